@@ -1,0 +1,88 @@
+"""``sm``: the Skeleton Mamba command line.
+
+``sm fit|validate|test|predict --recipe NAME`` runs LightningCLI (``skeleton_mamba.tasks``);
+the helper commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the
+task code that implements them. Everything is imported lazily, so ``import skeleton_mamba`` and
+``sm --help`` stay light (torch and einops only).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from collections.abc import Sequence
+
+from skeleton_mamba import __version__
+
+# name -> ("module:function", one-line help). Each function takes the arguments after the
+# command name (the LightningCLI entry also receives the subcommand) and returns an exit code.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "fit": ("skeleton_mamba.tasks.lightning_cli:run", "train a model from a recipe (LightningCLI)"),
+    "validate": ("skeleton_mamba.tasks.lightning_cli:run", "run the validation loop of a recipe"),
+    "test": ("skeleton_mamba.tasks.lightning_cli:run", "evaluate a checkpoint on the test split"),
+    "predict": ("skeleton_mamba.tasks.lightning_cli:run", "run a recipe's prediction loop"),
+    "recipes": ("skeleton_mamba.tasks.lightning_cli:list_recipes", "list the packaged recipes"),
+    "prepare": ("skeleton_mamba.tasks.recognition.prepare:main", "build NTU / Kinetics annotation files"),
+    "analyze-music": ("skeleton_mamba.tasks.motion.analyze_music:main", "tempo, beats and features of a track"),
+    "render": ("skeleton_mamba.tasks.motion.render_cli:main", "render a motion file to mp4 / gif"),
+    "make-ego": ("skeleton_mamba.tasks.egodance.builder.cli:main", "build EgoAIST++-style egocentric data"),
+    "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),
+    "generate": ("skeleton_mamba.tasks.text2motion.generate_cli:main", "generate motion from text"),
+    "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
+}
+LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
+
+
+def _module_available(target: str) -> bool:
+    module = target.split(":")[0]
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
+def available_commands() -> dict[str, tuple[str, str]]:
+    """The commands whose implementation is installed."""
+    return {name: spec for name, spec in COMMANDS.items() if _module_available(spec[0])}
+
+
+def _usage() -> str:
+    lines = [
+        f"sm {__version__}: Skeleton Mamba command line",
+        "",
+        "usage: sm COMMAND [ARGS...]        (sm COMMAND --help for its options)",
+        "       sm fit --recipe ntu60.yaml [--config more.yaml] [--trainer.max_epochs 3 ...]",
+        "",
+        "commands:",
+    ]
+    for name, (_, help_text) in available_commands().items():
+        lines.append(f"  {name:<15}{help_text}")
+    lines += ["", "options:", "  -h, --help     show this message", "  --version      print the version"]
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``sm`` console script; returns the exit code."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help"):
+        print(_usage())
+        return 0
+    if args[0] in ("-V", "--version"):
+        print(f"skeleton-mamba {__version__}")
+        return 0
+    command, rest = args[0], args[1:]
+    commands = available_commands()
+    if command not in commands:
+        print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    module_name, func_name = commands[command][0].split(":")
+    func = getattr(importlib.import_module(module_name), func_name)
+    if command in LIGHTNING_SUBCOMMANDS:
+        rest = [command, *rest]
+    result = func(rest)
+    return int(result or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""Typed configuration of the Skeleton Mamba backbone (defaults: seed 000, supplementary Table 2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class MixerConfig:
+    """Mamba-2 mixer settings (names as in ``mamba_ssm.modules.mamba2.Mamba2``).
+
+    The defaults suit small widths (D = 128 per joint): d_inner = expand * width, heads of
+    ``headdim`` channels, state size ``d_state``.
+    """
+
+    d_state: int = 64
+    d_conv: int = 4
+    expand: int = 2
+    headdim: int = 64
+    ngroups: int = 1
+    chunk_size: int = 64
+    dt_min: float = 0.001
+    dt_max: float = 0.1
+    dt_init_floor: float = 1e-4
+    A_init_range: tuple[float, float] = (1.0, 16.0)
+    use_kernel: bool = True  # use mamba-ssm's Triton kernel on CUDA when installed
+
+
+@dataclass
+class SkeletonMambaConfig:
+    """The backbone: ``depth`` SkeletonMamba blocks over (B, T, J, D) joint tokens.
+
+    Attributes:
+        skeleton: ``smpl24`` | ``humanml3d22`` | ``ntu25`` | ``openpose18`` (joints, groups, mirror).
+        in_channels: per-joint input features C (``None``: the input already has width ``dim``).
+        out_channels: per-joint output features (``None``: return width ``dim``).
+        dim: D, the width of one joint token (E = P * D for a group token).
+        depth: N, the number of blocks.
+        group_paths: the group orders of the Group Scan (``None``: the authors' 8 paths for
+            5 groups, else all groups in index order).
+        group_scan_shared: ``False`` scans the concatenated paths as one sequence (seed Eq. 13);
+            ``True`` scans each path separately with shared weights (the frame-averaging F, Eq. 18).
+        heads: attention heads of the optional cross-attention.
+        mlp_dim: hidden width of the per-joint MLP.
+        context_dim: width of a condition sequence for cross-attention (``None``: no cross-attention).
+        joint_embedding: add a learned embedding per joint before the first block.
+        dropout: dropout in the MLP and attention.
+        mixer: settings of every Mamba-2 mixer.
+    """
+
+    skeleton: str = "smpl24"
+    in_channels: int | None = None
+    out_channels: int | None = None
+    dim: int = 128
+    depth: int = 8
+    group_paths: list[list[int]] | None = None
+    group_scan_shared: bool = False
+    heads: int = 4
+    mlp_dim: int = 1024
+    context_dim: int | None = None
+    joint_embedding: bool = True
+    dropout: float = 0.0
+    mixer: MixerConfig | None = None

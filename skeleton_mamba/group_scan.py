@@ -1,0 +1,60 @@
+"""Group Scan (MSSD, seed 000 supplementary section 2, Eq. 13 and Eq. 18).
+
+For every frame the G group tokens are read in n orders (paths). Two variants:
+
+- ``shared=False`` (Eq. 13, the paper's MSSD): the n permuted sequences are concatenated into one
+  sequence of n*G tokens and scanned by one SSD mixer; each segment is un-permuted and the n results
+  are averaged. Later paths see the earlier ones, so this is not permutation-equivariant (Eq. 17).
+- ``shared=True`` (Eq. 18, the frame-averaging surrogate F): each path is scanned separately with
+  the same weights, un-permuted and averaged. If the path set is closed under a group permutation
+  rho ({rho pi_i} = {pi_i}), then F(g^rho) = F(g)^rho (Eq. 20).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from einops import rearrange
+from torch import nn
+
+from skeleton_mamba.config import MixerConfig
+from skeleton_mamba.mixer import Mamba2Mixer
+
+
+class GroupScan(nn.Module):
+    """(B, T, G, E) group tokens -> (B, T, G, E)."""
+
+    def __init__(
+        self,
+        dim: int,
+        paths: Sequence[Sequence[int]],
+        shared: bool = False,
+        mixer: MixerConfig | None = None,
+    ):
+        super().__init__()
+        paths_t = torch.tensor([list(p) for p in paths], dtype=torch.long)
+        num_groups = paths_t.shape[1]
+        for p in paths_t.tolist():
+            if sorted(p) != list(range(num_groups)):
+                raise ValueError(f"group path {p} is not a permutation of 0..{num_groups - 1}")
+        self.num_paths, self.num_groups = paths_t.shape
+        self.shared = shared
+        # Gather index of the concatenated permuted sequence, and per path the inverse permutation.
+        self.register_buffer("path_index", paths_t.flatten(), persistent=False)
+        self.register_buffer("inverse", torch.argsort(paths_t, dim=1), persistent=False)
+        self.mixer = Mamba2Mixer(dim, mixer)
+
+    def forward(self, g: torch.Tensor) -> torch.Tensor:
+        lead = g.shape[:-2]
+        g = g.reshape(-1, self.num_groups, g.shape[-1])  # (BT, G, E)
+        seq = g[:, self.path_index]  # (BT, n*G, E): the n permuted group sequences, concatenated
+        if self.shared:
+            y = self.mixer(rearrange(seq, "b (n g) e -> (b n) g e", n=self.num_paths))
+            y = rearrange(y, "(b n) g e -> b n g e", n=self.num_paths)
+        else:
+            y = rearrange(self.mixer(seq), "b (n g) e -> b n g e", n=self.num_paths)
+        # Un-permute each path: position k of path i holds group paths[i][k].
+        index = self.inverse[None, :, :, None].expand(y.shape[0], -1, -1, y.shape[-1])
+        y = torch.gather(y, 2, index).mean(dim=1)
+        return y.reshape(*lead, self.num_groups, y.shape[-1])

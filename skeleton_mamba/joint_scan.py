@@ -1,0 +1,30 @@
+"""Joint Scan (seed 000 supplementary Eq. 15): a shared-weight SSD over the joints of each group.
+
+Each group token (E = P * D) is mapped to P joint tokens of width D by a Linear and a rearrange;
+one mixer, shared by all G groups, scans the P joints of every group.
+"""
+
+from __future__ import annotations
+
+import torch
+from einops import rearrange
+from torch import nn
+
+from skeleton_mamba.config import MixerConfig
+from skeleton_mamba.mixer import Mamba2Mixer
+
+
+class JointScan(nn.Module):
+    """(B, T, G, P*D) group tokens -> (B, T, G, P, D) joint tokens."""
+
+    def __init__(self, dim: int, group_size: int, mixer: MixerConfig | None = None):
+        super().__init__()
+        self.group_size = group_size
+        self.split = nn.Linear(group_size * dim, group_size * dim)
+        self.mixer = Mamba2Mixer(dim, mixer)
+
+    def forward(self, g: torch.Tensor) -> torch.Tensor:
+        lead = g.shape[:-1]
+        joints = rearrange(self.split(g), "... (p d) -> (...) p d", p=self.group_size)
+        y = self.mixer(joints)
+        return y.reshape(*lead, self.group_size, y.shape[-1])

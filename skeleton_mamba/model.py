@@ -1,0 +1,99 @@
+"""SkeletonMamba: the backbone, N blocks over joint tokens for any registered skeleton."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from skeleton_mamba.block import SkeletonMambaBlock
+from skeleton_mamba.config import SkeletonMambaConfig
+from skeleton_mamba.skeletons import DEFAULT_GROUP_PATHS, get_skeleton
+from skeleton_mamba.temporal_scan import check_prefix_mask
+
+
+class SkeletonMamba(nn.Module):
+    """(B, T, J, C_in) -> (B, T, J, D or C_out).
+
+    Example::
+
+        cfg = SkeletonMambaConfig(skeleton="ntu25", in_channels=3, dim=64, depth=2)
+        y = SkeletonMamba(cfg)(torch.randn(2, 100, 25, 3))          # (2, 100, 25, 64)
+
+    Args:
+        config: a :class:`SkeletonMambaConfig` (defaults: the seed's D 128, G 5, P 6, N 8).
+    """
+
+    def __init__(self, config: SkeletonMambaConfig | None = None, **overrides):
+        super().__init__()
+        if config is None:
+            config = SkeletonMambaConfig(**overrides)
+        elif overrides:
+            raise TypeError("pass either a config or keyword overrides, not both")
+        self.config = config
+        skeleton = get_skeleton(config.skeleton)
+        self.skeleton = skeleton
+        if config.group_paths is not None:
+            paths = [tuple(p) for p in config.group_paths]
+        elif skeleton.num_groups == 5:
+            paths = list(DEFAULT_GROUP_PATHS)
+        else:
+            paths = [tuple(range(skeleton.num_groups))]
+        d = config.dim
+        self.input_proj = nn.Linear(config.in_channels, d) if config.in_channels is not None else nn.Identity()
+        self.joint_embedding = (
+            nn.Parameter(torch.randn(skeleton.num_joints, d) * 0.02) if config.joint_embedding else None
+        )
+        self.blocks = nn.ModuleList(
+            SkeletonMambaBlock(
+                d,
+                skeleton.groups,
+                skeleton.num_joints,
+                paths,
+                group_scan_shared=config.group_scan_shared,
+                heads=config.heads,
+                mlp_dim=config.mlp_dim,
+                context_dim=config.context_dim,
+                dropout=config.dropout,
+                mixer=config.mixer,
+            )
+            for _ in range(config.depth)
+        )
+        self.norm = nn.LayerNorm(d)
+        self.output_proj = nn.Linear(d, config.out_channels) if config.out_channels is not None else nn.Identity()
+
+    @property
+    def out_channels(self) -> int:
+        return self.config.out_channels if self.config.out_channels is not None else self.config.dim
+
+    def forward(
+        self,
+        x: torch.Tensor,
+        mask: torch.Tensor | None = None,
+        context: torch.Tensor | None = None,
+        context_mask: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Run the backbone.
+
+        Args:
+            x: (B, T, J, C_in) per-joint features.
+            mask: (B, T) bool, True on valid frames (a valid prefix per sequence; right padding).
+                Padded frames never influence valid ones.
+            context: (B, S, Dc) condition sequence for cross-attention (when ``context_dim`` is set).
+            context_mask: (B, S) bool, True on valid condition tokens.
+
+        Returns:
+            (B, T, J, D) or (B, T, J, C_out).
+        """
+        if x.dim() != 4 or x.shape[2] != self.skeleton.num_joints:
+            raise ValueError(
+                f"expected (B, T, {self.skeleton.num_joints}, C) for skeleton {self.skeleton.name}, "
+                f"got {tuple(x.shape)}"
+            )
+        if mask is not None:
+            check_prefix_mask(mask)
+        h = self.input_proj(x)
+        if self.joint_embedding is not None:
+            h = h + self.joint_embedding
+        for block in self.blocks:
+            h = block(h, mask=mask, context=context, context_mask=context_mask)
+        return self.output_proj(self.norm(h))

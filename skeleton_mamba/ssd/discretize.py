@@ -1,0 +1,90 @@
+"""Input validation and the Mamba-2 discretisation of the step size Δ (reference §2, step 1).
+
+Shapes (batch b, length L, heads H, head dim P, B/C groups G, state N):
+x (b, L, H, P); dt (b, L, H); A (H,); B, C (b, L, G, N); D (H,) or (H, P); dt_bias (H,);
+initial_state (b, H, P, N).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+
+def compute_dtype(x: torch.Tensor) -> torch.dtype:
+    """fp64 stays fp64 (the test oracle); every other dtype (fp16, bf16, fp32) computes in fp32."""
+    return torch.float64 if x.dtype == torch.float64 else torch.float32
+
+
+def check_inputs(
+    x: torch.Tensor,
+    dt: torch.Tensor,
+    A: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    D: torch.Tensor | None = None,
+    dt_bias: torch.Tensor | None = None,
+    initial_state: torch.Tensor | None = None,
+) -> None:
+    """Raise ``ValueError`` naming the offending argument when a shape breaks the SSD contract."""
+    if x.dim() != 4:
+        raise ValueError(f"ssd: x must be (batch, length, heads, headdim), got shape {tuple(x.shape)}")
+    b, L, H, P = x.shape
+    if tuple(dt.shape) != (b, L, H):
+        raise ValueError(f"ssd: dt must be (batch, length, heads) = {(b, L, H)}, got {tuple(dt.shape)}")
+    if tuple(A.shape) != (H,):
+        raise ValueError(f"ssd: A must be (heads,) = ({H},), got {tuple(A.shape)}")
+    if B.dim() != 4 or B.shape[:2] != (b, L):
+        raise ValueError(f"ssd: B must be (batch, length, groups, state) with batch, length = {b, L}, "
+                         f"got {tuple(B.shape)}")
+    if tuple(C.shape) != tuple(B.shape):
+        raise ValueError(f"ssd: C must have the shape of B {tuple(B.shape)}, got {tuple(C.shape)}")
+    G, N = B.shape[2], B.shape[3]
+    if G == 0 or H % G:
+        raise ValueError(f"ssd: {H} heads cannot be split evenly over {G} B/C groups")
+    if D is not None and tuple(D.shape) not in ((H,), (H, P)):
+        raise ValueError(f"ssd: D must be (heads,) or (heads, headdim) = ({H},) or ({H}, {P}), "
+                         f"got {tuple(D.shape)}")
+    if dt_bias is not None and tuple(dt_bias.shape) != (H,):
+        raise ValueError(f"ssd: dt_bias must be (heads,) = ({H},), got {tuple(dt_bias.shape)}")
+    if initial_state is not None and tuple(initial_state.shape) != (b, H, P, N):
+        raise ValueError(f"ssd: initial_state must be (batch, heads, headdim, state) = {(b, H, P, N)}, "
+                         f"got {tuple(initial_state.shape)}")
+
+
+def discretize_dt(
+    dt: torch.Tensor,
+    dt_bias: torch.Tensor | None,
+    dt_softplus: bool,
+    dt_limit: tuple[float, float],
+    dtype: torch.dtype = torch.float32,
+) -> torch.Tensor:
+    """Δ = clamp(softplus(dt + dt_bias), dt_limit), computed in ``dtype`` (fp32 unless fp64).
+
+    Args:
+        dt: raw step (b, L, H).
+        dt_bias: (H,) added before the softplus, or ``None``.
+        dt_softplus: apply softplus (else Δ = dt + dt_bias).
+        dt_limit: (min, max) clamp; (0, inf) leaves Δ unchanged.
+        dtype: the computation dtype.
+
+    Returns:
+        Δ (b, L, H) in ``dtype``.
+    """
+    delta = dt.to(dtype)
+    if dt_bias is not None:
+        delta = delta + dt_bias.to(dtype)
+    if dt_softplus:
+        delta = F.softplus(delta)
+    lo, hi = dt_limit
+    if lo > 0.0 or hi != float("inf"):
+        delta = delta.clamp(min=lo, max=hi)
+    return delta
+
+
+def apply_skip(y: torch.Tensor, x: torch.Tensor, D: torch.Tensor | None) -> torch.Tensor:
+    """y + D ⊙ x with D (H,) or (H, P); y, x (b, L, H, P)."""
+    if D is None:
+        return y
+    d = D.to(y.dtype)
+    return y + x.to(y.dtype) * (d[:, None] if d.dim() == 1 else d)

@@ -1,0 +1,77 @@
+"""``ssd``: one entry point choosing between the SSD implementations.
+
+impl="auto": the mamba-ssm Triton kernel when installed and x is on CUDA; else the single-chunk
+quadratic form when L <= chunk_size and no initial/final state is involved; else the chunked form.
+impl="torch": the same choice without the kernel.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from skeleton_mamba.ssd.chunked import ssd_chunked
+from skeleton_mamba.ssd.kernel import kernel_available, ssd_kernel
+from skeleton_mamba.ssd.quadratic import ssd_quadratic
+from skeleton_mamba.ssd.recurrence import ssd_recurrence
+
+IMPLS = ("auto", "torch", "recurrence", "chunked", "quadratic", "kernel")
+
+
+def choose_impl(x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "auto") -> str:
+    """The concrete implementation ``ssd`` runs for ``impl`` ("auto"/"torch" resolved)."""
+    if impl not in IMPLS:
+        raise ValueError(f"ssd: impl must be one of {IMPLS}, got {impl!r}")
+    if impl == "auto" and kernel_available(x):
+        return "kernel"
+    if impl in ("auto", "torch"):
+        return "quadratic" if x.shape[1] <= chunk_size and not stateful else "chunked"
+    return impl
+
+
+def ssd(
+    x: torch.Tensor,
+    dt: torch.Tensor,
+    A: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    *,
+    D: torch.Tensor | None = None,
+    dt_bias: torch.Tensor | None = None,
+    dt_softplus: bool = True,
+    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    initial_state: torch.Tensor | None = None,
+    return_final_state: bool = False,
+    chunk_size: int = 64,
+    impl: str = "auto",
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """Structured state-space duality (Mamba-2) per head.
+
+    h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,  y_t = h_t C_t + D ⊙ x_t,
+    Δ = clamp(softplus(dt + dt_bias), dt_limit) in fp32.
+
+    Args:
+        x: (b, L, H, P).
+        dt: (b, L, H) raw step sizes.
+        A: (H,) negative continuous decay per head (A = -exp(A_log)).
+        B, C: (b, L, G, N) with H % G == 0; head h reads group h // (H // G).
+        D: (H,) or (H, P) skip weights, or ``None``.
+        dt_bias: (H,) or ``None``; dt_softplus, dt_limit: see above.
+        initial_state: (b, H, P, N) or ``None`` (zeros).
+        return_final_state: also return the final state (b, H, P, N) in fp32.
+        chunk_size: chunk length of the chunked form (and of the kernel).
+        impl: "auto" | "torch" | "recurrence" | "chunked" | "quadratic" | "kernel".
+
+    Returns:
+        y (b, L, H, P) in x's dtype, or (y, final_state) when ``return_final_state``.
+    """
+    kwargs = dict(D=D, dt_bias=dt_bias, dt_softplus=dt_softplus, dt_limit=dt_limit,
+                  initial_state=initial_state, return_final_state=return_final_state)
+    stateful = initial_state is not None or return_final_state
+    chosen = choose_impl(x, chunk_size, stateful, impl)
+    if chosen == "kernel":
+        return ssd_kernel(x, dt, A, B, C, chunk_size=chunk_size, **kwargs)
+    if chosen == "chunked":
+        return ssd_chunked(x, dt, A, B, C, chunk_size=chunk_size, **kwargs)
+    if chosen == "quadratic":
+        return ssd_quadratic(x, dt, A, B, C, **kwargs)
+    return ssd_recurrence(x, dt, A, B, C, **kwargs)

@@ -1,0 +1,75 @@
+"""Optional GPU backend: mamba-ssm's fused Triton chunk scan (reference §6).
+
+``mamba_ssm`` imports Triton at import time and its kernels run on CUDA only, so it is imported
+lazily, inside :func:`ssd_kernel`, and :func:`kernel_available` checks both conditions first.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+
+import torch
+
+KERNEL_MODULE = "mamba_ssm.ops.triton.ssd_combined"
+
+
+def is_cuda(t: torch.Tensor) -> bool:
+    """Whether ``t`` lives on a CUDA device (a seam the tests replace to fake a GPU)."""
+    return bool(t.is_cuda)
+
+
+def mamba_ssm_installed() -> bool:
+    """Whether the ``mamba_ssm`` package can be imported (without importing it)."""
+    try:
+        return importlib.util.find_spec("mamba_ssm") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def kernel_available(x: torch.Tensor) -> bool:
+    """True when the Triton kernel can run on ``x``: mamba-ssm installed and x on CUDA."""
+    return is_cuda(x) and mamba_ssm_installed()
+
+
+def ssd_kernel(
+    x: torch.Tensor,
+    dt: torch.Tensor,
+    A: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    *,
+    D: torch.Tensor | None = None,
+    dt_bias: torch.Tensor | None = None,
+    dt_softplus: bool = True,
+    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    initial_state: torch.Tensor | None = None,
+    return_final_state: bool = False,
+    chunk_size: int = 64,
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """SSD through ``mamba_chunk_scan_combined``; arguments and results as :func:`ssd_recurrence`.
+
+    The kernel takes the same raw dt, continuous A, and grouped B/C layout, so arguments map
+    one to one (``initial_state`` -> ``initial_states``, ``return_final_state`` ->
+    ``return_final_states``); the state is returned in fp32.
+
+    Raises:
+        RuntimeError: mamba-ssm is not installed or x is not on a CUDA device.
+    """
+    if not is_cuda(x):
+        raise RuntimeError("ssd(impl='kernel'): the mamba-ssm Triton kernel needs CUDA tensors, x is on "
+                           f"{x.device}; use impl='chunked' or 'auto' on CPU")
+    try:
+        module = importlib.import_module(KERNEL_MODULE)
+    except ImportError as err:
+        raise RuntimeError("ssd(impl='kernel') needs mamba-ssm (pip install mamba-ssm --no-build-isolation): "
+                           f"importing {KERNEL_MODULE} failed: {err}") from err
+    out = module.mamba_chunk_scan_combined(
+        x, dt, A, B, C, chunk_size,
+        D=D, z=None, dt_bias=dt_bias, initial_states=initial_state,
+        dt_softplus=dt_softplus, dt_limit=tuple(dt_limit), return_final_states=return_final_state,
+    )
+    if return_final_state:
+        y, final = out
+        return y, final.float()
+    return out

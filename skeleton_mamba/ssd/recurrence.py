@@ -1,0 +1,63 @@
+"""The sequential SSD recurrence (reference §2): the test oracle for the matrix forms.
+
+h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t.
+
+One Python step per time step, so only for tests and tiny inputs. fp64 inputs are computed in fp64.
+"""
+
+from __future__ import annotations
+
+import torch
+from einops import repeat
+
+from skeleton_mamba.ssd.discretize import apply_skip, check_inputs, compute_dtype, discretize_dt
+
+
+def ssd_recurrence(
+    x: torch.Tensor,
+    dt: torch.Tensor,
+    A: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    *,
+    D: torch.Tensor | None = None,
+    dt_bias: torch.Tensor | None = None,
+    dt_softplus: bool = True,
+    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    initial_state: torch.Tensor | None = None,
+    return_final_state: bool = False,
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """SSD by the step-by-step recurrence.
+
+    Args:
+        x: (b, L, H, P) inputs.
+        dt: (b, L, H) raw step sizes (see :func:`discretize_dt`).
+        A: (H,) negative continuous decay per head.
+        B, C: (b, L, G, N); head h reads group h // (H // G).
+        D: (H,) or (H, P) skip, or ``None``.
+        dt_bias, dt_softplus, dt_limit: the discretisation of Δ.
+        initial_state: (b, H, P, N) state before the first step, or ``None`` (zeros).
+        return_final_state: also return the state after the last step.
+
+    Returns:
+        y (b, L, H, P) in x's dtype, and the final state (b, H, P, N) (fp32, fp64 for fp64 input)
+        when ``return_final_state``.
+    """
+    check_inputs(x, dt, A, B, C, D, dt_bias, initial_state)
+    b, L, H, P = x.shape
+    G, N = B.shape[2], B.shape[3]
+    ct = compute_dtype(x)
+    delta = discretize_dt(dt, dt_bias, dt_softplus, dt_limit, ct)  # (b, L, H)
+    decay = torch.exp(delta * A.to(ct))  # (b, L, H)
+    xd = x.to(ct) * delta[..., None]  # (b, L, H, P)
+    Bh = repeat(B.to(ct), "b l g n -> b l (g r) n", r=H // G)
+    Ch = repeat(C.to(ct), "b l g n -> b l (g r) n", r=H // G)
+    h = x.new_zeros((b, H, P, N), dtype=ct) if initial_state is None else initial_state.to(ct)
+    ys = []
+    for t in range(L):
+        # h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t ;  y_t = h_t C_t
+        h = torch.addcmul(h * decay[:, t, :, None, None], xd[:, t, :, :, None], Bh[:, t, :, None, :])
+        ys.append(torch.matmul(h, Ch[:, t, :, :, None]).squeeze(-1))
+    y = torch.stack(ys, dim=1) if ys else x.new_zeros((b, 0, H, P), dtype=ct)
+    y = apply_skip(y, x, D).to(x.dtype)
+    return (y, h) if return_final_state else y

@@ -1,0 +1,61 @@
+"""Temporal Scan: a bidirectional SSD along time for every joint (seed 000, supplementary Table 1).
+
+Independent forward and backward mixers, summed and projected by a Linear. Variable-length batches
+are right-padded; the backward direction reverses only the valid prefix of each sequence, so it
+starts at the last valid frame and padded frames (which stay at the end in both directions) can
+never reach a valid frame through the causal scans.
+"""
+
+from __future__ import annotations
+
+import torch
+from einops import rearrange
+from torch import nn
+
+from skeleton_mamba.config import MixerConfig
+from skeleton_mamba.mixer import Mamba2Mixer
+
+
+def valid_prefix_reversal(mask: torch.Tensor) -> torch.Tensor:
+    """Time index that reverses each valid prefix and leaves the padding in place.
+
+    Args:
+        mask: (B, T) bool, True on valid frames; valid frames must form a prefix.
+
+    Returns:
+        (B, T) long index ``r`` with ``r[b, t] = len_b - 1 - t`` for ``t < len_b`` else ``t``
+        (an involution: applying it twice is the identity).
+    """
+    lengths = mask.sum(dim=1, keepdim=True)
+    t = torch.arange(mask.shape[1], device=mask.device)[None]
+    return torch.where(t < lengths, lengths - 1 - t, t)
+
+
+def check_prefix_mask(mask: torch.Tensor) -> None:
+    """Raise if a padding mask is not a valid prefix (True...True False...False) per row."""
+    if mask.dtype != torch.bool or mask.dim() != 2:
+        raise ValueError(f"padding mask must be a (B, T) bool tensor, got {tuple(mask.shape)} {mask.dtype}")
+    if bool((mask[:, 1:] & ~mask[:, :-1]).any()):
+        raise ValueError("padding mask must mark a valid prefix of each sequence (right padding only)")
+
+
+class TemporalScan(nn.Module):
+    """(B, T, J, D) -> (B, T, J, D), each joint scanned along T in both directions."""
+
+    def __init__(self, dim: int, mixer: MixerConfig | None = None):
+        super().__init__()
+        self.forward_mixer = Mamba2Mixer(dim, mixer)
+        self.backward_mixer = Mamba2Mixer(dim, mixer)
+        self.proj = nn.Linear(dim, dim)
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        num_joints = x.shape[2]
+        seq = rearrange(x, "b t j d -> (b j) t d")
+        fwd = self.forward_mixer(seq)
+        if mask is None:
+            bwd = self.backward_mixer(seq.flip(1)).flip(1)
+        else:
+            index = valid_prefix_reversal(mask).repeat_interleave(num_joints, dim=0)
+            index = index[..., None].expand_as(seq)
+            bwd = torch.gather(self.backward_mixer(torch.gather(seq, 1, index)), 1, index)
+        return rearrange(self.proj(fwd + bwd), "(b j) t d -> b t j d", j=num_joints)

@@ -1,0 +1,57 @@
+"""Human Tokenizer and its inverse (seed 000, supplementary section 4 and Table 1).
+
+The tokenizer gathers the joints of each group and concatenates their features:
+(B, T, J, D) -> (B, T, G, E = P * D). Groups may overlap (SMPL-24: joints 0, 3 and 9 appear three
+times); the inverse scatters the P joint tokens of every group back and averages the copies of a
+joint, (B, T, G, P, D) -> (B, T, J, D).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from einops import rearrange
+from torch import nn
+
+
+def _group_index(groups: Sequence[Sequence[int]]) -> torch.Tensor:
+    sizes = {len(g) for g in groups}
+    if len(sizes) != 1:
+        raise ValueError(f"tokenizer groups must all have the same size, got sizes {sorted(sizes)}")
+    return torch.tensor([j for g in groups for j in g], dtype=torch.long)
+
+
+class HumanTokenizer(nn.Module):
+    """(B, T, J, D) joint tokens -> (B, T, G, P*D) group tokens."""
+
+    def __init__(self, groups: Sequence[Sequence[int]]):
+        super().__init__()
+        self.register_buffer("index", _group_index(groups), persistent=False)
+        self.num_groups = len(groups)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return rearrange(x[..., self.index, :], "... (g p) d -> ... g (p d)", g=self.num_groups)
+
+
+class InverseHumanTokenizer(nn.Module):
+    """(B, T, G, P, D) per-group joint tokens -> (B, T, J, D), averaging joints shared by groups."""
+
+    def __init__(self, groups: Sequence[Sequence[int]], num_joints: int):
+        super().__init__()
+        index = _group_index(groups)
+        if int(index.max()) >= num_joints or int(index.min()) < 0:
+            raise ValueError(f"group joint indices must lie in [0, {num_joints})")
+        counts = torch.bincount(index, minlength=num_joints)
+        if bool((counts == 0).any()):
+            missing = torch.nonzero(counts == 0).flatten().tolist()
+            raise ValueError(f"joints {missing} belong to no group; the inverse tokenizer cannot restore them")
+        self.register_buffer("index", index, persistent=False)
+        self.register_buffer("inv_count", 1.0 / counts.float(), persistent=False)
+        self.num_joints = num_joints
+
+    def forward(self, tokens: torch.Tensor) -> torch.Tensor:
+        flat = rearrange(tokens, "... g p d -> ... (g p) d")
+        out = flat.new_zeros(*flat.shape[:-2], self.num_joints, flat.shape[-1])
+        out = out.index_add(-2, self.index, flat)
+        return out * self.inv_count.to(out.dtype)[:, None]

@@ -1,0 +1,384 @@
+"""The resumable, multi-process EgoAIST++ build (seed supplement section 5).
+
+For every motion file, the motion is resampled to ``fps`` and cut into ``window_s`` windows (5 s,
+non-overlapping by default: "we divide the motion sequences into multiple 5-second subsequences"). Each
+window gets a scene (scene files round-robin, or procedural rooms) and up to ``max_attempts`` random
+placements (:mod:`.placement`); the first whose penetration score ``S_p`` (:mod:`.penetration`) is at
+most ``threshold`` (2, the seed's value) is kept, the window is skipped with a logged reason otherwise.
+The kept window is rendered from the head camera (:mod:`.camera`, :mod:`.raycast`) and written in the
+layout of :mod:`.layout`. Each window's random numbers come from ``(seed, crc32(sample_id))``, so a
+build is reproducible whatever the worker count and order, and an interrupted build resumes: complete
+samples and windows already skipped are not redone; temporary and unmarked folders are removed first.
+
+The manual verification step of the seed is left to the user (``meta.json`` keeps the score).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import zlib
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from skeleton_mamba.tasks.egodance.builder import layout
+from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
+from skeleton_mamba.tasks.egodance.builder.penetration import penetration_score
+from skeleton_mamba.tasks.egodance.builder.placement import place_points, random_placement
+from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
+from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
+from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
+from skeleton_mamba.tasks.motion import aistpp
+from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
+from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
+
+from skeleton_mamba.skeletons import SMPL24
+
+__all__ = ["BuildConfig", "WindowTask", "plan_windows", "build_window", "run_build", "SCENE_SUFFIXES"]
+
+log = logging.getLogger(__name__)
+SCENE_SUFFIXES = (".glb", ".gltf", ".obj", ".ply", ".off", ".stl")
+AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".opus", ".mp3")
+# Settings that change the data: a resumed build must use the same values.
+_FIXED_SETTINGS = (
+    "fps",
+    "window_s",
+    "stride_s",
+    "width",
+    "height",
+    "fov",
+    "threshold",
+    "seed",
+    "frame_format",
+    "up_axis",
+    "scenes",
+    "num_rooms",
+    "camera_forward",
+    "camera_up",
+)
+
+
+@dataclass
+class BuildConfig:
+    """Options of ``sm make-ego`` (see ``cli.py`` for their help)."""
+
+    out: str
+    scenes: str = "procedural"
+    up_axis: str = "y"
+    num_rooms: int = 8
+    fps: float = 30.0
+    window_s: float = 5.0
+    stride_s: float | None = None  # None: the window length (non-overlapping windows)
+    width: int = 224
+    height: int = 224
+    fov: float = 90.0
+    threshold: float = 2.0
+    max_attempts: int = 20
+    penetration_stride: int = 1
+    seed: int = 0
+    frame_format: str = "mp4"
+    camera_forward: float = 0.10
+    camera_up: float = 0.06
+    music_dir: str | None = None
+    keep_ignored: bool = False
+    workers: int = 1
+    progress: bool = True
+
+    @property
+    def stride(self) -> float:
+        """Window stride in seconds (the window length unless set)."""
+        return self.window_s if self.stride_s is None else self.stride_s
+
+
+@dataclass(frozen=True)
+class WindowTask:
+    """One window to build: ``window_index`` of the windows of ``motion_path``, rendered in ``scene_key``."""
+
+    sample_id: str
+    motion_path: str
+    window_index: int
+    start_frame: int
+    num_frames: int
+    scene_key: str
+
+
+@dataclass
+class BuildSummary:
+    planned: int = 0
+    complete: int = 0
+    placed: int = 0
+    rejected: int = 0
+    skipped: int = 0
+    already_complete: int = 0
+    already_skipped: int = 0
+    skip_reasons: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------- inputs
+def motion_files(motion: str | Path, keep_ignored: bool = False) -> list[Path]:
+    """Our ``.npz`` motions and AIST++ ``.pkl`` motions of a file or folder (AIST++ ignore list dropped)."""
+    path = Path(motion)
+    if path.is_file():
+        return [path]
+    if not path.is_dir():
+        raise FileNotFoundError(f"motion path not found: {path}")
+    files = sorted(p for p in path.iterdir() if p.suffix in (".npz", ".pkl"))
+    if not keep_ignored:
+        ignored = aistpp.ignore_list()
+        files = [p for p in files if p.stem not in ignored]
+    if not files:
+        raise FileNotFoundError(f"{path}: no .npz or .pkl motion files")
+    return files
+
+
+def read_motion(path: str | Path) -> MotionData:
+    """An SMPL motion from our ``.npz`` format or an AIST++ ``.pkl`` (restricted unpickler)."""
+    path = Path(path)
+    motion = aistpp.load_aistpp_motion(path) if path.suffix == ".pkl" else load_motion(path)
+    if motion.poses is None:
+        raise ValueError(
+            f"{path}: the builder needs SMPL parameters (smpl_poses, smpl_trans), not joints only"
+        )
+    return motion
+
+
+def scene_keys(cfg: BuildConfig) -> list[str]:
+    """``procedural:<seed>`` keys or scene file paths."""
+    if cfg.scenes == "procedural":
+        return [f"procedural:{cfg.seed * 1000 + k}" for k in range(cfg.num_rooms)]
+    path = Path(cfg.scenes)
+    if path.is_file():
+        return [str(path)]
+    if not path.is_dir():
+        raise FileNotFoundError(f"scenes: {path} is neither 'procedural', a scene file nor a folder")
+    files = sorted(str(p) for p in path.rglob("*") if p.suffix.lower() in SCENE_SUFFIXES)
+    if not files:
+        raise FileNotFoundError(f"{path}: no scene meshes ({', '.join(SCENE_SUFFIXES)})")
+    return files
+
+
+def plan_windows(cfg: BuildConfig, motions: list[Path]) -> list[WindowTask]:
+    """All windows of all motions, in a fixed order, each with its scene."""
+    keys = scene_keys(cfg)
+    window = round(cfg.window_s * cfg.fps)
+    stride = round(cfg.stride * cfg.fps)
+    tasks: list[WindowTask] = []
+    for path in motions:
+        motion = read_motion(path)
+        frames = int(np.floor((motion.num_frames - 1) * cfg.fps / motion.fps + 1e-9)) + 1
+        for w, start in enumerate(aistpp.window_starts(frames, window, stride)):
+            sample_id = f"{path.stem}__w{w:03d}"
+            tasks.append(WindowTask(sample_id, str(path), w, start, window, keys[len(tasks) % len(keys)]))
+    return tasks
+
+
+def music_reference(motion_path: Path, start_s: float, end_s: float, music_dir: str | None) -> dict:
+    """The music slice that plays during a window (``meta.json`` ``music``)."""
+    for suffix in AUDIO_SUFFIXES:  # an audio file with the motion's stem (the synthetic generators write one)
+        sidecar = motion_path.with_suffix(suffix)
+        if sidecar.is_file():
+            return {"id": sidecar.stem, "path": str(sidecar), "start_s": start_s, "end_s": end_s}
+    try:
+        music = aistpp.music_id(motion_path.stem)
+    except ValueError:
+        return {"id": None, "path": None, "start_s": start_s, "end_s": end_s}
+    path = None
+    if music_dir is not None:
+        candidates = [Path(music_dir) / f"{music}{s}" for s in AUDIO_SUFFIXES]
+        path = next((str(c) for c in candidates if c.is_file()), None)
+    return {"id": music, "path": path, "start_s": start_s, "end_s": end_s}
+
+
+# ---------------------------------------------------------------- per-worker caches
+_SCENES: dict[tuple[str, str], SceneMesh] = {}
+_WINDOWS: dict[tuple, list[MotionData]] = {}
+
+
+def get_scene(key: str, up_axis: str) -> SceneMesh:
+    if (key, up_axis) not in _SCENES:
+        if key.startswith("procedural:"):
+            _SCENES[key, up_axis] = procedural_room(int(key.split(":", 1)[1]))
+        else:
+            _SCENES[key, up_axis] = load_scene(key, up_axis)
+    return _SCENES[key, up_axis]
+
+
+def _windows(path: str, fps: float, window_s: float, stride_s: float) -> list[MotionData]:
+    key = (path, fps, window_s, stride_s)
+    if key not in _WINDOWS:
+        _WINDOWS.clear()  # one motion at a time per worker (tasks come motion by motion)
+        _WINDOWS[key] = aistpp.motion_windows(read_motion(path), fps, window_s, stride_s)
+    return _WINDOWS[key]
+
+
+# ---------------------------------------------------------------- one window
+def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
+    """Place, score, render and write one window; returns ``{"status", "sample_id", "rejected", ...}``."""
+    torch.set_num_threads(1)
+    win = _windows(task.motion_path, cfg.fps, cfg.window_s, cfg.stride)[task.window_index]
+    poses = torch.from_numpy(np.asarray(win.poses, dtype=np.float64))
+    root = torch.from_numpy(np.asarray(win.root_position(), dtype=np.float64))
+    local = axis_angle_to_matrix(poses)  # (T, 24, 3, 3)
+    joints_t, world_t = forward_kinematics(local, root, smpl_rest_offsets(torch.float64), SMPL24.parents)
+    joints, world = joints_t.numpy(), world_t.numpy()
+    scene = get_scene(task.scene_key, cfg.up_axis)
+    rng = np.random.default_rng([cfg.seed, zlib.crc32(task.sample_id.encode())])
+    scores: list[float] = []
+    placement = None
+    for _ in range(cfg.max_attempts):
+        candidate = random_placement(joints, scene, rng)
+        scores.append(penetration_score(scene, place_points(joints, candidate), cfg.penetration_stride))
+        if scores[-1] <= cfg.threshold:
+            placement = candidate
+            break
+    if placement is None:
+        reason = (
+            f"no placement with S_p <= {cfg.threshold} in {cfg.max_attempts} attempts "
+            f"(best S_p {min(scores):.2f} cm) in scene {scene.name}"
+        )
+        skipped = Path(cfg.out) / layout.SKIPPED
+        skipped.mkdir(parents=True, exist_ok=True)
+        layout.write_json(
+            skipped / f"{task.sample_id}.json",
+            {"sample_id": task.sample_id, "reason": reason, "scores": scores, "scene": scene.name},
+        )
+        return {"status": "skipped", "sample_id": task.sample_id, "rejected": len(scores), "reason": reason}
+
+    rot = placement.rotation
+    placed = place_points(joints, placement)
+    K = intrinsics(cfg.width, cfg.height, cfg.fov)
+    camera = head_camera(
+        placed[:, 15], rot @ world[:, 15], K, cfg.width, cfg.height, cfg.camera_forward, cfg.camera_up
+    )
+    rgb, depth = render_trajectory(scene, camera)
+
+    placed_poses = poses.clone()
+    placed_poses[:, 0] = matrix_to_axis_angle(torch.from_numpy(rot) @ local[:, 0])
+    motion = MotionData(
+        fps=cfg.fps,
+        skeleton="smpl24",
+        poses=placed_poses.numpy(),
+        trans=place_points(root.numpy(), placement),
+        scaling=1.0,
+        joints=placed,
+    )
+    start_s, end_s = task.start_frame / cfg.fps, (task.start_frame + task.num_frames) / cfg.fps
+    motion_path = Path(task.motion_path)
+    meta = {
+        "sample_id": task.sample_id,
+        "synthetic": motion_path.stem.startswith("synthetic"),
+        "motion": {
+            "source": str(motion_path),
+            "window_index": task.window_index,
+            "start_frame": task.start_frame,
+            "num_frames": task.num_frames,
+            "start_s": start_s,
+            "end_s": end_s,
+        },
+        "music": music_reference(motion_path, start_s, end_s, cfg.music_dir),
+        "scene": {
+            "name": scene.name,
+            "source": scene.source,
+            "up_axis": cfg.up_axis,
+            "floor_height": scene.floor_height,
+        },
+        "placement": placement.to_dict(),
+        "penetration_score": scores[-1],
+        "threshold": cfg.threshold,
+        "attempts": len(scores),
+        "frames": {
+            "format": cfg.frame_format,
+            "count": len(rgb),
+            "width": cfg.width,
+            "height": cfg.height,
+            "fps": cfg.fps,
+        },
+    }
+    cam = {
+        "positions": camera.positions,
+        "rotations": camera.rotations,
+        "K": K,
+        "width": cfg.width,
+        "height": cfg.height,
+        "fps": cfg.fps,
+    }
+    layout.write_sample(cfg.out, layout.EgoSample(meta, motion, cam, rgb, depth), cfg.frame_format)
+    return {"status": "placed", "sample_id": task.sample_id, "rejected": len(scores) - 1, "score": scores[-1]}
+
+
+# ---------------------------------------------------------------- the whole build
+def _check_settings(cfg: BuildConfig) -> None:
+    """Write ``build.json``, or check that a resumed build uses the same data settings."""
+    path = Path(cfg.out) / "build.json"
+    settings = {k: getattr(cfg, k) for k in _FIXED_SETTINGS}
+    if path.is_file():
+        import json
+
+        old = json.loads(path.read_text(encoding="utf-8"))
+        diff = {k: (old.get(k), v) for k, v in settings.items() if old.get(k) != v}
+        if diff:
+            raise ValueError(f"{cfg.out} was built with other settings {diff} (old, new): use another --out")
+    else:
+        layout.write_json(path, settings)
+
+
+def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
+    """Build (or resume) a dataset; returns the counts also written to ``summary.json``."""
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_settings(cfg)
+    removed = layout.clean_incomplete(out)
+    if removed:
+        log.info("removed %d incomplete sample folder(s): %s", len(removed), ", ".join(removed))
+    tasks = plan_windows(cfg, motion_files(motion, cfg.keep_ignored))
+    summary = BuildSummary(planned=len(tasks))
+    todo = []
+    for task in tasks:
+        if layout.is_complete(layout.sample_dir(out, task.sample_id)):
+            summary.already_complete += 1
+        elif (out / layout.SKIPPED / f"{task.sample_id}.json").is_file():
+            summary.already_skipped += 1
+        else:
+            todo.append(task)
+    counts: Counter = Counter()
+
+    def record(result: dict) -> None:
+        counts[result["status"]] += 1
+        counts["rejected"] += result["rejected"]
+        if result["status"] == "skipped":
+            log.warning("skipped %s: %s", result["sample_id"], result["reason"])
+            summary.skip_reasons.append(f"{result['sample_id']}: {result['reason']}")
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(todo), desc="make-ego", unit="window", disable=not cfg.progress)
+    if cfg.workers <= 1:
+        for task in todo:
+            record(build_window(task, cfg))
+            bar.update()
+    else:
+        with ProcessPoolExecutor(max_workers=cfg.workers) as pool:
+            futures = [pool.submit(build_window, task, cfg) for task in todo]
+            for future in as_completed(futures):
+                record(future.result())
+                bar.update()
+    bar.close()
+    summary.placed, summary.skipped, summary.rejected = (
+        counts["placed"],
+        counts["skipped"],
+        counts["rejected"],
+    )
+    summary.complete = len(layout.complete_samples(out))
+    layout.write_json(out / "summary.json", asdict(summary))
+    return summary
+
+
+def default_workers() -> int:
+    """Worker processes by default: the CPUs this process may use."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)

@@ -1,0 +1,210 @@
+"""The on-disk layout of an EgoAIST++-style dataset built by ``sm make-ego`` (read and write).
+
+::
+
+    <out>/
+      build.json                 the build settings (fps, window, resolution, fov, seed, threshold, ...);
+                                 a resumed build must use the same settings
+      summary.json               counts of the last run: planned, complete, placed, rejected, skipped
+      skipped/<sample_id>.json   a window given up after ``max_attempts`` placements: reason, scores
+      samples/<sample_id>/       ONE COMPLETE SAMPLE (the folder exists only once the sample is complete)
+        meta.json                see below
+        motion.npz               the placed motion window, our motion format
+                                 (:mod:`skeleton_mamba.tasks.motion.motion_file`): smpl_poses (T, 72),
+                                 smpl_trans (T, 3) metres with smpl_scaling 1, fps, skeleton "smpl24",
+                                 joints (T, 24, 3); y-up SCENE coordinates (the placement applied)
+        camera.npz               positions (T, 3) float32 optical centres; rotations (T, 3, 3) float32
+                                 camera-to-world, OpenCV axes (x right, y down, z forward); K (3, 3)
+                                 intrinsics; width, height, fps (see ``builder/camera.py``)
+        rgb.mp4 | rgb/%06d.png   the egocentric RGB frames (H, W, 3), T frames at ``fps``
+        depth.npz                depth (T, H, W) uint16 z-depth in millimetres, 0 = nothing hit
+        COMPLETE                 completion marker (written last)
+      samples/.tmp-<sample_id>-<pid>/   a sample being written (never read; removed on resume)
+
+``meta.json`` keys: ``sample_id``; ``synthetic`` (true when the motion came from the procedural
+generators); ``motion`` {``source`` path, ``window_index``, ``start_frame``, ``num_frames`` (at the build
+fps), ``start_s``, ``end_s``}; ``music`` {``id`` (AIST++ music id, or the audio file stem), ``path`` (or
+null when unknown), ``start_s``, ``end_s``}: the slice of the track that plays during the window;
+``scene`` {``name``, ``source``, ``up_axis`` of the file, ``floor_height`` (y-up scene frame)};
+``placement`` {``yaw`` radians about +y, ``translation`` (3,) metres: ``p_scene = R_y(yaw) p + t``};
+``penetration_score`` (``S_p`` in cm, ``builder/penetration.py``), ``threshold``, ``attempts``;
+``frames`` {``format`` "mp4" or "png", ``count``, ``width``, ``height``, ``fps``}.
+
+Atomicity: a sample is written into ``samples/.tmp-<id>-<pid>/``, the ``COMPLETE`` marker is written
+last, then the folder is renamed to ``samples/<id>`` (``os.replace``, atomic on one file system). A
+reader lists only folders holding ``COMPLETE`` (:func:`complete_samples`), so an interrupted build never
+yields a half-written sample; :func:`clean_incomplete` removes leftovers before a build resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
+
+__all__ = [
+    "COMPLETE",
+    "SAMPLES",
+    "EgoSample",
+    "sample_dir",
+    "is_complete",
+    "complete_samples",
+    "clean_incomplete",
+    "write_sample",
+    "read_sample",
+    "read_frames",
+    "write_json",
+]
+
+COMPLETE = "COMPLETE"
+SAMPLES = "samples"
+SKIPPED = "skipped"
+TMP_PREFIX = ".tmp-"
+
+
+@dataclass
+class EgoSample:
+    """Everything one sample folder holds (arrays at the build fps, T frames).
+
+    Attributes:
+        meta: the ``meta.json`` dictionary (module docstring).
+        motion: the placed motion window (scene coordinates).
+        camera: ``positions`` (T, 3), ``rotations`` (T, 3, 3), ``K`` (3, 3), ``width``, ``height``, ``fps``.
+        rgb: (T, H, W, 3) uint8, or None when not loaded.
+        depth: (T, H, W) float32 metres, or None when not loaded.
+    """
+
+    meta: dict
+    motion: MotionData
+    camera: dict
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
+
+
+def write_json(path: Path, data: dict) -> None:
+    """Write JSON through a temporary file and an atomic rename."""
+    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def sample_dir(root: str | Path, sample_id: str) -> Path:
+    return Path(root) / SAMPLES / sample_id
+
+
+def is_complete(folder: Path) -> bool:
+    return (folder / COMPLETE).is_file()
+
+
+def complete_samples(root: str | Path) -> list[Path]:
+    """The complete sample folders of a dataset, sorted by id."""
+    base = Path(root) / SAMPLES
+    if not base.is_dir():
+        return []
+    return sorted(p for p in base.iterdir() if p.is_dir() and not p.name.startswith(".") and is_complete(p))
+
+
+def clean_incomplete(root: str | Path) -> list[str]:
+    """Remove temporary folders and sample folders without a completion marker; returns their names."""
+    base = Path(root) / SAMPLES
+    removed: list[str] = []
+    if base.is_dir():
+        for p in sorted(base.iterdir()):
+            if p.is_dir() and (p.name.startswith(TMP_PREFIX) or not is_complete(p)):
+                shutil.rmtree(p)
+                removed.append(p.name)
+    return removed
+
+
+def _write_frames(folder: Path, rgb: np.ndarray, fps: float, fmt: str) -> None:
+    import imageio.v3 as iio
+
+    if fmt == "png":
+        (folder / "rgb").mkdir()
+        for i, frame in enumerate(rgb):
+            iio.imwrite(folder / "rgb" / f"{i:06d}.png", frame)
+    elif fmt == "mp4":
+        # yuv420p needs even sizes: the encoder would otherwise resize; keep the exact size with yuv444p
+        even = rgb.shape[1] % 2 == 0 and rgb.shape[2] % 2 == 0
+        iio.imwrite(
+            folder / "rgb.mp4",
+            rgb,
+            fps=fps,
+            codec="libx264",
+            macro_block_size=1,
+            pixelformat="yuv420p" if even else "yuv444p",
+            quality=8,
+        )
+    else:
+        raise ValueError(f"frame format must be 'png' or 'mp4', got {fmt!r}")
+
+
+def write_sample(root: str | Path, sample: EgoSample, frame_format: str = "mp4") -> Path:
+    """Write a complete sample atomically (module docstring) and return its final folder."""
+    if sample.rgb is None or sample.depth is None:
+        raise ValueError("write_sample needs rgb and depth frames")
+    base = Path(root) / SAMPLES
+    base.mkdir(parents=True, exist_ok=True)
+    sample_id = sample.meta["sample_id"]
+    tmp = base / f"{TMP_PREFIX}{sample_id}-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    save_motion(tmp / "motion.npz", sample.motion)
+    cam = sample.camera
+    np.savez(
+        tmp / "camera.npz",
+        positions=np.asarray(cam["positions"], np.float32),
+        rotations=np.asarray(cam["rotations"], np.float32),
+        K=np.asarray(cam["K"], np.float64),
+        width=np.asarray(cam["width"]),
+        height=np.asarray(cam["height"]),
+        fps=np.asarray(float(cam["fps"])),
+    )
+    _write_frames(tmp, sample.rgb, float(cam["fps"]), frame_format)
+    depth_mm = np.clip(np.round(sample.depth * 1000.0), 0, np.iinfo(np.uint16).max).astype(np.uint16)
+    np.savez_compressed(tmp / "depth.npz", depth=depth_mm)
+    (tmp / "meta.json").write_text(json.dumps(sample.meta, indent=2, sort_keys=True), encoding="utf-8")
+    (tmp / COMPLETE).write_text("ok\n", encoding="utf-8")
+    final = base / sample_id
+    if final.exists():  # an incomplete leftover (complete samples are never rebuilt)
+        shutil.rmtree(final)
+    os.replace(tmp, final)
+    return final
+
+
+def read_frames(folder: str | Path) -> np.ndarray:
+    """The (T, H, W, 3) uint8 RGB frames of a sample folder (``rgb.mp4`` or ``rgb/*.png``)."""
+    import imageio.v3 as iio
+
+    folder = Path(folder)
+    if (folder / "rgb.mp4").is_file():
+        return np.asarray(iio.imread(folder / "rgb.mp4"))
+    pngs = sorted((folder / "rgb").glob("*.png"))
+    if not pngs:
+        raise FileNotFoundError(f"{folder}: no rgb.mp4 and no rgb/*.png frames")
+    return np.stack([iio.imread(p) for p in pngs])
+
+
+def read_sample(folder: str | Path, load_frames: bool = True) -> EgoSample:
+    """Read one sample folder; raises when it is not complete or a file is missing."""
+    folder = Path(folder)
+    if not is_complete(folder):
+        raise ValueError(f"{folder}: not a complete sample (no {COMPLETE} marker)")
+    meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+    with np.load(folder / "camera.npz", allow_pickle=False) as data:
+        camera = {k: data[k] for k in data.files}
+    for key in ("width", "height"):
+        camera[key] = int(camera[key])
+    camera["fps"] = float(camera["fps"])
+    sample = EgoSample(meta=meta, motion=load_motion(folder / "motion.npz"), camera=camera)
+    if load_frames:
+        sample.rgb = read_frames(folder)
+        with np.load(folder / "depth.npz", allow_pickle=False) as data:
+            sample.depth = data["depth"].astype(np.float32) / 1000.0
+    return sample

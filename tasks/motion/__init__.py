@@ -1,0 +1,1 @@
+"""Shared motion and music toolkit."""

@@ -1,0 +1,139 @@
+"""BeatAlign: how well kinematic beats (velocity minima) meet music beats, in both published variants.
+
+The two published definitions disagree (dance.md section 7.4), so the variant is always named:
+
+``"fact"`` (liruilong940607/mint tools/calculate_beat_scores.py; FACT, QEAN):
+    envelope ``e_t = sum_joints |p_t - p_(t-1)|`` with ``e_0 = 0``; motion beats are strict local minima
+    of ``e`` over ``+-10`` frames (``scipy.signal.argrelextrema(order=10)``, "10 for 60FPS"); score = mean
+    over **motion** beats of ``exp(-d^2 / (2 sigma^2))``, ``d`` = distance to the nearest music beat,
+    ``sigma = 3`` frames; 0 when the motion has no beat. Precision-like.
+``"bailando"`` (lisiyao21/Bailando utils/beat_align_score.py; Bailando, LODGE, EgoMusic's MM term):
+    envelope ``e_t = mean_joints |p_(t+1) - p_t|`` (``T - 1`` values) smoothed with
+    ``scipy.ndimage.gaussian_filter(sigma=5)``; motion beats = its local minima (order 1); music beats are
+    truncated to the envelope length; score = mean over **music** beats of ``exp(-d^2 / (2 * 9))``,
+    ``d`` = distance to the nearest motion beat. Recall-like.
+
+Frame constants are the published 60 fps values; at another ``fps`` they are scaled by ``fps / 60`` so they
+keep their meaning in seconds (minima window 1/6 s, sigma 0.05 s, smoothing 1/12 s). FACT scores generated
+motion on frames ``>= 120`` (after the seed) with beats found on the whole sequence: ``start_frame=120``;
+Bailando scores the whole sequence (``start_frame=0``). Music beats past the motion's end are dropped (the
+FACT script keeps them for generated motion, which only matters for motion beats in the last frames).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from scipy.ndimage import gaussian_filter
+from scipy.signal import argrelextrema
+from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences, beat_indices
+from torchmetrics import Metric
+
+__all__ = ["BeatAlign", "alignment_score", "kinematic_beats", "sequence_beat_align"]
+
+Variant = Literal["fact", "bailando"]
+_REFERENCE_FPS = 60.0
+
+
+def kinematic_beats(
+    positions: torch.Tensor | np.ndarray, variant: Variant = "bailando", fps: float = 60.0
+) -> np.ndarray:
+    """Motion-beat frame indices of one ``(T, J, 3)`` joint sequence (velocity minima of ``variant``).
+
+    Pass a single joint as ``(T, 1, 3)`` for the head beats of the MMV metric.
+    """
+    p = np.asarray(positions.cpu() if isinstance(positions, torch.Tensor) else positions, dtype=np.float64)
+    if p.ndim != 3 or p.shape[-1] != 3:
+        raise ValueError(f"positions must be (T, J, 3), got {p.shape}")
+    scale = fps / _REFERENCE_FPS
+    speed = np.linalg.norm(p[1:] - p[:-1], axis=-1)  # (T-1, J)
+    if variant == "fact":
+        envelope = np.concatenate([[0.0], speed.sum(axis=1)])
+        order = max(1, round(10 * scale))
+        return argrelextrema(envelope, np.less, order=order)[0]
+    if variant == "bailando":
+        envelope = gaussian_filter(speed.mean(axis=1), 5 * scale)
+        return argrelextrema(envelope, np.less)[0]
+    raise ValueError(f"variant must be 'fact' or 'bailando', got {variant!r}")
+
+
+def alignment_score(queries: np.ndarray, targets: np.ndarray, sigma: float) -> float:
+    """``mean_q exp(-min_t (q - t)^2 / (2 sigma^2))`` over beat frames ``queries`` (0.0 if none match).
+
+    Returns 0.0 when either set is empty (no beat to align / nothing to align to).
+    """
+    queries = np.asarray(queries, dtype=np.float64)
+    targets = np.asarray(targets, dtype=np.float64)
+    if queries.size == 0 or targets.size == 0:
+        return 0.0
+    nearest = np.abs(queries[:, None] - targets[None, :]).min(axis=1)
+    return float(np.exp(-(nearest**2) / (2 * sigma**2)).mean())
+
+
+def sequence_beat_align(
+    positions: torch.Tensor | np.ndarray,
+    music_beats: torch.Tensor | np.ndarray | Sequence[int],
+    variant: Variant,
+    fps: float = 60.0,
+    start_frame: int = 0,
+) -> float:
+    """BeatAlign of one ``(T, J, 3)`` motion against its music beats (one-hot or frame indices).
+
+    Beats are found on the whole sequence; only motion and music beats at frames ``>= start_frame`` count.
+    """
+    motion = kinematic_beats(positions, variant, fps)
+    motion = motion[motion >= start_frame]
+    beats = beat_indices(music_beats)
+    beats = beats[beats >= start_frame]
+    sigma = 3.0 * fps / _REFERENCE_FPS
+    t = len(positions)
+    if variant == "fact":
+        beats = beats[beats < t]  # music truncated to the motion length
+        return alignment_score(motion, beats, sigma)
+    beats = beats[beats < t - 1]  # Bailando: truncated to the envelope length T - 1
+    return alignment_score(beats, motion, sigma)
+
+
+class BeatAlign(Metric):
+    """Beat alignment score averaged over sequences, ``variant="fact"`` or ``"bailando"`` (see module doc).
+
+    Args:
+        variant: ``"fact"`` (averaged over motion beats) or ``"bailando"`` (averaged over music beats).
+        fps: frame rate of motion and beats (published constants are for 60 fps and scale with it).
+        start_frame: score only beats from this frame on (FACT generated motion: 120, after the seed).
+
+    ``update(positions, music_beats)`` takes ``(B, T, J, 3)`` joints (or a list of ``(T_i, J, 3)``) and one
+    beat vector per sequence: one-hot ``(T,)`` (column 34 of the music features) or frame indices.
+    """
+
+    is_differentiable = False
+    higher_is_better = True
+    full_state_update = False
+
+    def __init__(
+        self, variant: Variant = "bailando", fps: float = 60.0, start_frame: int = 0, **kwargs: Any
+    ) -> None:
+        super().__init__(**kwargs)
+        if variant not in ("fact", "bailando"):
+            raise ValueError(f"variant must be 'fact' or 'bailando', got {variant!r}")
+        self.variant = variant
+        self.fps = fps
+        self.start_frame = start_frame
+        self.add_state("score_sum", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("count", default=torch.tensor(0, dtype=torch.long), dist_reduce_fx="sum")
+
+    def update(self, positions: Positions, music_beats: Sequence[Any] | torch.Tensor | np.ndarray) -> None:
+        sequences = as_sequences(positions, min_frames=3)
+        if len(music_beats) != len(sequences):
+            raise ValueError(f"got {len(sequences)} motions but {len(music_beats)} beat vectors")
+        for seq, beats in zip(sequences, music_beats, strict=True):
+            self.score_sum += sequence_beat_align(seq, beats, self.variant, self.fps, self.start_frame)
+            self.count += 1
+
+    def compute(self) -> torch.Tensor:
+        if self.count == 0:
+            raise RuntimeError("BeatAlign.compute() called before any update()")
+        return self.score_sum / self.count

@@ -1,0 +1,256 @@
+"""The 35-d librosa music feature of FACT (60 fps) and EDGE (30 fps), with tempo and beats.
+
+Recipe (google-research/mint tools/preprocessing.py; Stanford-TML/EDGE data/audio_extraction/
+baseline_features.py; dance.md section 5): the audio is loaded at ``SR = fps * 512`` Hz so one STFT hop of
+512 samples is one motion frame, then per frame
+
+========  =======================================================================
+columns   content
+========  =======================================================================
+0         onset-strength envelope (``librosa.onset.onset_strength``)
+1-20      20 MFCCs (``librosa.feature.mfcc``)
+21-32     12-bin ``chroma_cens`` (hop 512)
+33        one-hot onset peaks (``librosa.onset.onset_detect`` on the envelope)
+34        one-hot beats (``librosa.beat.beat_track`` on the envelope, ``start_bpm``, tightness 100)
+========  =======================================================================
+
+``start_bpm`` comes from the AIST music id when the file name carries one (:func:`aist_start_bpm`);
+otherwise (EDGE falls back to librosa's estimate) it is librosa's tempo estimate *folded into the dance
+range* 80-170 BPM (AIST++'s own range): beat trackers often lock onto half or double the tempo, and the
+fold is the prior that picks the dance octave. It is a prior, not a constraint: ``beat_track`` centres its
+log-normal tempo prior on it, so a track with strong evidence for another octave (a 60 BPM click track)
+keeps its own tempo; ``bpm_range=None`` disables the fold. The reported tempo is the slope of a
+least-squares line through the beat times, which is not quantised to whole frames like librosa's tempo
+estimate (at 30 fps a 132 BPM track reads 128.6 BPM there, 133.2 BPM here).
+
+Features are cached on disk (:mod:`~skeleton_mamba.tasks.motion.cache`) keyed by the audio file's content
+and every setting; tempo and beats are re-derived from the cached beat column, so hits and misses agree.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from skeleton_mamba.tasks.motion.cache import FeatureCache
+
+__all__ = [
+    "BEAT",
+    "CHROMA",
+    "DANCE_BPM_RANGE",
+    "ENVELOPE",
+    "HOP_LENGTH",
+    "MFCC",
+    "NUM_MUSIC_FEATURES",
+    "ONSET_PEAK",
+    "MusicAnalysis",
+    "aist_start_bpm",
+    "compute_music_features",
+    "extract_music_features",
+    "fold_tempo",
+    "load_audio",
+    "tempo_from_beats",
+]
+
+HOP_LENGTH = 512
+NUM_MUSIC_FEATURES = 35
+ENVELOPE = 0
+MFCC = slice(1, 21)
+CHROMA = slice(21, 33)
+ONSET_PEAK = 33
+BEAT = 34
+DANCE_BPM_RANGE = (80.0, 170.0)
+TIGHTNESS = 100.0
+_CACHE_VERSION = 1
+
+_AIST_ID = re.compile(r"(?:^|_)(m(?:BR|PO|LO|MH|LH|WA|KR|JS|JB|HO)\d)(?:_|$)")
+
+
+def aist_start_bpm(name: str) -> float | None:
+    """FACT/EDGE ``start_bpm`` for an AIST music id found in ``name`` (``None`` when there is none).
+
+    ``name`` may be the id (``"mHO5"``), a file stem (``"mHO5.wav"``) or an AIST++ sequence name
+    (``"gHO_sBM_cAll_d19_mHO5_ch02"``). mBR, mPO, mLO, mMH, mLH, mWA, mKR, mJS, mJB: ``10 * digit + 80``;
+    mHO: ``5 * digit + 110``.
+    """
+    match = _AIST_ID.search(Path(name).stem)
+    if match is None:
+        return None
+    music_id = match.group(1)
+    digit = int(music_id[3])
+    return float(5 * digit + 110) if music_id.startswith("mHO") else float(10 * digit + 80)
+
+
+def fold_tempo(bpm: float, bpm_range: tuple[float, float] = DANCE_BPM_RANGE) -> float:
+    """Multiply or divide ``bpm`` by 2 until it lies in ``[low, high)`` (needs ``high >= 2 * low``)."""
+    low, high = bpm_range
+    if not (0 < low and high >= 2 * low):
+        raise ValueError(f"bpm_range {bpm_range} must satisfy 0 < low and high >= 2 * low")
+    if not bpm > 0:
+        raise ValueError(f"tempo must be positive, got {bpm}")
+    while bpm < low:
+        bpm *= 2.0
+    while bpm >= high:
+        bpm /= 2.0
+    return bpm
+
+
+def tempo_from_beats(beat_frames: np.ndarray, fps: float) -> float:
+    """Tempo in BPM from the least-squares slope of beat time against beat number (0.0 if < 2 beats)."""
+    beats = np.asarray(beat_frames, dtype=np.float64)
+    if beats.size < 2:
+        return 0.0
+    slope = np.polyfit(np.arange(beats.size, dtype=np.float64), beats / fps, 1)[0]
+    return float(60.0 / slope)
+
+
+def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
+    """Mono float32 audio resampled to ``sr`` (anything librosa/soundfile reads: wav, flac, ogg/opus, mp3).
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ValueError: the file cannot be decoded or holds no samples (the message names the file).
+    """
+    import librosa
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: audio file not found")
+    try:
+        with warnings.catch_warnings():  # librosa warns before falling back to audioread; we raise instead
+            warnings.simplefilter("ignore", UserWarning)
+            warnings.simplefilter("ignore", FutureWarning)
+            y, _ = librosa.load(path, sr=sr, mono=True)
+    except Exception as err:  # soundfile/audioread raise many unrelated types
+        raise ValueError(f"{path}: cannot decode audio ({type(err).__name__}: {err})") from err
+    if y.size == 0:
+        raise ValueError(f"{path}: the audio holds no samples")
+    return y
+
+
+@dataclass
+class MusicAnalysis:
+    """The 35-d features of one track with its beats.
+
+    Attributes:
+        features: ``(T, 35)`` float32, one row per motion frame.
+        fps: frames per second of ``features``.
+        tempo_bpm: tempo from the beat times (:func:`tempo_from_beats`).
+        beat_frames: ``(B,)`` frame indices of the beats (the nonzero rows of column 34).
+        duration_s: length of the audio in seconds.
+    """
+
+    features: np.ndarray
+    fps: int
+    tempo_bpm: float
+    beat_frames: np.ndarray
+    duration_s: float
+
+    @property
+    def beat_times(self) -> np.ndarray:
+        """``(B,)`` beat times in seconds."""
+        return self.beat_frames / float(self.fps)
+
+    @classmethod
+    def from_features(cls, features: np.ndarray, fps: int, duration_s: float) -> MusicAnalysis:
+        beats = np.flatnonzero(features[:, BEAT] > 0.5)
+        return cls(features, fps, tempo_from_beats(beats, fps), beats, duration_s)
+
+
+def compute_music_features(
+    y: np.ndarray,
+    fps: int = 60,
+    start_bpm: float | None = None,
+    tightness: float = TIGHTNESS,
+    bpm_range: tuple[float, float] | None = DANCE_BPM_RANGE,
+) -> MusicAnalysis:
+    """The 35-d feature of mono audio ``y`` sampled at ``fps * 512`` Hz.
+
+    Args:
+        y: ``(N,)`` mono audio at ``fps * HOP_LENGTH`` Hz (see :func:`load_audio`).
+        fps: motion frame rate: 60 (FACT) or 30 (EDGE); any positive integer works.
+        start_bpm: beat-tracker tempo prior; ``None`` estimates it (folded into ``bpm_range``).
+        tightness: beat-tracker tightness (100 in FACT and EDGE).
+        bpm_range: dance tempo octave used when ``start_bpm`` is estimated (``None``: no fold).
+
+    Returns:
+        A :class:`MusicAnalysis` whose ``features`` are ``(1 + N // 512, 35)``.
+    """
+    import librosa
+
+    sr = int(fps) * HOP_LENGTH
+    y = np.asarray(y, dtype=np.float32)
+    envelope = librosa.onset.onset_strength(y=y, sr=sr)  # (T,)
+    mfcc = librosa.feature.mfcc(y=y, sr=sr, n_mfcc=20).T  # (T, 20)
+    chroma = librosa.feature.chroma_cens(y=y, sr=sr, hop_length=HOP_LENGTH, n_chroma=12).T  # (T, 12)
+    peak_idxs = librosa.onset.onset_detect(onset_envelope=envelope.flatten(), sr=sr, hop_length=HOP_LENGTH)
+    peak_onehot = np.zeros_like(envelope, dtype=np.float32)
+    peak_onehot[peak_idxs] = 1.0
+    if start_bpm is None:
+        estimate = librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0]
+        start_bpm = float(estimate) if bpm_range is None else fold_tempo(float(estimate), bpm_range)
+    _, beat_idxs = librosa.beat.beat_track(
+        onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH, start_bpm=start_bpm, tightness=tightness
+    )
+    beat_onehot = np.zeros_like(envelope, dtype=np.float32)
+    beat_onehot[beat_idxs] = 1.0
+    t = min(len(envelope), len(mfcc), len(chroma))  # equal for centred frames; guard anyway
+    features = np.concatenate(
+        [envelope[:t, None], mfcc[:t], chroma[:t], peak_onehot[:t, None], beat_onehot[:t, None]], axis=-1
+    ).astype(np.float32)
+    return MusicAnalysis.from_features(features, int(fps), len(y) / sr)
+
+
+def extract_music_features(
+    path: str | os.PathLike,
+    fps: int = 60,
+    start_bpm: float | None = None,
+    tightness: float = TIGHTNESS,
+    bpm_range: tuple[float, float] | None = DANCE_BPM_RANGE,
+    cache_dir: str | os.PathLike | None = None,
+    use_cache: bool = True,
+) -> MusicAnalysis:
+    """Load an audio file and compute (or fetch from the cache) its 35-d features.
+
+    Args:
+        path: audio file.
+        fps: 60 (FACT, QEAN) or 30 (EDGE, EgoMusic).
+        start_bpm: tempo prior; ``None`` uses the AIST music id in the file name if any
+            (:func:`aist_start_bpm`), else the folded librosa estimate.
+        tightness: beat-tracker tightness.
+        bpm_range: dance tempo octave for estimated priors (``None``: no fold).
+        cache_dir: cache folder (default ``~/.cache/skeleton_mamba/music``).
+        use_cache: ``False`` always recomputes and writes nothing.
+    """
+    import librosa
+
+    if fps <= 0 or int(fps) != fps:
+        raise ValueError(f"fps must be a positive integer, got {fps}")
+    fps = int(fps)
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: audio file not found")
+    if start_bpm is None:
+        start_bpm = aist_start_bpm(path.name)
+    settings = {
+        "kind": "fact35",
+        "version": _CACHE_VERSION,
+        "fps": fps,
+        "start_bpm": start_bpm,
+        "tightness": tightness,
+        "bpm_range": None if bpm_range is None else list(bpm_range),
+        "librosa": librosa.__version__,
+    }
+    cache = FeatureCache("music", cache_dir, enabled=use_cache)
+    key = cache.key(path, settings)
+    features = cache.load(key)
+    if features is None or features.ndim != 2 or features.shape[1] != NUM_MUSIC_FEATURES:
+        y = load_audio(path, fps * HOP_LENGTH)
+        features = compute_music_features(y, fps, start_bpm, tightness, bpm_range).features
+        cache.store(key, features)
+    # The header duration, identical on hits and misses (the decoded length can differ by a few samples).
+    return MusicAnalysis.from_features(features, fps, float(librosa.get_duration(path=path)))

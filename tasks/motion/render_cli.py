@@ -1,0 +1,159 @@
+"""``sm render MOTION [--music FILE] --out clip.mp4|clip.gif [--fps N] [--skeleton NAME]``.
+
+Reads any motion file the toolkit knows and renders a skeleton animation (see :mod:`.render`):
+
+- ``.npz``: our motion format (:mod:`.motion_file`); SMPL-24 through forward kinematics when no joints;
+- ``.pkl``: an AIST++ motion (60 fps, read with the restricted unpickler), through forward kinematics;
+- ``.npy``: joint positions (T, J, 3); the skeleton is ``--skeleton`` or inferred from J
+  (22 HumanML3D, 24 SMPL, 25 NTU, 18 OpenPose); its frame rate ``--motion-fps`` (default 20 for
+  HumanML3D, 30 otherwise);
+- ``.bvh``: any BVH file (hierarchy from the file);
+- ``.skeleton``: a raw NTU RGB+D file (every tracked body, 30 fps).
+
+``--fps`` resamples the joints linearly to the output frame rate (default: the motion's own).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from skeleton_mamba.skeletons import get_skeleton
+
+__all__ = ["JointsClip", "load_joints", "render_file", "main"]
+
+_BY_JOINT_COUNT = {22: "humanml3d22", 24: "smpl24", 25: "ntu25", 18: "openpose18"}
+_DEFAULT_FPS = {"humanml3d22": 20.0}
+
+
+@dataclass
+class JointsClip:
+    """Joint positions ready to draw: (T, J, 3) y-up, parents, names and frame rate."""
+
+    joints: np.ndarray
+    parents: list[int]
+    names: list[str]
+    fps: float
+
+
+def _from_skeleton(joints: np.ndarray, skeleton: str, fps: float) -> JointsClip:
+    skel = get_skeleton(skeleton)
+    return JointsClip(joints, list(skel.parents), list(skel.joint_names), fps)
+
+
+def load_joints(
+    path: str | PathLike[str], skeleton: str | None = None, motion_fps: float | None = None
+) -> JointsClip:
+    """Read a motion file of any supported kind (see the module docstring) as joint positions."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such motion file")
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        from skeleton_mamba.tasks.motion.motion_file import load_motion
+
+        motion = load_motion(path)
+        return _from_skeleton(motion.joint_positions(), motion.skeleton, motion_fps or motion.fps)
+    if suffix == ".pkl":
+        from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
+
+        motion = load_aistpp_motion(path)
+        return _from_skeleton(motion.joint_positions(), "smpl24", motion_fps or motion.fps)
+    if suffix == ".npy":
+        joints = np.load(path, allow_pickle=False)
+        if joints.ndim != 3 or joints.shape[2] != 3:
+            raise ValueError(f"{path}: expected joint positions (T, J, 3), got shape {joints.shape}")
+        name = skeleton or _BY_JOINT_COUNT.get(joints.shape[1])
+        if name is None:
+            raise ValueError(f"{path}: cannot infer a skeleton for {joints.shape[1]} joints; pass --skeleton")
+        skel = get_skeleton(name)
+        if skel.num_joints != joints.shape[1]:
+            raise ValueError(f"{path}: {joints.shape[1]} joints, skeleton {skel.name} has {skel.num_joints}")
+        fps = motion_fps or _DEFAULT_FPS.get(skel.name, 30.0)
+        return _from_skeleton(joints.astype(np.float64), name, fps)
+    if suffix == ".bvh":
+        from skeleton_mamba.tasks.motion.bvh import load_bvh
+
+        bvh = load_bvh(path)
+        return JointsClip(bvh.joint_positions(), list(bvh.parents), list(bvh.names), motion_fps or bvh.fps)
+    if suffix == ".skeleton":
+        from skeleton_mamba.tasks.recognition.ntu import read_skeleton_file
+
+        keypoints = read_skeleton_file(path).keypoints(max_bodies=2)  # (M, T, 25, 3)
+        if keypoints.shape[1] == 0:
+            raise ValueError(f"{path}: no frame lists a body")
+        skel = get_skeleton("ntu25")
+        bodies = keypoints.shape[0]
+        # Bodies side by side in one joint array; each keeps its own root (the camera follows the first).
+        parents = [p + b * skel.num_joints if p >= 0 else -1 for b in range(bodies) for p in skel.parents]
+        joints = np.concatenate(list(keypoints), axis=1).astype(np.float64)
+        names = [n for _ in range(bodies) for n in skel.joint_names]
+        return JointsClip(joints, parents, names, motion_fps or 30.0)
+    raise ValueError(f"{path}: unsupported motion file type {suffix!r} (.npz, .pkl, .npy, .bvh, .skeleton)")
+
+
+def render_file(
+    motion: str | PathLike[str],
+    out: str | PathLike[str],
+    music: str | PathLike[str] | None = None,
+    fps: float | None = None,
+    skeleton: str | None = None,
+    motion_fps: float | None = None,
+    title: str | None = None,
+    progress: bool = True,
+) -> Path:
+    """Load ``motion`` (any supported file), resample to ``fps`` if given, and render it to ``out``."""
+    from skeleton_mamba.tasks.motion.render import render_motion
+    from skeleton_mamba.tasks.motion.resample import resample_linear
+
+    clip = load_joints(motion, skeleton=skeleton, motion_fps=motion_fps)
+    joints, out_fps = clip.joints, clip.fps
+    if fps is not None and abs(fps - clip.fps) > 1e-9:
+        joints = resample_linear(torch.from_numpy(np.asarray(joints, np.float64)), clip.fps, fps).numpy()
+        out_fps = fps
+    return render_motion(
+        joints, clip.parents, out, out_fps, music=music, names=clip.names, title=title, progress=progress
+    )
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm render", description="Render a motion file as a skeleton animation.")
+    p.add_argument("motion", help="motion file: .npz (ours), .pkl (AIST++), .npy (T,J,3), .bvh, .skeleton")
+    p.add_argument("--out", required=True, help="output video, .mp4 or .gif")
+    p.add_argument("--music", default=None, help="audio file muxed into the mp4 (cut to the motion's length)")
+    p.add_argument("--fps", type=float, default=None, help="output frame rate (default: the motion's)")
+    p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
+    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
+    p.add_argument("--title", default=None, help="text drawn on every frame (default: the file name)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm render``; returns 0 on success, 2 on a bad file or argument."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    start = time.perf_counter()
+    try:
+        out = render_file(
+            args.motion,
+            args.out,
+            music=args.music,
+            fps=args.fps,
+            skeleton=args.skeleton,
+            motion_fps=args.motion_fps,
+            title=args.title if args.title is not None else Path(args.motion).name,
+            progress=not args.quiet,
+        )
+    except (OSError, ValueError, KeyError) as e:
+        print(f"sm render: error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
+    return 0

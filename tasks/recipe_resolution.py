@@ -1,0 +1,99 @@
+"""``--recipe NAME|PATH``: resolve a recipe name to the packaged YAML file.
+
+jsonargparse allows one config action per parser, so ``--recipe`` is an alias of LightningCLI's
+``-c/--config`` (same destination): :class:`RecipeConfigAction` resolves its value and hands the
+resolved path to :class:`jsonargparse.ActionConfigFile`. Resolution order for a value:
+
+1. an existing file on disk is used as is (``--recipe my_recipe.yaml``);
+2. a YAML mapping given inline (``--config '{trainer: {max_epochs: 1}}'``) is passed through;
+3. otherwise the value is looked up among the packaged recipes
+   (``importlib.resources.files("skeleton_mamba.recipes")``), with or without the ``.yaml`` suffix;
+4. an unknown name ends in ``parser.error`` listing the available recipes.
+
+Several ``--recipe``/``--config`` options and dotted overrides merge left to right.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+from pathlib import Path
+
+import yaml
+from jsonargparse import ActionConfigFile
+
+RECIPE_PACKAGE = "skeleton_mamba.recipes"
+RECIPE_SUFFIXES = (".yaml", ".yml")
+
+__all__ = [
+    "RecipeConfigAction",
+    "packaged_recipe_dir",
+    "packaged_recipes",
+    "recipe_description",
+    "resolve_recipe",
+]
+
+
+def packaged_recipe_dir() -> Path:
+    """The folder of the packaged recipes (a real directory: editable, wheel and sdist installs)."""
+    root = importlib.resources.files(RECIPE_PACKAGE)
+    path = Path(str(root))
+    if not path.is_dir():
+        raise RuntimeError(f"the packaged recipes are not on the file system ({root}); install unzipped")
+    return path
+
+
+def packaged_recipes() -> dict[str, Path]:
+    """Recipe file name -> path, for the top-level ``*.yaml`` files of the recipe package.
+
+    Sub-folders (``backbones/``) hold fragments that recipes include; they are not recipes.
+    """
+    folder = packaged_recipe_dir()
+    return {p.name: p for p in sorted(folder.iterdir()) if p.is_file() and p.suffix in RECIPE_SUFFIXES}
+
+
+def recipe_description(path: Path) -> str:
+    """The recipe's one-line description: its first ``# `` comment line (empty when there is none)."""
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            stripped = line.strip()
+            if not stripped:
+                continue
+            if stripped.startswith("#"):
+                return stripped.lstrip("#").strip()
+            return ""
+    return ""
+
+
+def resolve_recipe(value: str) -> Path | None:
+    """The file a ``--recipe`` value names: an existing path, else a packaged recipe; ``None`` if neither."""
+    candidate = Path(value).expanduser()
+    if candidate.is_file():
+        return candidate
+    recipes = packaged_recipes()
+    for name in (value, *(value + s for s in RECIPE_SUFFIXES)):
+        if name in recipes:
+            return recipes[name]
+    return None
+
+
+def _is_inline_mapping(value: str) -> bool:
+    try:
+        return isinstance(yaml.safe_load(value), dict)
+    except yaml.YAMLError:
+        return False
+
+
+class RecipeConfigAction(ActionConfigFile):
+    """``-c/--config/--recipe``: a config file, an inline YAML mapping or a packaged recipe name."""
+
+    def __call__(self, parser, cfg, values, option_string=None):
+        if not _is_inline_mapping(values):
+            resolved = resolve_recipe(values)
+            if resolved is None:
+                available = ", ".join(packaged_recipes()) or "(none installed)"
+                parser.error(
+                    f"{option_string or '--recipe'} {values!r}: no such file and no packaged recipe of that "
+                    f"name. Available recipes: {available} (`sm recipes` describes them)."
+                )
+            values = str(resolved)
+        super().__call__(parser, cfg, values, option_string)

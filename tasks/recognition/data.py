@@ -1,0 +1,252 @@
+"""LightningDataModule for skeleton action recognition on PYSKL annotation files.
+
+One pickle (``sm prepare ntu60|ntu120|kinetics`` writes it; PYSKL's ``ntu60_3danno.pkl`` works as is)
+holds every sample and the named splits; the data module picks ``train_split`` / ``val_split`` /
+``test_split`` and runs :class:`.transforms.SkeletonPipeline` per sample:
+
+- training: 1 random clip of ``clip_len`` frames, optional rotation / scaling;
+- validation: ``num_clips_val`` deterministic clips; test: ``num_clips_test`` (PYSKL: 10, seed 255).
+
+A batch is ``(keypoint (B, N, M, T, V, C) float32, label (B,) int64)`` with N clips and M bodies.
+
+``num_classes``, ``skeleton``, ``in_channels`` and ``batch_size`` are attributes that ``sm`` links to the
+model (``in_channels`` is read off the pipeline output: x y z for 3D, x y score for 2D). ``batch_size``
+is the per-device batch; the model scales its learning rate by the global batch.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from lightning.pytorch import LightningDataModule
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.recognition.pyskl import load_annotations
+from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
+from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline
+from torch.utils.data import DataLoader, Dataset
+
+from skeleton_mamba.skeletons import get_skeleton
+
+__all__ = ["RecognitionDataModule", "SkeletonClipDataset", "SyntheticRecognitionDataModule"]
+
+
+class SkeletonClipDataset(Dataset):
+    """Annotations -> ``(clips (N, M, T, V, C) float32 tensor, label)`` through a pipeline.
+
+    Training randomness comes from torch's generator (seeded per worker by the DataLoader and by
+    ``seed_everything(workers=True)``), so runs are reproducible and workers differ.
+    """
+
+    def __init__(self, annotations: list[dict], pipeline: SkeletonPipeline) -> None:
+        self.annotations = annotations
+        self.pipeline = pipeline
+
+    def __len__(self) -> int:
+        return len(self.annotations)
+
+    def __getitem__(self, index: int) -> tuple[torch.Tensor, int]:
+        annotation = self.annotations[index]
+        rng = None if self.pipeline.test_mode else np.random.default_rng(int(torch.randint(2**62, ()).item()))
+        return torch.from_numpy(self.pipeline(annotation, rng)), annotation["label"]
+
+
+class RecognitionDataModule(LightningDataModule):
+    """Skeleton clips from a PYSKL annotation pickle.
+
+    Args:
+        ann_file: the annotation pickle.
+        num_classes: classes of the data set (NTU60 60, NTU120 120, Kinetics 400).
+        skeleton: joint layout of the keypoints (``ntu25`` or ``openpose18``).
+        train_split: split name for training (PYSKL names, e.g. ``xsub_train``).
+        val_split: split name for validation.
+        test_split: split name for testing (``None``: the validation split, as PYSKL does).
+        clip_len: frames per clip (PYSKL GCN configs: 100).
+        num_clips_val: clips per validation sample.
+        num_clips_test: clips per test sample; their softmax scores are averaged (PYSKL: 10).
+        num_person: bodies per sample (zero-padded).
+        max_angle: training rotation range in radians (0: off, as PYSKL's NTU configs).
+        scale_range: training per-axis scale range (0: off).
+        batch_size: per-device batch size.
+        num_workers: DataLoader worker processes.
+        prepare_command: how to build ``ann_file`` (shown when it is missing).
+    """
+
+    def __init__(
+        self,
+        ann_file: str,
+        num_classes: int,
+        skeleton: str = "ntu25",
+        train_split: str = "xsub_train",
+        val_split: str = "xsub_val",
+        test_split: str | None = None,
+        clip_len: int = 100,
+        num_clips_val: int = 1,
+        num_clips_test: int = 10,
+        num_person: int = 2,
+        max_angle: float = 0.0,
+        scale_range: float = 0.0,
+        batch_size: int = 128,
+        num_workers: int = 4,
+        prepare_command: str | None = None,
+    ) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        get_skeleton(skeleton)  # fail early on an unknown name
+        self.ann_file = ann_file
+        self.num_classes = num_classes
+        self.skeleton = skeleton
+        self.splits = {"train": train_split, "val": val_split, "test": test_split or val_split}
+        self.clip_len = clip_len
+        self.num_clips = {"validate": num_clips_val, "test": num_clips_test}
+        self.num_person = num_person
+        self.max_angle = max_angle
+        self.scale_range = scale_range
+        self.batch_size = batch_size
+        self.num_workers = num_workers
+        self.prepare_command = prepare_command
+        self._data: dict | None = None
+        self.datasets: dict[str, SkeletonClipDataset] = {}
+        self.check_data()
+
+    def check_data(self) -> None:
+        """Raise :class:`DatasetNotFoundError` (where the data goes, how to build it) without ``ann_file``."""
+        path = Path(self.ann_file).expanduser()
+        if path.is_file():
+            return
+        how = f"Build it with:\n    {self.prepare_command}\n" if self.prepare_command else ""
+        raise DatasetNotFoundError(
+            f"annotation file not found: {path.resolve()}\n{how}"
+            f"Or point the recipe at it with --data.init_args.ann_file PATH."
+        )
+
+    def load(self) -> dict:
+        """The PYSKL annotation dict (loaded once, validated)."""
+        if self._data is None:
+            self._data = load_annotations(self.ann_file)
+        return self._data
+
+    def _split(self, name: str) -> list[dict]:
+        data = self.load()
+        if name not in data["split"]:
+            raise KeyError(f"{self.ann_file}: no split {name!r}; it has {sorted(data['split'])}")
+        by_name = {a["frame_dir"]: a for a in data["annotations"]}
+        annotations = [by_name[n] for n in data["split"][name]]
+        bad = [a["frame_dir"] for a in annotations if not 0 <= a["label"] < self.num_classes]
+        if bad:
+            raise ValueError(f"{self.ann_file}: labels outside [0, {self.num_classes}) in {bad[:3]}")
+        joints = get_skeleton(self.skeleton).num_joints
+        found = sorted({a["keypoint"].shape[2] for a in annotations} - {joints})
+        if found:
+            raise ValueError(
+                f"{self.ann_file}: split {name!r} has samples with {found} joints; "
+                f"skeleton {self.skeleton!r} has {joints}"
+            )
+        return annotations
+
+    def pipeline(self, stage: str) -> SkeletonPipeline:
+        """The sample pipeline of ``fit`` (training), ``validate`` or ``test``/``predict``."""
+        if stage == "fit":
+            return SkeletonPipeline(
+                self.clip_len, 1, False, self.num_person, self.max_angle, self.scale_range
+            )
+        num_clips = self.num_clips["validate" if stage == "validate" else "test"]
+        return SkeletonPipeline(self.clip_len, num_clips, True, self.num_person)
+
+    @property
+    def in_channels(self) -> int:
+        """Per-joint channels C of the network input (from the first training sample)."""
+        first = self._split(self.splits["train"])[:1] or self.load()["annotations"][:1]
+        if not first:
+            raise ValueError(f"{self.ann_file}: no annotations")
+        return int(self.pipeline("validate")(first[0]).shape[-1])
+
+    def setup(self, stage: str) -> None:
+        keys = {"fit": ("train", "val"), "validate": ("val",)}.get(stage, ("test",))
+        for key in keys:
+            if key not in self.datasets:
+                pipeline = self.pipeline({"train": "fit", "val": "validate"}.get(key, "test"))
+                self.datasets[key] = SkeletonClipDataset(self._split(self.splits[key]), pipeline)
+
+    def _loader(self, key: str, shuffle: bool) -> DataLoader:
+        workers = self.num_workers
+        return DataLoader(
+            self.datasets[key],
+            batch_size=self.batch_size,
+            shuffle=shuffle,
+            drop_last=shuffle,
+            num_workers=workers,
+            persistent_workers=workers > 0,
+            pin_memory=torch.cuda.is_available(),
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", shuffle=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", shuffle=False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+    def predict_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+
+class SyntheticRecognitionDataModule(RecognitionDataModule):
+    """Generated class-separable sequences (:func:`.synthetic.make_synthetic_annotations`); no files.
+
+    Args:
+        num_classes: K classes.
+        train_per_class: training samples per class.
+        val_per_class: validation (and test) samples per class.
+        num_frames: frames per generated sequence.
+        skeleton: ``ntu25`` (3D) or ``openpose18`` (2D with scores).
+        num_bodies: bodies per generated sequence.
+        seed: generator seed.
+        clip_len: frames per clip.
+        num_clips_test: test clips per sample.
+        num_person: bodies per network input.
+        batch_size: per-device batch size.
+        num_workers: DataLoader worker processes.
+    """
+
+    def __init__(
+        self,
+        num_classes: int = 3,
+        train_per_class: int = 16,
+        val_per_class: int = 8,
+        num_frames: int = 32,
+        skeleton: str = "ntu25",
+        num_bodies: int = 1,
+        seed: int = 0,
+        clip_len: int = 16,
+        num_clips_test: int = 2,
+        num_person: int = 1,
+        batch_size: int = 8,
+        num_workers: int = 0,
+    ) -> None:
+        super().__init__(
+            ann_file="<generated>",
+            num_classes=num_classes,
+            skeleton=skeleton,
+            clip_len=clip_len,
+            num_clips_test=num_clips_test,
+            num_person=num_person,
+            batch_size=batch_size,
+            num_workers=num_workers,
+        )
+        self.save_hyperparameters()
+        self.generator_args = dict(
+            num_classes=num_classes, train_per_class=train_per_class, val_per_class=val_per_class,
+            num_frames=num_frames, skeleton=skeleton, num_bodies=num_bodies, seed=seed,
+        )  # fmt: skip
+
+    def check_data(self) -> None:
+        """Nothing to check: the data is generated."""
+
+    def load(self) -> dict:
+        if self._data is None:
+            self._data = make_synthetic_annotations(**self.generator_args)
+        return self._data

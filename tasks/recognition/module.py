@@ -1,0 +1,194 @@
+"""LightningModule for skeleton action recognition: cross-entropy, SGD + cosine, top-k accuracy.
+
+Training schedule defaults follow the reference toolkits (PYSKL ST-GCN++/CTR-GCN NTU configs,
+mmaction2 ``stgcnpp_8xb16``): SGD, momentum 0.9, Nesterov, weight decay 5e-4, learning rate 0.1
+for a global batch of 128, cosine annealing to 0 per optimizer step.
+
+Learning-rate scaling (linear rule, PYSKL maintainer in pyskl #51): ``batch_size`` is the
+per-device batch of the data module (linked), and the optimizer uses::
+
+    lr_used = lr * global_batch / base_batch_size,
+    global_batch = batch_size * trainer.world_size * trainer.accumulate_grad_batches
+
+so ``lr: 0.1, base_batch_size: 128`` gives 0.1 for 1 device x 128, 8 devices x 16, or 2 devices x 64,
+and 0.2 for 2 devices x 128. The value used is logged as ``lr`` and printed at fit start.
+
+Evaluation follows PYSKL (``average_clips='prob'``): a sample may carry several clips
+(B, N, M, T, J, C); the softmax probabilities of its clips are averaged. Metrics are torchmetrics
+top-1 / top-5 accuracy (micro) and, at test time, mean class accuracy and the confusion matrix,
+saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from lightning.pytorch import LightningModule
+from lightning.pytorch.utilities import rank_zero_info
+from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
+from skeleton_mamba.tasks.recognition.model import ActionRecognizer
+from torchmetrics import MetricCollection
+from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+
+__all__ = ["ActionRecognitionModule", "backbone_config", "plain_backbone_config"]
+
+
+def backbone_config(value: SkeletonMambaConfig | Mapping | None) -> SkeletonMambaConfig:
+    """A :class:`SkeletonMambaConfig` from a config, a plain mapping (checkpoint hparams) or ``None``."""
+    if value is None:
+        return SkeletonMambaConfig()
+    if isinstance(value, SkeletonMambaConfig):
+        return value
+    fields = dict(value)
+    mixer = fields.get("mixer")
+    if isinstance(mixer, Mapping):
+        mixer = dict(mixer)
+        if "A_init_range" in mixer:
+            mixer["A_init_range"] = tuple(mixer["A_init_range"])
+        fields["mixer"] = MixerConfig(**mixer)
+    return SkeletonMambaConfig(**fields)
+
+
+def plain_backbone_config(config: SkeletonMambaConfig) -> dict:
+    """The config as plain dicts and lists (checkpoints load with ``weights_only=True``)."""
+
+    def plain(value):
+        if isinstance(value, dict):
+            return {k: plain(v) for k, v in value.items()}
+        if isinstance(value, list | tuple):
+            return [plain(v) for v in value]
+        return value
+
+    return plain(dataclasses.asdict(config))
+
+
+class ActionRecognitionModule(LightningModule):
+    """Skeleton Mamba action recognizer.
+
+    Args:
+        backbone: the backbone configuration (recipes include ``backbones/skeleton_mamba.yaml``).
+            Its ``skeleton`` and ``in_channels`` fields are replaced by the linked values below.
+        num_classes: K. Linked from the data module (not user-settable under ``sm``).
+        skeleton: skeleton name. Linked from the data module.
+        in_channels: per-joint input channels. Linked from the data module.
+        batch_size: per-device batch size. Linked from the data module; used for the LR scaling.
+        dropout: dropout before the linear classifier.
+        label_smoothing: label smoothing of the cross-entropy.
+        lr: SGD learning rate for a global batch of ``base_batch_size`` (scaled linearly).
+        base_batch_size: the global batch that ``lr`` refers to.
+        momentum: SGD momentum.
+        nesterov: Nesterov momentum.
+        weight_decay: L2 weight decay (all parameters, as in PYSKL/mmcv).
+        class_names: optional names for the confusion-matrix axes.
+    """
+
+    def __init__(
+        self,
+        backbone: SkeletonMambaConfig | None = None,
+        num_classes: int = 60,
+        skeleton: str = "ntu25",
+        in_channels: int = 3,
+        batch_size: int = 128,
+        dropout: float = 0.0,
+        label_smoothing: float = 0.0,
+        lr: float = 0.1,
+        base_batch_size: int = 128,
+        momentum: float = 0.9,
+        nesterov: bool = True,
+        weight_decay: float = 5e-4,
+        class_names: list[str] | None = None,
+    ) -> None:
+        super().__init__()
+        config = backbone_config(backbone)
+        self.save_hyperparameters(ignore=["backbone"])
+        self.hparams["backbone"] = plain_backbone_config(config)
+        config = dataclasses.replace(config, skeleton=skeleton, in_channels=in_channels)
+        self.model = ActionRecognizer(config, num_classes=num_classes, dropout=dropout)
+        top_k = {"top1": MulticlassAccuracy(num_classes, top_k=1, average="micro")}
+        if num_classes > 5:
+            top_k["top5"] = MulticlassAccuracy(num_classes, top_k=5, average="micro")
+        metrics = MetricCollection(top_k)
+        self.train_metrics = metrics.clone(prefix="train/")
+        self.val_metrics = metrics.clone(prefix="val/")
+        self.test_metrics = metrics.clone(prefix="test/")
+        self.test_mean_class_accuracy = MulticlassAccuracy(num_classes, average="macro")
+        self.test_confusion = MulticlassConfusionMatrix(num_classes)
+
+    def forward(self, keypoint: torch.Tensor) -> torch.Tensor:
+        """Class probabilities (B, K), averaged over clips, for keypoints (B, N, M, T, J, C)."""
+        b, n = keypoint.shape[:2]
+        logits = self.model(keypoint.flatten(0, 1))  # (B*N, K)
+        return logits.softmax(dim=-1).unflatten(0, (b, n)).mean(dim=1)
+
+    def training_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> torch.Tensor:
+        keypoint, label = batch
+        logits = self.model(keypoint.flatten(0, 1))  # training samples carry one clip each
+        label = label.repeat_interleave(keypoint.shape[1])
+        loss = F.cross_entropy(logits, label, label_smoothing=self.hparams.label_smoothing)
+        self.train_metrics.update(logits, label)
+        self.log("train/loss", loss, prog_bar=True, batch_size=label.numel())
+        self.log_dict(self.train_metrics, on_step=False, on_epoch=True, batch_size=label.numel())
+        return loss
+
+    def _evaluate(self, batch, metrics: MetricCollection, stage: str) -> torch.Tensor:
+        keypoint, label = batch
+        prob = self(keypoint)
+        loss = F.nll_loss(prob.clamp_min(1e-12).log(), label)
+        metrics.update(prob, label)
+        self.log(f"{stage}/loss", loss, batch_size=label.numel(), sync_dist=True)
+        self.log_dict(metrics, prog_bar=stage == "val", batch_size=label.numel())
+        return prob
+
+    def validation_step(self, batch, batch_idx: int) -> None:
+        self._evaluate(batch, self.val_metrics, "val")
+
+    def test_step(self, batch, batch_idx: int) -> None:
+        prob = self._evaluate(batch, self.test_metrics, "test")
+        self.test_mean_class_accuracy.update(prob, batch[1])
+        self.test_confusion.update(prob, batch[1])
+        self.log("test/mean_class_accuracy", self.test_mean_class_accuracy, batch_size=batch[1].numel())
+
+    def predict_step(self, batch, batch_idx: int) -> torch.Tensor:
+        """Class probabilities (B, K)."""
+        keypoint = batch[0] if isinstance(batch, list | tuple) else batch
+        return self(keypoint)
+
+    def on_test_epoch_end(self) -> None:
+        matrix = self.test_confusion.compute()  # synchronized over processes
+        self.test_confusion.reset()
+        log_dir = self.trainer.log_dir
+        if self.trainer.is_global_zero and log_dir is not None:
+            path = save_confusion_matrix(
+                matrix.cpu(), Path(log_dir) / "confusion_matrix.png", self.hparams.class_names
+            )
+            rank_zero_info(f"confusion matrix saved to {path} (and {path.with_suffix('.csv').name})")
+
+    def effective_lr(self) -> float:
+        """``lr * global_batch / base_batch_size`` (see the module docstring)."""
+        world = self.trainer.world_size if self._trainer is not None else 1
+        accumulate = self.trainer.accumulate_grad_batches if self._trainer is not None else 1
+        global_batch = self.hparams.batch_size * world * accumulate
+        return self.hparams.lr * global_batch / self.hparams.base_batch_size
+
+    def configure_optimizers(self):
+        lr = self.effective_lr()
+        rank_zero_info(
+            f"SGD learning rate {lr:g} = lr {self.hparams.lr:g} x global batch / "
+            f"{self.hparams.base_batch_size}"
+        )
+        optimizer = torch.optim.SGD(
+            self.parameters(),
+            lr=lr,
+            momentum=self.hparams.momentum,
+            nesterov=self.hparams.nesterov,
+            weight_decay=self.hparams.weight_decay,
+        )
+        total_steps = max(int(self.trainer.estimated_stepping_batches), 1)
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=total_steps, eta_min=0.0)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}

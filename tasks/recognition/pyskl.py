@@ -1,0 +1,155 @@
+"""PYSKL skeleton annotation files (``kennymckormick/pyskl tools/data/README.md``).
+
+A pickle holding ``{"split": {name: [frame_dir, ...]}, "annotations": [annotation, ...]}``; each
+annotation has ``frame_dir`` (str), ``label`` (0-based int), ``keypoint`` (M, T, V, C) with C = 3 for 3D
+or 2 for 2D, ``total_frames`` (= T) and, for 2D data, ``keypoint_score`` (M, T, V); other keys
+(``img_shape``, ``original_shape``, ...) are kept as they are. Files from outside are read with the
+restricted unpickler of :mod:`skeleton_mamba.tasks.motion.safe_pickle`, never plain ``pickle.load``.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import tempfile
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+
+__all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
+
+
+class AnnotationFileError(ValueError):
+    """A PYSKL annotation file does not have the documented structure (the message names the file)."""
+
+
+def _int(value: Any) -> int | None:
+    """``value`` as a Python int when it is an integer (numpy integers included), else None."""
+    if isinstance(value, bool | np.bool_):
+        return None
+    if isinstance(value, int | np.integer):
+        return int(value)
+    return None
+
+
+def _validate_annotation(anno: Any, index: int, source: str) -> dict:
+    where = f"{source}: annotation {index}"
+    if not isinstance(anno, dict):
+        raise AnnotationFileError(f"{where}: expected a dict, got {type(anno).__name__}")
+    frame_dir = anno.get("frame_dir")
+    if not isinstance(frame_dir, str) or not frame_dir:
+        raise AnnotationFileError(f"{where}: 'frame_dir' must be a non-empty string, got {frame_dir!r}")
+    where = f"{source}: annotation {index} ({frame_dir})"
+    if "keypoint" not in anno:
+        raise AnnotationFileError(f"{where}: no 'keypoint' array (annotations that keep keypoints "
+                                  "in separate kpfiles, like PYSKL's K400 file, are unsupported)")
+    label = _int(anno.get("label"))
+    if label is None or label < 0:
+        raise AnnotationFileError(f"{where}: 'label' must be a 0-based integer, got {anno.get('label')!r}")
+    keypoint = anno["keypoint"]
+    if not isinstance(keypoint, np.ndarray) or keypoint.ndim != 4 or keypoint.shape[-1] not in (2, 3):
+        shape = getattr(keypoint, "shape", type(keypoint).__name__)
+        raise AnnotationFileError(f"{where}: 'keypoint' must be an array (M, T, V, C=2|3), got {shape}")
+    if not np.issubdtype(keypoint.dtype, np.number):
+        raise AnnotationFileError(f"{where}: 'keypoint' must be numeric, got dtype {keypoint.dtype}")
+    total_frames = _int(anno.get("total_frames"))
+    if total_frames is None or total_frames != keypoint.shape[1]:
+        raise AnnotationFileError(f"{where}: 'total_frames' ({anno.get('total_frames')!r}) must be an "
+                                  f"integer equal to the T axis of 'keypoint' {keypoint.shape}")  # fmt: skip
+    out = dict(anno)
+    out.update(label=label, total_frames=total_frames, keypoint=np.asarray(keypoint, dtype=np.float32))
+    if keypoint.shape[-1] == 2 or "keypoint_score" in anno:
+        score = anno.get("keypoint_score")
+        if not isinstance(score, np.ndarray) or score.shape != keypoint.shape[:3]:
+            shape = getattr(score, "shape", None if score is None else type(score).__name__)
+            raise AnnotationFileError(f"{where}: 2D keypoints need 'keypoint_score' of shape "
+                                      f"{keypoint.shape[:3]} (M, T, V), got {shape}")  # fmt: skip
+        out["keypoint_score"] = np.asarray(score, dtype=np.float32)
+    return out
+
+
+def validate_annotations(data: Any, source: str = "<annotations>") -> dict:
+    """Check the PYSKL structure and return a normalized copy.
+
+    Args:
+        data: the unpickled object.
+        source: how to name it in error messages (the file path).
+
+    Returns:
+        ``{"split": {name: [frame_dir]}, "annotations": [...]}`` with ``label`` / ``total_frames`` as
+        Python ints and ``keypoint`` / ``keypoint_score`` as float32 arrays; other top-level and
+        per-annotation keys are kept.
+
+    Raises:
+        AnnotationFileError: a missing or ill-typed field, a duplicate ``frame_dir``, or a split naming a
+            ``frame_dir`` that has no annotation.
+    """
+    if not isinstance(data, dict) or "split" not in data or "annotations" not in data:
+        keys = sorted(data) if isinstance(data, dict) else type(data).__name__
+        raise AnnotationFileError(f"{source}: expected a dict with 'split' and 'annotations', got {keys}")
+    split, annotations = data["split"], data["annotations"]
+    if not isinstance(annotations, list | tuple):
+        raise AnnotationFileError(f"{source}: 'annotations' must be a list, got {type(annotations).__name__}")
+    annos = [_validate_annotation(a, i, source) for i, a in enumerate(annotations)]
+    seen: set[str] = set()
+    for anno in annos:
+        if anno["frame_dir"] in seen:
+            raise AnnotationFileError(f"{source}: frame_dir {anno['frame_dir']!r} appears twice")
+        seen.add(anno["frame_dir"])
+    if not isinstance(split, dict):
+        raise AnnotationFileError(f"{source}: 'split' must be a dict name -> list of frame_dir, "
+                                  f"got {type(split).__name__}")  # fmt: skip
+    clean_split: dict[str, list[str]] = {}
+    for name, members in split.items():
+        if not isinstance(name, str) or not isinstance(members, list | tuple):
+            raise AnnotationFileError(f"{source}: split {name!r} must map a name to a list of frame_dir")
+        if not all(isinstance(m, str) for m in members):
+            raise AnnotationFileError(f"{source}: split {name!r} must list frame_dir strings")
+        unknown = [m for m in members if m not in seen]
+        if unknown:
+            raise AnnotationFileError(f"{source}: split {name!r} names {len(unknown)} frame_dir without an "
+                                      f"annotation, e.g. {unknown[:3]}")  # fmt: skip
+        clean_split[name] = list(members)
+    out = dict(data)
+    out.update(split=clean_split, annotations=annos)
+    return out
+
+
+def load_annotations(path: str | PathLike[str]) -> dict:
+    """Load and validate a PYSKL annotation pickle (2D or 3D) with the restricted unpickler.
+
+    Raises:
+        FileNotFoundError: no such file.
+        skeleton_mamba.tasks.motion.safe_pickle.UnsafePickleError: the pickle names a global other than
+            numpy arrays and plain Python values (nothing in it is run), or is not a pickle.
+        AnnotationFileError: the structure is not PYSKL's (see :func:`validate_annotations`).
+    """
+    return validate_annotations(safe_load_pickle(path), str(path))
+
+
+def save_annotations(data: dict, path: str | PathLike[str]) -> Path:
+    """Validate ``data`` and write it as a standard pickle, atomically (temp file + ``os.replace``).
+
+    The pickle uses protocol 4 and holds only dicts, lists, strings, ints and numpy arrays, so PYSKL,
+    mmaction2 and :func:`load_annotations` all read it.
+
+    Returns:
+        The written path.
+    """
+    path = Path(path)
+    data = validate_annotations(data, str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump(data, f, protocol=4)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

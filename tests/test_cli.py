@@ -1,0 +1,175 @@
+"""``sm fit|validate|test|predict`` (LightningCLI) with ``--recipe``, and ``sm recipes``.
+
+Parse-level behaviour runs in-process through ``skeleton_mamba.cli.main`` (the console script's
+function); training runs go through the real ``sm`` executable in a subprocess.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import skeleton_mamba.tasks.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
+import yaml
+from skeleton_mamba.tasks.recipe_resolution import packaged_recipes, recipe_description, resolve_recipe
+
+from skeleton_mamba.cli import main as sm_main
+
+RECIPES_DIR = Path(__file__).resolve().parents[1] / "recipes"
+EXPECTED_RECIPES = {
+    "ntu60.yaml",
+    "ntu60_xview.yaml",
+    "ntu120_xsub.yaml",
+    "ntu120_xset.yaml",
+    "kinetics.yaml",
+    "recognition_synthetic.yaml",
+}
+
+
+def sm_executable() -> str:
+    """The installed ``sm`` console script next to this interpreter."""
+    path = Path(sys.executable).with_name("sm")
+    if not path.exists():
+        pytest.skip(f"console script not installed at {path}")
+    return str(path)
+
+
+def run_sm(args: list[str], cwd: Path, timeout: int = 300) -> subprocess.CompletedProcess:
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONWARNINGS": "ignore"}
+    return subprocess.run(
+        [sm_executable(), *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def print_config(args: list[str], capsys) -> dict:
+    with pytest.raises(SystemExit) as exit_info:
+        sm_main([*args, "--print_config"])
+    assert exit_info.value.code in (0, None)
+    return yaml.safe_load(capsys.readouterr().out)
+
+
+# --- recipe resolution --------------------------------------------------------------------------
+
+
+def test_packaged_recipes_are_the_top_level_yaml_files():
+    on_disk = {p.name for p in RECIPES_DIR.glob("*.yaml")}
+    assert set(packaged_recipes()) == on_disk
+    assert EXPECTED_RECIPES <= on_disk
+    assert "skeleton_mamba.yaml" not in packaged_recipes()  # backbones/ holds fragments, not recipes
+
+
+def test_resolve_recipe_name_suffixless_name_path_and_unknown(tmp_path):
+    assert resolve_recipe("ntu60.yaml") == RECIPES_DIR / "ntu60.yaml"
+    assert resolve_recipe("ntu60") == RECIPES_DIR / "ntu60.yaml"
+    local = tmp_path / "ntu60.yaml"  # an existing path wins over the packaged name
+    local.write_text("# mine\ntrainer: {max_epochs: 1}\n")
+    assert resolve_recipe(str(local)) == local
+    assert resolve_recipe("no_such_recipe.yaml") is None
+
+
+def test_recipe_description_is_the_leading_comment(tmp_path):
+    path = tmp_path / "r.yaml"
+    path.write_text("\n#   Trains a thing  \n# second line\ntrainer: {}\n")
+    assert recipe_description(path) == "Trains a thing"
+    path.write_text("trainer: {}\n# late comment\n")
+    assert recipe_description(path) == ""
+
+
+def test_sm_recipes_lists_each_recipe_with_its_first_comment_line(capsys):
+    assert sm_main(["recipes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    listed = {line.split()[0]: line.split(None, 1)[1] for line in lines}
+    assert set(listed) == {p.name for p in RECIPES_DIR.glob("*.yaml")}
+    for name, description in listed.items():
+        first = (RECIPES_DIR / name).read_text().splitlines()[0]
+        assert first.startswith("# ") and description == first[2:].strip()
+
+
+# --- parsing: names, paths, merge order, links ----------------------------------------------------
+
+
+def test_print_config_recipe_name_and_path_agree_and_compose_the_backbone(capsys):
+    by_name = print_config(["fit", "--recipe", "ntu60.yaml"], capsys)
+    by_path = print_config(["fit", "--recipe", str(RECIPES_DIR / "ntu60.yaml")], capsys)
+    assert by_name == by_path
+    backbone_file = yaml.safe_load((RECIPES_DIR / "backbones" / "skeleton_mamba.yaml").read_text())
+    backbone = by_name["model"]["init_args"]["backbone"]
+    for key in ("dim", "depth", "heads", "mlp_dim"):
+        assert backbone[key] == backbone_file[key]
+    assert (backbone["dim"], backbone["depth"], backbone["mlp_dim"]) == (128, 8, 1024)  # seed Table 2
+    # Linked values are not options: they come from the data module at instantiation.
+    assert "num_classes" not in by_name["model"]["init_args"]
+    assert by_name["data"]["init_args"]["num_classes"] == 60
+
+
+def test_config_files_and_dotted_overrides_merge_left_to_right(tmp_path, capsys):
+    extra = tmp_path / "extra.yaml"
+    extra.write_text("trainer: {max_epochs: 5}\nmodel: {init_args: {lr: 0.5}}\n")
+    base = ["fit", "--recipe", "recognition_synthetic.yaml"]
+    later_override = print_config([*base, "--config", str(extra), "--trainer.max_epochs", "3"], capsys)
+    assert later_override["trainer"]["max_epochs"] == 3
+    assert later_override["model"]["init_args"]["lr"] == 0.5
+    later_file = print_config([*base, "--trainer.max_epochs", "3", "--config", str(extra)], capsys)
+    assert later_file["trainer"]["max_epochs"] == 5
+    short_form = print_config([*base, "--model.lr", "0.7", "--data.batch_size", "4"], capsys)
+    assert short_form["model"]["init_args"]["lr"] == 0.7
+    assert short_form["data"]["init_args"]["batch_size"] == 4
+
+
+def test_unknown_recipe_is_a_parser_error_listing_the_recipes(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        sm_main(["fit", "--recipe", "no_such_recipe.yaml"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "no_such_recipe.yaml" in err and "Available recipes" in err
+    assert all(name in err for name in EXPECTED_RECIPES)
+    assert "Traceback" not in err
+
+
+def test_missing_dataset_stops_with_where_it_goes_and_how_to_build_it(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    missing = tmp_path.resolve() / "data" / "ntu60_3danno.pkl"  # the recipe's path, relative to the cwd
+    assert sm_main(["fit", "--recipe", "ntu60.yaml"]) == 2
+    err = capsys.readouterr().err
+    assert str(missing) in err
+    assert "sm prepare ntu60 --raw" in err
+    assert "Traceback" not in err
+
+
+# --- real runs through the console script -------------------------------------------------------
+
+
+def test_sm_fit_fast_dev_run_on_the_synthetic_recipe(tmp_path):
+    result = run_sm(
+        ["fit", "--recipe", "recognition_synthetic.yaml", "--trainer.fast_dev_run", "true"], tmp_path
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "Running in `fast_dev_run` mode" in result.stdout + result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_sm_fit_ddp_over_two_cpu_processes(tmp_path):
+    result = run_sm(
+        [
+            "fit", "--recipe", "recognition_synthetic.yaml",
+            "--trainer.accelerator", "cpu", "--trainer.devices", "2", "--trainer.strategy", "ddp",
+            "--trainer.max_epochs", "1", "--trainer.enable_progress_bar", "false",
+            "--data.train_per_class", "8", "--data.val_per_class", "4", "--trainer.num_sanity_val_steps", "0",
+            "--trainer.enable_model_summary", "false",
+        ],
+        tmp_path,
+    )  # fmt: skip
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output[-3000:]
+    assert "GLOBAL_RANK: 1, MEMBER: 2/2" in output  # the second process joined (gloo on CPU)
+    # Global batch 2 x 8 = 16 -> lr = 0.02 * 16 / 8 (recipe: lr 0.02 per base batch 8).
+    lr = float(re.search(r"SGD learning rate ([0-9.e-]+)", output).group(1))
+    assert lr == pytest.approx(0.04)
+    run_dir = tmp_path / "runs" / "recognition_synthetic" / "version_0"
+    assert (run_dir / "checkpoints" / "last.ckpt").is_file()
+    assert (run_dir / "config.yaml").is_file() and (run_dir / "metrics.csv").is_file()
+    assert not (tmp_path / "runs" / "recognition_synthetic" / "version_1").exists()  # TB and CSV share a dir

@@ -1,0 +1,203 @@
+"""Music features, tempo on the real tracks, the feature cache and ``sm analyze-music``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import librosa
+import numpy as np
+import pytest
+import soundfile as sf
+from skeleton_mamba.tasks.motion import music
+from skeleton_mamba.tasks.motion.analyze_music import main as analyze_main
+from skeleton_mamba.tasks.motion.cache import FeatureCache
+from skeleton_mamba.tasks.motion.music import (
+    BEAT,
+    CHROMA,
+    ENVELOPE,
+    MFCC,
+    ONSET_PEAK,
+    aist_start_bpm,
+    compute_music_features,
+    extract_music_features,
+    fold_tempo,
+    load_audio,
+)
+
+REAL_TRACKS = {  # file stem -> listed tempo (shared/data/music/LICENSE-MUSIC.txt)
+    "energetic_acoustic_1": 132.0,
+    "happy_electronic_1": 123.0,
+    "energetic_electronic_2": 150.0,
+}
+
+
+def click_track(path, bpm: float = 120.0, seconds: float = 8.0, sr: int = 22050) -> None:
+    """A wav of short decaying 1 kHz clicks at ``bpm``."""
+    y = np.zeros(int(seconds * sr), dtype=np.float32)
+    n = np.arange(int(0.03 * sr))
+    click = np.sin(2 * np.pi * 1000 * n / sr) * np.exp(-n / 100)
+    for start in np.arange(0.5, seconds - 0.1, 60.0 / bpm):
+        i = int(start * sr)
+        y[i : i + click.size] += click.astype(np.float32)
+    sf.write(path, y, sr)
+
+
+@pytest.fixture(scope="module")
+def real_analyses(shared_data, tmp_path_factory):
+    """60-fps analyses of the three real tracks (three beat-tracking calls for the whole module)."""
+    folder = shared_data / "music"
+    if not folder.is_dir():
+        pytest.skip(f"real music not found at {folder}")
+    cache = tmp_path_factory.mktemp("music_cache")
+    return {
+        name: extract_music_features(folder / f"{name}.opus", fps=60, cache_dir=cache) for name in REAL_TRACKS
+    }
+
+
+@pytest.mark.parametrize("name", sorted(REAL_TRACKS))
+def test_tempo_of_real_music_within_3_percent(real_analyses, name):
+    analysis = real_analyses[name]
+    assert analysis.tempo_bpm == pytest.approx(REAL_TRACKS[name], rel=0.03)
+    assert analysis.features.shape[1] == 35
+    # Beats are about one period apart (no half/double-tempo beat grid).
+    period = np.median(np.diff(analysis.beat_times))
+    assert 60.0 / period == pytest.approx(REAL_TRACKS[name], rel=0.03)
+
+
+def test_start_bpm_from_aist_names_and_tempo_fold():
+    assert aist_start_bpm("mBR0") == 80
+    assert aist_start_bpm("mHO5.wav") == 135
+    assert aist_start_bpm("mJB5") == 130
+    assert aist_start_bpm("gHO_sBM_cAll_d19_mHO5_ch02") == 135
+    assert aist_start_bpm("gKR_sBM_cAll_d28_mKR2_ch02.pkl") == 100
+    assert aist_start_bpm("happy_electronic_1") is None
+    assert fold_tempo(66.0) == 132.0  # half tempo -> dance octave
+    assert fold_tempo(300.0) == 150.0  # double tempo
+    assert fold_tempo(123.0) == 123.0
+    with pytest.raises(ValueError):
+        fold_tempo(120.0, (100.0, 150.0))
+
+
+@pytest.mark.parametrize("fps", [60, 30])
+def test_feature_columns_match_librosa_called_directly(shared_data, fps):
+    path = shared_data / "music" / "happy_electronic_1.opus"
+    sr = fps * 512
+    y, _ = librosa.load(path, sr=sr, duration=10.0)
+    analysis = compute_music_features(y, fps=fps, start_bpm=123.0)
+    feats = analysis.features
+    t_len = 1 + len(y) // 512
+    assert feats.shape == (t_len, 35) and feats.dtype == np.float32
+
+    envelope = librosa.onset.onset_strength(y=y, sr=sr)
+    np.testing.assert_allclose(feats[:, ENVELOPE], envelope, rtol=1e-5, atol=1e-6)
+    mfcc = librosa.feature.mfcc(y=y, sr=sr, n_mfcc=20).T
+    np.testing.assert_allclose(feats[:, MFCC], mfcc, rtol=1e-4, atol=1e-3)
+    chroma = librosa.feature.chroma_cens(y=y, sr=sr, hop_length=512, n_chroma=12).T
+    np.testing.assert_allclose(feats[:, CHROMA], chroma, rtol=1e-5, atol=1e-6)
+    peaks = librosa.onset.onset_detect(onset_envelope=envelope, sr=sr, hop_length=512)
+    np.testing.assert_array_equal(np.flatnonzero(feats[:, ONSET_PEAK]), peaks)
+    _, beats = librosa.beat.beat_track(
+        onset_envelope=envelope, sr=sr, hop_length=512, start_bpm=123.0, tightness=100
+    )
+    np.testing.assert_array_equal(np.flatnonzero(feats[:, BEAT]), beats)
+    np.testing.assert_array_equal(analysis.beat_frames, beats)
+    assert set(np.unique(feats[:, [ONSET_PEAK, BEAT]])) <= {0.0, 1.0}
+
+
+def test_octave_prior_is_soft(tmp_path):
+    # A 60 BPM click track: the prior is folded to 120 BPM, but the clicks' evidence keeps 60 BPM beats.
+    sr = 30 * 512
+    click_track(tmp_path / "slow.wav", bpm=60.0, seconds=12.0, sr=sr)
+    y, _ = librosa.load(tmp_path / "slow.wav", sr=sr)
+    analysis = compute_music_features(y, fps=30)
+    assert analysis.tempo_bpm == pytest.approx(60.0, rel=0.03)
+    phase = analysis.beat_times - 0.5  # clicks at 0.5 s + k s
+    assert np.abs(phase - np.round(phase)).max() < 0.05
+
+
+def test_cache_hit_miss_and_content_key(tmp_path, monkeypatch):
+    wav = tmp_path / "clicks.wav"
+    click_track(wav)
+    cache_dir = tmp_path / "cache"
+    first = extract_music_features(wav, fps=30, cache_dir=cache_dir)
+    assert len(list(cache_dir.glob("*.npy"))) == 1
+    assert first.tempo_bpm == pytest.approx(120.0, rel=0.03)
+
+    def no_compute(*args, **kwargs):
+        raise AssertionError("cache hit expected, features were recomputed")
+
+    monkeypatch.setattr(music, "compute_music_features", no_compute)
+    hit = extract_music_features(wav, fps=30, cache_dir=cache_dir)
+    np.testing.assert_array_equal(hit.features, first.features)
+    np.testing.assert_array_equal(hit.beat_frames, first.beat_frames)
+    assert hit.tempo_bpm == first.tempo_bpm and hit.duration_s == first.duration_s
+    renamed = tmp_path / "renamed.wav"
+    shutil.copy(wav, renamed)
+    extract_music_features(renamed, fps=30, cache_dir=cache_dir)  # same content: still a hit
+    monkeypatch.undo()
+
+    extract_music_features(wav, fps=60, cache_dir=cache_dir)  # other settings: miss
+    assert len(list(cache_dir.glob("*.npy"))) == 2
+    click_track(wav, bpm=100.0)  # other content: miss
+    extract_music_features(wav, fps=30, cache_dir=cache_dir)
+    assert len(list(cache_dir.glob("*.npy"))) == 3
+    extract_music_features(wav, fps=30, cache_dir=cache_dir, use_cache=False)
+    assert len(list(cache_dir.glob("*.npy"))) == 3
+    assert not list(cache_dir.glob("*.tmp"))
+
+
+def test_cache_writes_are_atomic_and_corrupt_entries_recompute(tmp_path, monkeypatch):
+    cache = FeatureCache("music", tmp_path)
+
+    def crash(file, *args, **kwargs):
+        file.write(b"\x93NUMPY half written")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(np, "save", crash)
+    with pytest.raises(KeyboardInterrupt):
+        cache.store("abc", np.ones(3))
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []  # neither the entry nor the temporary file
+    assert cache.load("abc") is None and cache.misses == 1
+
+    cache.store("abc", np.arange(4.0))
+    np.testing.assert_array_equal(cache.load("abc"), np.arange(4.0))
+    assert cache.hits == 1
+    cache.path_for("abc").write_bytes(b"garbage")
+    with pytest.warns(UserWarning, match="unreadable cache entry"):
+        assert cache.load("abc") is None
+
+
+def test_analyze_music_cli_json_and_out(tmp_path, capsys):
+    wav = tmp_path / "clicks.wav"
+    click_track(wav)
+    out = tmp_path / "feats.npy"
+    cache = str(tmp_path / "c")
+    rc = analyze_main([str(wav), "--fps", "30", "--json", "--out", str(out), "--cache-dir", cache])
+    assert rc == 0
+    report = json.loads(capsys.readouterr().out)
+    assert set(report) == {"file", "duration_s", "tempo_bpm", "beats_s", "fps", "feature_shape"}
+    assert report["fps"] == 30 and report["duration_s"] == pytest.approx(8.0)
+    assert report["tempo_bpm"] == pytest.approx(120.0, rel=0.03)
+    feats = np.load(out)
+    assert list(feats.shape) == report["feature_shape"] and feats.shape == (1 + int(8.0 * 15360) // 512, 35)
+    np.testing.assert_allclose(report["beats_s"], np.flatnonzero(feats[:, BEAT]) / 30, atol=1e-4)
+    # Clicks start at 0.5 s, every 0.5 s: beats sit on them (within 0.05 s).
+    phase = (np.array(report["beats_s"]) - 0.5) / 0.5
+    assert np.abs(phase - np.round(phase)).max() < 0.1
+
+    assert analyze_main([str(wav), "--fps", "30", "--no-cache"]) == 0
+    assert "BPM" in capsys.readouterr().out
+
+
+def test_bad_audio_inputs_name_the_file(tmp_path, capsys):
+    missing = tmp_path / "missing.wav"
+    with pytest.raises(FileNotFoundError, match="missing.wav"):
+        load_audio(missing, 22050)
+    bad = tmp_path / "bad.wav"
+    bad.write_bytes(b"not audio at all")
+    with pytest.raises(ValueError, match="bad.wav: cannot decode audio"):
+        load_audio(bad, 22050)
+    assert analyze_main([str(bad), "--no-cache"]) == 2
+    assert "bad.wav" in capsys.readouterr().err

@@ -1,0 +1,288 @@
+"""SSD: the recurrence against a loop-built matrix form; chunked/quadratic against the recurrence."""
+
+from __future__ import annotations
+
+import importlib.machinery
+import math
+import sys
+import types
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skeleton_mamba.ssd import kernel as kernel_mod
+from skeleton_mamba.ssd import ssd, ssd_chunked, ssd_quadratic, ssd_recurrence
+from skeleton_mamba.ssd.dispatch import choose_impl
+from skeleton_mamba.ssd.segsum import decay_mask, segsum_stable
+
+F64 = torch.float64
+
+
+def make_inputs(b, L, H, P, G, N, dtype=F64, seed=0, d_shape="h"):
+    """Random SSD inputs in the Mamba-2 regime (A in [-8, -0.5], dt raw around the dt_bias)."""
+    g = torch.Generator().manual_seed(seed)
+    r = lambda *s: torch.randn(*s, generator=g, dtype=F64)  # noqa: E731
+    inp = dict(
+        x=r(b, L, H, P), dt=r(b, L, H), A=-(0.5 + 7.5 * torch.rand(H, generator=g, dtype=F64)),
+        B=r(b, L, G, N), C=r(b, L, G, N),
+        D=r(H) if d_shape == "h" else r(H, P), dt_bias=r(H) - 1.0, initial_state=r(b, H, P, N),
+    )
+    return {k: v.to(dtype) for k, v in inp.items()}
+
+
+def naive_matrix_form(x, dt, A, B, C, D, dt_bias, h0):
+    """y = (M ∘ C Bᵀ)(Δ ∘ x) + D x (+ the initial-state term), built entry by entry with Python loops.
+
+    M_ij = Π_{k=j+1}^{i} a_k (a_k = exp(Δ_k A)); Δ = log(1 + exp(dt + dt_bias)) with math.* floats.
+    Returns y (b, L, H, P) and the final state (b, H, P, N) as nested computations in float64.
+    """
+    b, L, H, P = x.shape
+    G, N = B.shape[2], B.shape[3]
+    y = torch.zeros(b, L, H, P, dtype=F64)
+    final = torch.zeros(b, H, P, N, dtype=F64)
+    for bi in range(b):
+        for h in range(H):
+            g = h // (H // G)
+            delta = [math.log1p(math.exp(float(dt[bi, t, h] + dt_bias[h]))) for t in range(L)]
+            a = [math.exp(delta[t] * float(A[h])) for t in range(L)]
+            for i in range(L):
+                for j in range(i + 1):
+                    m = math.prod(a[j + 1:i + 1])
+                    cb = float(C[bi, i, g] @ B[bi, j, g])
+                    y[bi, i, h] += m * cb * delta[j] * x[bi, j, h]
+                y[bi, i, h] += math.prod(a[:i + 1]) * (h0[bi, h] @ C[bi, i, g]) + D[h] * x[bi, i, h]
+            final[bi, h] = math.prod(a) * h0[bi, h]
+            for j in range(L):
+                final[bi, h] += math.prod(a[j + 1:]) * delta[j] * torch.outer(x[bi, j, h], B[bi, j, g])
+    return y, final
+
+
+def test_recurrence_equals_loop_built_matrix_form():
+    inp = make_inputs(2, 7, 4, 3, 2, 5, seed=1)
+    y_ref, f_ref = naive_matrix_form(*(inp[k] for k in ("x", "dt", "A", "B", "C", "D", "dt_bias",
+                                                         "initial_state")))
+    y, f = ssd_recurrence(**inp, return_final_state=True)
+    torch.testing.assert_close(y, y_ref, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(f, f_ref, rtol=1e-12, atol=1e-12)
+
+
+def test_decay_mask_matches_stable_segsum_and_loops():
+    a = -torch.rand(3, 9, dtype=F64) * 4
+    mask = decay_mask(a.cumsum(-1))
+    torch.testing.assert_close(mask, segsum_stable(a).exp(), rtol=1e-12, atol=0)
+    for i in range(9):
+        for j in range(9):
+            expected = math.exp(float(a[1, j + 1:i + 1].sum())) if i >= j else 0.0
+            assert mask[1, i, j].item() == pytest.approx(expected, rel=1e-12, abs=0)
+    # fp32: the cumsum-difference mask stays within 1e-5 relative of the fp64 stable mask for
+    # chunk-length sums (|cs| up to 64 * 2 = 128).
+    a32 = -torch.rand(4, 64) * 2
+    rel = (decay_mask(a32.cumsum(-1)).double() - segsum_stable(a32.double()).exp()).abs()
+    assert (rel / segsum_stable(a32.double()).exp().clamp_min(1e-30)).max() < 1e-5
+
+
+def run_all(fn, inp, **kw):
+    return fn(**inp, return_final_state=True, **kw)
+
+
+SHAPES = [  # (b, L, H, P, G, N, chunk)
+    (1, 1, 1, 1, 1, 1, 4),
+    (2, 5, 2, 3, 1, 4, 8),
+    (2, 16, 4, 2, 2, 3, 8),
+    (3, 23, 6, 4, 3, 2, 8),
+    (1, 40, 2, 5, 1, 6, 16),
+    (2, 37, 4, 3, 4, 5, 5),
+]
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("fn", ["chunked", "quadratic"])
+def test_matrix_forms_equal_recurrence_fp64(shape, fn):
+    b, L, H, P, G, N, Q = shape
+    inp = make_inputs(b, L, H, P, G, N, seed=L, d_shape="hp" if H % 2 else "h")
+    y_ref, f_ref = run_all(ssd_recurrence, inp)
+    y, f = run_all(ssd_chunked, inp, chunk_size=Q) if fn == "chunked" else run_all(ssd_quadratic, inp)
+    torch.testing.assert_close(y, y_ref, rtol=1e-10, atol=1e-10)
+    torch.testing.assert_close(f, f_ref, rtol=1e-10, atol=1e-10)
+
+
+@given(
+    b=st.integers(1, 2), L=st.integers(1, 30), H=st.sampled_from([1, 2, 4]), P=st.integers(1, 4),
+    G=st.sampled_from([1, 2]), N=st.integers(1, 4), Q=st.integers(1, 12),
+    use_d=st.booleans(), use_bias=st.booleans(), use_h0=st.booleans(), final=st.booleans(),
+)
+@settings(max_examples=25, deadline=None)
+def test_optional_arguments_hypothesis(b, L, H, P, G, N, Q, use_d, use_bias, use_h0, final):
+    G = min(G, H)
+    inp = make_inputs(b, L, H, P, G, N, seed=7)
+    inp["D"] = inp["D"] if use_d else None
+    inp["dt_bias"] = inp["dt_bias"] if use_bias else None
+    inp["initial_state"] = inp["initial_state"] if use_h0 else None
+    ref = ssd_recurrence(**inp, return_final_state=final)
+    for out in (ssd_chunked(**inp, return_final_state=final, chunk_size=Q),
+                ssd_quadratic(**inp, return_final_state=final),
+                ssd(**inp, return_final_state=final, chunk_size=Q)):
+        if final:
+            torch.testing.assert_close(out[1], ref[1], rtol=1e-10, atol=1e-10)
+            out, expected = out[0], ref[0]
+        else:
+            expected = ref
+        torch.testing.assert_close(out, expected, rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("L,Q", [(150, 64), (150, 150), (40, 64), (6, 64), (200, 48)])
+def test_fp32_within_1e5_of_fp64_recurrence(L, Q):
+    inp = make_inputs(2, L, 4, 8, 1, 16, seed=3)
+    y_ref, f_ref = run_all(ssd_recurrence, inp)
+    inp32 = {k: v.float() for k, v in inp.items()}
+    for y, f in (run_all(ssd_chunked, inp32, chunk_size=Q), run_all(ssd_quadratic, inp32)):
+        assert y.dtype == torch.float32 and f.dtype == torch.float32
+        assert (y.double() - y_ref).abs().max() <= 1e-5 * y_ref.abs().max()
+        assert (f.double() - f_ref).abs().max() <= 1e-5 * f_ref.abs().max()
+
+
+GRAD_NAMES = ["x", "dt", "A", "B", "C", "D", "dt_bias", "initial_state"]
+
+
+def grads(fn, inp, **kw):
+    leaves = {k: v.detach().clone().requires_grad_(True) for k, v in inp.items()}
+    y, f = fn(**leaves, return_final_state=True, **kw)
+    g = torch.Generator().manual_seed(11)
+    loss = (y * torch.randn(y.shape, generator=g, dtype=y.dtype)).sum() + (
+        f * torch.randn(f.shape, generator=g, dtype=f.dtype)).sum()
+    loss.backward()
+    return {k: leaves[k].grad for k in GRAD_NAMES}
+
+
+@pytest.mark.parametrize("shape", [(2, 13, 4, 3, 2, 5, 4), (1, 20, 2, 4, 1, 3, 20), (2, 9, 3, 2, 3, 2, 16)])
+@pytest.mark.parametrize("fn", ["chunked", "quadratic"])
+def test_gradients_equal_recurrence_fp64(shape, fn):
+    b, L, H, P, G, N, Q = shape
+    inp = make_inputs(b, L, H, P, G, N, seed=5, d_shape="hp")
+    ref = grads(ssd_recurrence, inp)
+    got = grads(ssd_chunked, inp, chunk_size=Q) if fn == "chunked" else grads(ssd_quadratic, inp)
+    for k in GRAD_NAMES:
+        assert got[k] is not None, k
+        torch.testing.assert_close(got[k], ref[k], rtol=1e-9, atol=1e-9, msg=lambda m, k=k: f"grad {k}: {m}")
+
+
+def test_gradients_without_state_or_skip():
+    inp = make_inputs(2, 11, 2, 3, 1, 4, seed=8)
+    for k in ("D", "initial_state"):
+        inp[k] = None
+    for fn, kw in ((ssd_chunked, {"chunk_size": 4}), (ssd_quadratic, {})):
+        leaves = [{k: v.clone().requires_grad_(True) if v is not None else None for k, v in inp.items()}
+                  for _ in range(2)]
+        ssd_recurrence(**leaves[0]).pow(2).sum().backward()
+        fn(**leaves[1], **kw).pow(2).sum().backward()
+        for k in ("x", "dt", "A", "B", "C", "dt_bias"):
+            torch.testing.assert_close(leaves[1][k].grad, leaves[0][k].grad, rtol=1e-9, atol=1e-9)
+
+
+def test_dt_limit_and_no_softplus():
+    inp = make_inputs(1, 10, 2, 2, 1, 3, seed=2)
+    inp["dt"], inp["dt_bias"] = inp["dt"].abs(), inp["dt_bias"].abs()  # Δ >= 0 without the softplus
+    limits = ({"dt_limit": (0.2, 0.5)}, {"dt_softplus": False},
+              {"dt_softplus": False, "dt_limit": (0.3, 1.0)})
+    for kw in limits:
+        ref = ssd_recurrence(**inp, **kw)
+        torch.testing.assert_close(ssd_chunked(**inp, chunk_size=3, **kw), ref, rtol=1e-10, atol=1e-10)
+        torch.testing.assert_close(ssd_quadratic(**inp, **kw), ref, rtol=1e-10, atol=1e-10)
+    # the clamp really acts: Δ = 0.2 everywhere once dt + bias is very negative
+    low = dict(inp, dt=torch.full_like(inp["dt"], -30.0), dt_bias=None, D=None, initial_state=None)
+    y = ssd_recurrence(**low, dt_limit=(0.2, 0.5))
+    const = dict(low, dt=torch.full_like(inp["dt"], 0.2))
+    torch.testing.assert_close(y, ssd_recurrence(**const, dt_softplus=False), rtol=1e-12, atol=1e-12)
+
+
+def test_dtype_is_preserved_and_state_is_fp32():
+    inp = {k: v.to(torch.bfloat16) for k, v in make_inputs(1, 9, 2, 4, 1, 4).items()}
+    y, f = ssd(**inp, return_final_state=True)
+    assert y.dtype == torch.bfloat16 and f.dtype == torch.float32
+
+
+def test_bad_shapes_raise():
+    inp = make_inputs(1, 5, 4, 2, 2, 3)
+    with pytest.raises(ValueError, match="dt must be"):
+        ssd(**dict(inp, dt=inp["dt"][..., :3]))
+    with pytest.raises(ValueError, match="cannot be split"):
+        ssd(**dict(inp, B=inp["B"].repeat(1, 1, 2, 1)[:, :, :3], C=inp["C"].repeat(1, 1, 2, 1)[:, :, :3]))
+    with pytest.raises(ValueError, match="initial_state"):
+        ssd(**dict(inp, initial_state=inp["initial_state"][:, :2]))
+    with pytest.raises(ValueError, match="impl must be"):
+        ssd(**inp, impl="fast")
+
+
+def test_auto_dispatch_on_cpu():
+    x = torch.zeros(1, 40, 2, 2)
+    assert choose_impl(x, 64, stateful=False) == "quadratic"
+    assert choose_impl(x, 64, stateful=True) == "chunked"
+    assert choose_impl(torch.zeros(1, 65, 2, 2), 64, stateful=False) == "chunked"
+    assert choose_impl(x, 64, stateful=False, impl="recurrence") == "recurrence"
+    inp = make_inputs(2, 70, 2, 3, 1, 4)
+    ref = ssd_recurrence(**inp)
+    for impl in ("auto", "torch", "chunked", "quadratic", "recurrence"):
+        torch.testing.assert_close(ssd(**inp, impl=impl), ref, rtol=1e-10, atol=1e-10)
+
+
+def install_fake_mamba_ssm(monkeypatch, calls):
+    """Put a fake ``mamba_ssm.ops.triton.ssd_combined`` into sys.modules that records its arguments."""
+    names = ["mamba_ssm", "mamba_ssm.ops", "mamba_ssm.ops.triton", "mamba_ssm.ops.triton.ssd_combined"]
+    for name in names:
+        mod = types.ModuleType(name)
+        mod.__spec__ = importlib.machinery.ModuleSpec(name, loader=None)
+        monkeypatch.setitem(sys.modules, name, mod)
+
+    def mamba_chunk_scan_combined(
+        x, dt, A, B, C, chunk_size, D=None, z=None, dt_bias=None, initial_states=None, seq_idx=None,
+        cu_seqlens=None, dt_softplus=False, dt_limit=(0.0, float("inf")), return_final_states=False,
+        return_varlen_states=False,
+    ):
+        calls.append(dict(chunk_size=chunk_size, D=D, z=z, dt_bias=dt_bias, initial_states=initial_states,
+                          dt_softplus=dt_softplus, dt_limit=dt_limit,
+                          return_final_states=return_final_states))
+        return ssd_recurrence(x, dt, A, B, C, D=D, dt_bias=dt_bias, dt_softplus=dt_softplus,
+                              dt_limit=dt_limit, initial_state=initial_states,
+                              return_final_state=return_final_states)
+
+    sys.modules[names[-1]].mamba_chunk_scan_combined = mamba_chunk_scan_combined
+
+
+def test_kernel_argument_mapping_with_fake_module(monkeypatch):
+    calls = []
+    install_fake_mamba_ssm(monkeypatch, calls)
+    monkeypatch.setattr(kernel_mod, "is_cuda", lambda t: True)
+    inp = make_inputs(1, 12, 2, 3, 1, 4)
+    x = inp["x"]
+    assert choose_impl(x, 64, stateful=False) == "kernel"
+    assert choose_impl(x, 64, stateful=False, impl="torch") == "quadratic"
+    y, f = ssd(**inp, return_final_state=True, chunk_size=32, dt_limit=(0.0, 5.0))
+    call = calls[-1]
+    assert call["chunk_size"] == 32 and call["z"] is None and call["dt_softplus"] is True
+    assert call["dt_limit"] == (0.0, 5.0) and call["return_final_states"] is True
+    assert call["D"] is inp["D"] and call["dt_bias"] is inp["dt_bias"]
+    assert call["initial_states"] is inp["initial_state"]
+    y_ref, f_ref = ssd_recurrence(**inp, return_final_state=True, dt_limit=(0.0, 5.0))
+    torch.testing.assert_close(y, y_ref)
+    assert f.dtype == torch.float32
+    torch.testing.assert_close(f, f_ref.float())
+
+
+def test_kernel_refuses_cpu_tensors():
+    inp = make_inputs(1, 4, 2, 2, 1, 2)
+    with pytest.raises(RuntimeError, match="CUDA"):
+        ssd(**inp, impl="kernel")
+
+
+def test_kernel_on_gpu_matches_recurrence():
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device: the mamba-ssm Triton kernel runs on CUDA only")
+    if not kernel_mod.mamba_ssm_installed():
+        pytest.skip("mamba-ssm is not installed (pip install mamba-ssm --no-build-isolation)")
+    inp = {k: v.float().cuda() for k, v in make_inputs(2, 200, 8, 64, 1, 64, seed=4).items()}
+    y, f = ssd(**inp, return_final_state=True, impl="kernel", chunk_size=64)
+    y_ref, f_ref = ssd_recurrence(**{k: v.double() for k, v in inp.items()}, return_final_state=True)
+    assert (y.double() - y_ref).abs().max() <= 1e-4 * y_ref.abs().max()
+    assert (f.double() - f_ref).abs().max() <= 1e-4 * f_ref.abs().max()
