@@ -46,8 +46,15 @@ class AttentionTwinBlock(nn.Module):
 class AttentionTwin(nn.Module):
     """(B, T, J, C_in) -> (B, T, J, D)."""
 
-    def __init__(self, in_channels: int, num_joints: int, dim: int = 128, depth: int = 8, heads: int = 4,
-                 mlp_dim: int = 1024):
+    def __init__(
+        self,
+        in_channels: int,
+        num_joints: int,
+        dim: int = 128,
+        depth: int = 8,
+        heads: int = 4,
+        mlp_dim: int = 1024,
+    ):
         super().__init__()
         self.input_proj = nn.Linear(in_channels, dim)
         self.joint_embedding = nn.Parameter(torch.randn(num_joints, dim) * 0.02)

@@ -52,8 +52,14 @@ def measure(kind: str, batch: int, length: int, dim: int, depth: int, repeats: i
     else:  # ru_maxrss is in KiB on Linux; the increase over the state before the first step
         peak_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base_rss) / 1024
     params = sum(p.numel() for p in model.parameters())
-    return {"model": kind, "batch": batch, "T": length, "ms": round(ms, 1), "peak_mb": round(peak_mb, 1),
-            "params": params}
+    return {
+        "model": kind,
+        "batch": batch,
+        "T": length,
+        "ms": round(ms, 1),
+        "peak_mb": round(peak_mb, 1),
+        "params": params,
+    }
 
 
 def run_isolated(**kwargs) -> dict:
@@ -63,7 +69,9 @@ def run_isolated(**kwargs) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--batch", type=int, default=4, help="batch of the seed-configuration row")
     parser.add_argument("--scaling-batch", type=int, default=1, help="batch of the T-scaling rows")
@@ -79,17 +87,28 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     common = {"dim": args.dim, "depth": args.depth, "threads": args.threads}
-    seed = [run_isolated(kind=k, batch=args.batch, length=150, repeats=args.repeats, **common)
-            for k in ("skeleton_mamba", "attention_twin")]
-    scaling = [run_isolated(kind=k, batch=args.scaling_batch, length=t, repeats=max(1, args.repeats - 2), **common)
-               for t in args.lengths for k in ("skeleton_mamba", "attention_twin")]
+    seed = [
+        run_isolated(kind=k, batch=args.batch, length=150, repeats=args.repeats, **common)
+        for k in ("skeleton_mamba", "attention_twin")
+    ]
+    scaling = [
+        run_isolated(kind=k, batch=args.scaling_batch, length=t, repeats=max(1, args.repeats - 2), **common)
+        for t in args.lengths
+        for k in ("skeleton_mamba", "attention_twin")
+    ]
     growth = {}
     for kind in ("skeleton_mamba", "attention_twin"):
         times = {r["T"]: r["ms"] for r in scaling if r["model"] == kind}
         t0 = min(times)
         growth[kind] = {str(t): round(times[t] / times[t0], 2) for t in sorted(times)}
-    result = {"machine": machine_info(), "threads": args.threads, "config": common, "seed_config": seed,
-              "scaling": scaling, "growth_vs_shortest": growth}
+    result = {
+        "machine": machine_info(),
+        "threads": args.threads,
+        "config": common,
+        "seed_config": seed,
+        "scaling": scaling,
+        "growth_vs_shortest": growth,
+    }
     if args.json:
         print(json.dumps(result))
     else:

@@ -24,7 +24,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "predict": ("skeleton_mamba.tasks.lightning_cli:run", "run a recipe's prediction loop"),
     "recipes": ("skeleton_mamba.tasks.lightning_cli:list_recipes", "list the packaged recipes"),
     "prepare": ("skeleton_mamba.tasks.recognition.prepare:main", "build NTU / Kinetics annotation files"),
-    "analyze-music": ("skeleton_mamba.tasks.motion.analyze_music:main", "tempo, beats and features of a track"),
+    "analyze-music": (
+        "skeleton_mamba.tasks.motion.analyze_music:main",
+        "tempo, beats and features of a track",
+    ),
     "render": ("skeleton_mamba.tasks.motion.render_cli:main", "render a motion file to mp4 / gif"),
     "make-ego": ("skeleton_mamba.tasks.egodance.builder.cli:main", "build EgoAIST++-style egocentric data"),
     "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),

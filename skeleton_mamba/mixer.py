@@ -30,7 +30,9 @@ class Mamba2Mixer(nn.Module):
         self.d_model = d_model
         self.d_inner = cfg.expand * d_model
         if self.d_inner % cfg.headdim:
-            raise ValueError(f"d_inner {self.d_inner} (expand x d_model) must be a multiple of headdim {cfg.headdim}")
+            raise ValueError(
+                f"d_inner {self.d_inner} (expand x d_model) must be a multiple of headdim {cfg.headdim}"
+            )
         self.headdim = cfg.headdim
         self.nheads = self.d_inner // cfg.headdim
         self.ngroups = cfg.ngroups
@@ -41,11 +43,17 @@ class Mamba2Mixer(nn.Module):
         conv_dim = self.d_inner + 2 * cfg.ngroups * cfg.d_state
 
         # Order of the projection: [z, x, B, C, dt] (as mamba_ssm).
-        self.in_proj = nn.Linear(d_model, 2 * self.d_inner + 2 * cfg.ngroups * cfg.d_state + self.nheads, bias=False)
-        self.conv1d = nn.Conv1d(conv_dim, conv_dim, cfg.d_conv, groups=conv_dim, padding=cfg.d_conv - 1, bias=True)
+        self.in_proj = nn.Linear(
+            d_model, 2 * self.d_inner + 2 * cfg.ngroups * cfg.d_state + self.nheads, bias=False
+        )
+        self.conv1d = nn.Conv1d(
+            conv_dim, conv_dim, cfg.d_conv, groups=conv_dim, padding=cfg.d_conv - 1, bias=True
+        )
 
         # dt initialisation: dt ~ exp(U(log dt_min, log dt_max)), floored; dt_bias = softplus^-1(dt).
-        dt = torch.exp(torch.rand(self.nheads) * (math.log(cfg.dt_max) - math.log(cfg.dt_min)) + math.log(cfg.dt_min))
+        dt = torch.exp(
+            torch.rand(self.nheads) * (math.log(cfg.dt_max) - math.log(cfg.dt_min)) + math.log(cfg.dt_min)
+        )
         dt = dt.clamp(min=cfg.dt_init_floor)
         self.dt_bias = nn.Parameter(dt + torch.log(-torch.expm1(-dt)))
         lo, hi = cfg.A_init_range
@@ -75,7 +83,6 @@ class Mamba2Mixer(nn.Module):
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:
         """u (B, L, d_model) -> (B, L, d_model)."""
-        length = u.shape[1]
         gn = self.ngroups * self.d_state
         z, xbc, dt = torch.split(self.in_proj(u), [self.d_inner, self.d_inner + 2 * gn, self.nheads], dim=-1)
         xbc = F.silu(self.causal_conv(xbc))

@@ -39,7 +39,9 @@ class SkeletonMamba(nn.Module):
         else:
             paths = [tuple(range(skeleton.num_groups))]
         d = config.dim
-        self.input_proj = nn.Linear(config.in_channels, d) if config.in_channels is not None else nn.Identity()
+        self.input_proj = (
+            nn.Linear(config.in_channels, d) if config.in_channels is not None else nn.Identity()
+        )
         self.joint_embedding = (
             nn.Parameter(torch.randn(skeleton.num_joints, d) * 0.02) if config.joint_embedding else None
         )
@@ -59,7 +61,9 @@ class SkeletonMamba(nn.Module):
             for _ in range(config.depth)
         )
         self.norm = nn.LayerNorm(d)
-        self.output_proj = nn.Linear(d, config.out_channels) if config.out_channels is not None else nn.Identity()
+        self.output_proj = (
+            nn.Linear(d, config.out_channels) if config.out_channels is not None else nn.Identity()
+        )
 
     @property
     def out_channels(self) -> int:

@@ -20,7 +20,9 @@ class RMSNormGated(nn.Module):
     ``True``: ``out = RMSNorm(y) * silu(z)``. Shapes: y, z (..., d) -> (..., d).
     """
 
-    def __init__(self, d: int, group_size: int | None = None, eps: float = 1e-5, norm_before_gate: bool = False):
+    def __init__(
+        self, d: int, group_size: int | None = None, eps: float = 1e-5, norm_before_gate: bool = False
+    ):
         super().__init__()
         self.group_size = group_size or d
         if d % self.group_size:

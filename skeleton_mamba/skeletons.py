@@ -65,8 +65,10 @@ class Skeleton:
             raise ValueError(f"{self.name}: parents/mirror must have one entry per joint ({j})")
         if sum(p < 0 for p in self.parents) != 1:
             raise ValueError(f"{self.name}: exactly one root (parent -1) is required")
-        self.topological_order  # raises on a cycle
-        if sorted(self.mirror) != list(range(j)) or any(self.mirror[m] != i for i, m in enumerate(self.mirror)):
+        _ = self.topological_order  # raises on a cycle
+        if sorted(self.mirror) != list(range(j)) or any(
+            self.mirror[m] != i for i, m in enumerate(self.mirror)
+        ):
             raise ValueError(f"{self.name}: mirror must be an involutive permutation")
         sizes = {len(g) for g in self.groups}
         if len(sizes) != 1:
@@ -118,10 +120,30 @@ def _mirror_from_pairs(n: int, pairs: list[tuple[int, int]]) -> tuple[int, ...]:
 SMPL24 = Skeleton(
     name="smpl24",
     joint_names=(
-        "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
-        "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar",
-        "right_collar", "head", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
-        "left_wrist", "right_wrist", "left_hand", "right_hand",
+        "pelvis",
+        "left_hip",
+        "right_hip",
+        "spine1",
+        "left_knee",
+        "right_knee",
+        "spine2",
+        "left_ankle",
+        "right_ankle",
+        "spine3",
+        "left_foot",
+        "right_foot",
+        "neck",
+        "left_collar",
+        "right_collar",
+        "head",
+        "left_shoulder",
+        "right_shoulder",
+        "left_elbow",
+        "right_elbow",
+        "left_wrist",
+        "right_wrist",
+        "left_hand",
+        "right_hand",
     ),
     parents=(-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21),
     mirror=_mirror_from_pairs(
@@ -141,9 +163,7 @@ HUMANML3D22 = Skeleton(
     name="humanml3d22",
     joint_names=SMPL24.joint_names[:22],
     parents=SMPL24.parents[:22],
-    mirror=_mirror_from_pairs(
-        22, [(1, 2), (4, 5), (7, 8), (10, 11), (13, 14), (16, 17), (18, 19), (20, 21)]
-    ),
+    mirror=_mirror_from_pairs(22, [(1, 2), (4, 5), (7, 8), (10, 11), (13, 14), (16, 17), (18, 19), (20, 21)]),
     # SMPL-24's groups without the hands (22, 23): the arm groups start one joint lower (spine2).
     groups=(
         (0, 3, 6, 9, 12, 15),
@@ -157,10 +177,30 @@ HUMANML3D22 = Skeleton(
 NTU25 = Skeleton(
     name="ntu25",
     joint_names=(
-        "spine_base", "spine_mid", "neck", "head", "left_shoulder", "left_elbow", "left_wrist",
-        "left_hand", "right_shoulder", "right_elbow", "right_wrist", "right_hand", "left_hip",
-        "left_knee", "left_ankle", "left_foot", "right_hip", "right_knee", "right_ankle",
-        "right_foot", "spine_shoulder", "left_hand_tip", "left_thumb", "right_hand_tip",
+        "spine_base",
+        "spine_mid",
+        "neck",
+        "head",
+        "left_shoulder",
+        "left_elbow",
+        "left_wrist",
+        "left_hand",
+        "right_shoulder",
+        "right_elbow",
+        "right_wrist",
+        "right_hand",
+        "left_hip",
+        "left_knee",
+        "left_ankle",
+        "left_foot",
+        "right_hip",
+        "right_knee",
+        "right_ankle",
+        "right_foot",
+        "spine_shoulder",
+        "left_hand_tip",
+        "left_thumb",
+        "right_hand_tip",
         "right_thumb",
     ),
     # Kinect v2 hierarchy rooted at the spine base (0-based).
@@ -182,15 +222,28 @@ NTU25 = Skeleton(
 OPENPOSE18 = Skeleton(
     name="openpose18",
     joint_names=(
-        "nose", "neck", "right_shoulder", "right_elbow", "right_wrist", "left_shoulder",
-        "left_elbow", "left_wrist", "right_hip", "right_knee", "right_ankle", "left_hip",
-        "left_knee", "left_ankle", "right_eye", "left_eye", "right_ear", "left_ear",
+        "nose",
+        "neck",
+        "right_shoulder",
+        "right_elbow",
+        "right_wrist",
+        "left_shoulder",
+        "left_elbow",
+        "left_wrist",
+        "right_hip",
+        "right_knee",
+        "right_ankle",
+        "left_hip",
+        "left_knee",
+        "left_ankle",
+        "right_eye",
+        "left_eye",
+        "right_ear",
+        "left_ear",
     ),
     # The ST-GCN Kinetics-skeleton layout, rooted at the neck; the nose hangs off the neck.
     parents=(1, -1, 1, 2, 3, 1, 5, 6, 1, 8, 9, 1, 11, 12, 0, 0, 14, 15),
-    mirror=_mirror_from_pairs(
-        18, [(2, 5), (3, 6), (4, 7), (8, 11), (9, 12), (10, 13), (14, 15), (16, 17)]
-    ),
+    mirror=_mirror_from_pairs(18, [(2, 5), (3, 6), (4, 7), (8, 11), (9, 12), (10, 13), (14, 15), (16, 17)]),
     groups=(
         (1, 0, 14, 15, 16, 17),
         (0, 1, 2, 3, 4, 8),

@@ -45,7 +45,9 @@ class InverseHumanTokenizer(nn.Module):
         counts = torch.bincount(index, minlength=num_joints)
         if bool((counts == 0).any()):
             missing = torch.nonzero(counts == 0).flatten().tolist()
-            raise ValueError(f"joints {missing} belong to no group; the inverse tokenizer cannot restore them")
+            raise ValueError(
+                f"joints {missing} belong to no group; the inverse tokenizer cannot restore them"
+            )
         self.register_buffer("index", index, persistent=False)
         self.register_buffer("inv_count", 1.0 / counts.float(), persistent=False)
         self.num_joints = num_joints

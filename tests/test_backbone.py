@@ -26,10 +26,17 @@ def _expected_params(cfg: SkeletonMambaConfig, num_joints: int, group_size: int)
     ln = lambda w: 2 * w  # noqa: E731
     lin = lambda i, o: i * o + o  # noqa: E731
     block = (
-        ln(d) + _mixer_params(e, mixer)  # norm before the tokenizer, group scan
-        + ln(e) + lin(e, e) + _mixer_params(d, mixer)  # norm, Linear E->P*D, joint scan
-        + ln(d) + 2 * _mixer_params(d, mixer) + lin(d, d)  # temporal scan: two directions + Linear
-        + ln(d) + lin(d, cfg.mlp_dim) + lin(cfg.mlp_dim, d)  # MLP
+        ln(d)
+        + _mixer_params(e, mixer)  # norm before the tokenizer, group scan
+        + ln(e)
+        + lin(e, e)
+        + _mixer_params(d, mixer)  # norm, Linear E->P*D, joint scan
+        + ln(d)
+        + 2 * _mixer_params(d, mixer)
+        + lin(d, d)  # temporal scan: two directions + Linear
+        + ln(d)
+        + lin(d, cfg.mlp_dim)
+        + lin(cfg.mlp_dim, d)  # MLP
     )
     if cfg.context_dim is not None:
         block += ln(d) + d * d + cfg.context_dim * 2 * d + lin(d, d)
@@ -43,8 +50,16 @@ def _expected_params(cfg: SkeletonMambaConfig, num_joints: int, group_size: int)
 @pytest.mark.parametrize("name", sorted(SKELETONS))
 def test_output_shape_and_parameter_count_for_each_skeleton(name):
     sk = SKELETONS[name]
-    cfg = SkeletonMambaConfig(skeleton=name, in_channels=3, out_channels=5, dim=16, depth=2, mlp_dim=32,
-                              context_dim=12, mixer=TINY_MIXER)
+    cfg = SkeletonMambaConfig(
+        skeleton=name,
+        in_channels=3,
+        out_channels=5,
+        dim=16,
+        depth=2,
+        mlp_dim=32,
+        context_dim=12,
+        mixer=TINY_MIXER,
+    )
     model = SkeletonMamba(cfg)
     y = model(torch.randn(2, 9, sk.num_joints, 3), context=torch.randn(2, 4, 12))
     assert y.shape == (2, 9, sk.num_joints, 5)
@@ -83,7 +98,9 @@ def test_context_mask_hides_padded_condition_tokens():
     cmask = torch.tensor([[True, True, True, False, False]])
     other = ctx.clone()
     other[:, 3:] = torch.randn(1, 2, 8)
-    torch.testing.assert_close(model(x, context=ctx, context_mask=cmask), model(x, context=other, context_mask=cmask))
+    torch.testing.assert_close(
+        model(x, context=ctx, context_mask=cmask), model(x, context=other, context_mask=cmask)
+    )
     torch.testing.assert_close(model(x, context=ctx, context_mask=cmask), model(x, context=ctx[:, :3]))
     assert not torch.allclose(model(x, context=ctx), model(x, context=other))
 
@@ -103,8 +120,15 @@ def test_tiny_model_learns_a_sequence_task():
     """Predict, per joint, the running mean of a signal up to each frame and the global mean:
     needs both temporal directions and the joint mixing of the group/joint scans."""
     torch.manual_seed(0)
-    cfg = SkeletonMambaConfig(skeleton="humanml3d22", in_channels=1, out_channels=2, dim=16, depth=1,
-                              mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=16, chunk_size=16))
+    cfg = SkeletonMambaConfig(
+        skeleton="humanml3d22",
+        in_channels=1,
+        out_channels=2,
+        dim=16,
+        depth=1,
+        mlp_dim=32,
+        mixer=MixerConfig(d_state=8, headdim=16, chunk_size=16),
+    )
     model = SkeletonMamba(cfg)
     opt = torch.optim.AdamW(model.parameters(), lr=3e-3)
 

@@ -11,7 +11,16 @@ from skeleton_mamba.mixer import Mamba2Mixer
 from skeleton_mamba.norm import RMSNormGated
 
 # The state_dict of mamba_ssm.modules.mamba2.Mamba2 (rmsnorm=True, bias=False, conv_bias=True).
-MAMBA2_KEYS = {"in_proj.weight", "conv1d.weight", "conv1d.bias", "dt_bias", "A_log", "D", "norm.weight", "out_proj.weight"}
+MAMBA2_KEYS = {
+    "in_proj.weight",
+    "conv1d.weight",
+    "conv1d.bias",
+    "dt_bias",
+    "A_log",
+    "D",
+    "norm.weight",
+    "out_proj.weight",
+}
 
 
 def test_parameter_names_and_shapes_match_mamba_ssm():
@@ -104,8 +113,11 @@ def test_gated_rmsnorm_per_group_against_hand_formula():
     y, z = torch.randn(3, 8), torch.randn(3, 8)
     gated = y * z * torch.sigmoid(z)
     expected = torch.cat(
-        [gated[:, :4] / (gated[:, :4].pow(2).mean(-1, keepdim=True) + 1e-5).sqrt(),
-         gated[:, 4:] / (gated[:, 4:].pow(2).mean(-1, keepdim=True) + 1e-5).sqrt()], dim=-1
+        [
+            gated[:, :4] / (gated[:, :4].pow(2).mean(-1, keepdim=True) + 1e-5).sqrt(),
+            gated[:, 4:] / (gated[:, 4:].pow(2).mean(-1, keepdim=True) + 1e-5).sqrt(),
+        ],
+        dim=-1,
     ) * torch.arange(1.0, 9.0)
     torch.testing.assert_close(norm(y, z), expected)
     before = RMSNormGated(8, norm_before_gate=True)

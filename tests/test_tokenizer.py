@@ -33,7 +33,9 @@ def test_inverse_averages_joints_shared_by_groups():
     tokens = torch.randn(1, 1, 5, 6, 2)
     out = InverseHumanTokenizer(SMPL24.groups, 24)(tokens)
     for joint in range(24):
-        copies = [tokens[0, 0, g, p] for g, grp in enumerate(SMPL24.groups) for p, j in enumerate(grp) if j == joint]
+        copies = [
+            tokens[0, 0, g, p] for g, grp in enumerate(SMPL24.groups) for p, j in enumerate(grp) if j == joint
+        ]
         expected = sum(copies) / len(copies)
         torch.testing.assert_close(out[0, 0, joint], expected)
     assert sum(1 for grp in SMPL24.groups for j in grp if j == 9) == 3

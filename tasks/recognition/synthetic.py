@@ -1,10 +1,9 @@
 """Generated, class-separable skeleton sequences in the PYSKL annotation format (no download).
 
 Used by the ``recognition_synthetic.yaml`` demo recipe, the tests and the loader benchmark. Class
-``c`` swings the joints of tokenizer group ``(c + 1) mod G`` (right arm, left arm, right leg, ...)
-sinusoidally along axis ``(c // G) mod D`` with a random phase per sample, on top of a fixed
-random rest pose, a random global offset and Gaussian noise, so the label is recoverable from the
-motion but not from any single frame's position.
+``c`` shifts and swings the joints of tokenizer group ``(c + 1) mod G`` (right arm, left arm, right
+leg, ...) along coordinate axis ``c mod D`` (a sinusoid with a random phase per sample), on top of a
+fixed random rest pose, a random global offset and Gaussian noise.
 """
 
 from __future__ import annotations
@@ -24,6 +23,7 @@ def make_synthetic_annotations(
     skeleton: str = "ntu25",
     num_bodies: int = 1,
     amplitude: float = 1.0,
+    displacement: float = 0.5,
     noise: float = 0.02,
     seed: int = 0,
     train_split: str = "xsub_train",
@@ -42,6 +42,7 @@ def make_synthetic_annotations(
         skeleton: ``ntu25`` (3D) or ``openpose18`` (2D with scores).
         num_bodies: M bodies per sample (all move the same way, each with its own offset).
         amplitude: swing amplitude (metres for 3D, image fraction / 3 for 2D).
+        displacement: static shift of the moving group, as a fraction of ``amplitude`` (0: motion only).
         noise: standard deviation of the per-joint Gaussian noise.
         seed: random seed (the output is a pure function of the arguments).
         train_split: name of the training split.
@@ -57,11 +58,11 @@ def make_synthetic_annotations(
     for name, per_class in ((train_split, train_per_class), (val_split, val_per_class)):
         for label in range(num_classes):
             group = skel.groups[(label + 1) % skel.num_groups]
-            axis = (label // skel.num_groups) % dims
+            axis = label % dims
             for i in range(per_class):
                 phase = rng.uniform(0.0, 2.0 * np.pi)
                 motion = np.zeros((num_frames, skel.num_joints, dims))
-                motion[:, list(group), axis] = amplitude * np.sin(t + phase)[:, None]
+                motion[:, list(group), axis] = amplitude * (displacement + np.sin(t + phase))[:, None]
                 offset = rng.normal(scale=0.5, size=(num_bodies, 1, 1, dims))
                 keypoint = (
                     rest
