@@ -203,7 +203,7 @@ def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_pa
     recipe = {
         "seed_everything": 0,
         "trainer": {
-            "max_epochs": 6,
+            "max_epochs": 3,
             "accelerator": "cpu",
             "enable_progress_bar": False,
             "log_every_n_steps": 1,
@@ -214,11 +214,15 @@ def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_pa
                 },
                 {"class_path": "lightning.pytorch.loggers.CSVLogger", "init_args": {"save_dir": "runs"}},
             ],
-            "callbacks": [
+            "callbacks": [  # as in the packaged recipes: the best epoch and the last one
                 {
                     "class_path": "lightning.pytorch.callbacks.ModelCheckpoint",
-                    "init_args": {"monitor": "val/top1", "mode": "max", "save_last": True},
-                }
+                    "init_args": {"monitor": "val/top1", "mode": "max", "filename": "best-{epoch:03d}"},
+                },
+                {
+                    "class_path": "lightning.pytorch.callbacks.ModelCheckpoint",
+                    "init_args": {"filename": "last", "save_top_k": 1, "enable_version_counter": False},
+                },
             ],
         },
         "model": {
@@ -243,13 +247,20 @@ def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_pa
     assert fit.returncode == 0, fit.stderr[-3000:]
     run_dir = tmp_path / "runs" / "lightning_logs" / "version_0"
     assert (run_dir / "config.yaml").is_file() and list(run_dir.glob("events.out.tfevents.*"))
-    val_top1 = [float(r["val/top1"]) for r in read_metrics(run_dir / "metrics.csv") if r.get("val/top1")]
-    assert len(val_top1) == 6
-    assert max(val_top1) > 0.6, val_top1  # chance is 1/3
+    val = [
+        (float(r["val/top1"]), float(r["val/loss"]))
+        for r in read_metrics(run_dir / "metrics.csv")
+        if r.get("val/top1")
+    ]
+    assert len(val) == 3
+    assert val[-1][0] > 0.6, val  # chance is 1/3
+    assert val[-1][1] < val[0][1] < np.log(3), val  # the loss falls, from below chance level
     saved = yaml.safe_load((run_dir / "config.yaml").read_text())
     assert saved["model"]["init_args"]["backbone"]["dim"] == 16
 
     checkpoint = run_dir / "checkpoints" / "last.ckpt"
+    assert torch.load(checkpoint, weights_only=True, map_location="cpu")["epoch"] == 2  # the last epoch
+    assert len(list((run_dir / "checkpoints").glob("best-*.ckpt"))) == 1
     test = run_sm(["test", "--recipe", "recipe.yaml", "--ckpt_path", str(checkpoint)], tmp_path)
     assert test.returncode == 0, test.stderr[-3000:]
     test_dir = tmp_path / "runs" / "lightning_logs" / "version_1"

@@ -286,3 +286,19 @@ def test_kernel_on_gpu_matches_recurrence():
     y_ref, f_ref = ssd_recurrence(**{k: v.double() for k, v in inp.items()}, return_final_state=True)
     assert (y.double() - y_ref).abs().max() <= 1e-4 * y_ref.abs().max()
     assert (f.double() - f_ref).abs().max() <= 1e-4 * f_ref.abs().max()
+
+
+def test_tiled_recompute_path_matches(monkeypatch):
+    """Inputs larger than SAVE_ELEMENTS run in tiles and recompute the mask in backward."""
+    import importlib
+
+    intra = importlib.import_module("skeleton_mamba.ssd.intra_chunk")
+    inp = make_inputs(3, 21, 4, 3, 2, 4, seed=9, d_shape="hp")
+    ref = grads(ssd_recurrence, inp)
+    y_ref = ssd_recurrence(**inp)
+    monkeypatch.setattr(intra, "SAVE_ELEMENTS", 4 * 8 * 8 * 2)  # two chunks of 8 per tile
+    assert len(intra._tiles(3 * 3, 4 * 8 * 8)) == 5
+    torch.testing.assert_close(ssd_chunked(**inp, chunk_size=8), y_ref, rtol=1e-10, atol=1e-10)
+    got = grads(ssd_chunked, inp, chunk_size=8)
+    for k in GRAD_NAMES:
+        torch.testing.assert_close(got[k], ref[k], rtol=1e-9, atol=1e-9, msg=lambda m, k=k: f"grad {k}: {m}")

@@ -128,7 +128,8 @@ def ssd_chunked(
         xc.reshape(b * c, Q, H, P), delta.reshape(b * c, Q, H), cs.flatten(0, 1),
         Bc.reshape(b * c, Q, *Bc.shape[2:]), Cc.reshape(b * c, Q, *Cc.shape[2:]), D2, y_off,
     )
-    y = y.view(b, c * Q, H, P)[:, :L].to(x.dtype)
+    y = y.view(b, c * Q, H, P)
+    y = (y[:, :L] if pad else y).to(x.dtype)
     if not return_final_state:
         return y
     return y, final

@@ -1,4 +1,4 @@
-"""The quadratic ("attention-like") SSD form inside chunks, with a hand-written, tiled backward.
+"""The quadratic ("attention-like") SSD form inside chunks, with a hand-written backward.
 
 For each chunk (reference §2 item 4, §3 step 1), per head h of B/C group g:
 
@@ -7,44 +7,45 @@ For each chunk (reference §2 item 4, §3 step 1), per head h of B/C group g:
 with cs the inclusive cumulative sum of a = Δ·A inside the chunk and Y_off an optional term added
 by the caller (the inter-chunk contribution). C·Bᵀ is formed once per group and shared by its heads.
 
-Speed (CPU): the Q×Q matrices (Lmask, W = Lmask ∘ CB, dW) are never materialised for the whole
-batch. The chunks are processed in tiles small enough to stay in cache, and the backward recomputes
-Lmask and W tile by tile instead of saving them (nothing of size Q×Q is kept between forward and
-backward). Large fresh allocations are avoided: on Linux every allocation above 32 MiB is a fresh
-mmap whose first touch page-faults, which costs more than the arithmetic here.
-
-Backward, with W = Lmask ∘ CB (per head) and Xd = Δ ⊙ X:
+Backward, with W = Lmask ∘ CB (per head), Xd = Δ ⊙ X and Y_in = W Xd:
     dXd = Wᵀ dY,  dW = dY Xdᵀ,  dCB = Σ_{heads of g} dW ∘ Lmask,  dC = dCB B,  dB = dCBᵀ C,
-    d cs_i = Σ_j G_ij - Σ_k G_ki with G = dW ∘ W   (∂W_ij/∂cs_i = W_ij, ∂W_ij/∂cs_j = -W_ij),
+    d cs_i = Σ_j dW_ij W_ij - Σ_k dW_ki W_ki = Σ_p dY_ip Y_in,ip - Σ_p Xd_ip dXd_ip
+             (∂W_ij/∂cs_i = W_ij, ∂W_ij/∂cs_j = -W_ij; the sums over Q×Q reduce to sums over P),
     dX = Δ ⊙ dXd + D ⊙ dY,  dΔ = Σ_p X ⊙ dXd,  dD = Σ X ⊙ dY,  dY_off = dY.
+
+Speed on CPU: the work is a few large operations (every operation costs a thread fork/join, which
+is expensive on a busy machine), and the Q×Q matrices Lmask and W are kept from the forward when
+they fit in ``SAVE_ELEMENTS`` (a fresh 100 MB tensor costs more in page faults than the arithmetic
+on it). Larger inputs are processed in tiles of at most ``SAVE_ELEMENTS`` mask entries, and the
+backward then recomputes Lmask and W tile by tile, so memory stays bounded.
 """
 
 from __future__ import annotations
 
 import torch
 
-# Number of Q×Q mask entries processed per tile (4 buffers of this many fp32 values stay in cache).
-TILE_ELEMENTS = 1 << 19
+# Largest number of Q×Q mask entries (n·H·Q²) kept between forward and backward / held per tile.
+SAVE_ELEMENTS = 1 << 25
 
 
-def _tiles(n: int, per_item: int):
-    step = max(1, TILE_ELEMENTS // max(1, per_item))
+def _tiles(n: int, per_item: int) -> list[tuple[int, int]]:
+    step = max(1, SAVE_ELEMENTS // max(1, per_item))
     return [(i, min(n, i + step)) for i in range(0, n, step)]
 
 
-def _causal_bias(Q: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    """(Q, Q) with 0 on and below the diagonal and -inf above: exp(segsum + bias) is causal."""
-    return torch.full((Q, Q), -torch.inf, dtype=dtype, device=device).triu_(1)
-
-
-def _mask_and_weights(cs, CB, bias, E, W):
-    """E = Lmask (s, H, Q, Q) and W = E ∘ CB written into the buffers E, W; returns (E, W)."""
+def _mask_and_weights(cs: torch.Tensor, CB: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Lmask (s, H, Q, Q) (zero above the diagonal) and W = Lmask ∘ CB from cs (s, H, Q), CB (s, G, Q, Q)."""
     s, H, Q = cs.shape
     G = CB.shape[1]
-    torch.sub(cs[..., :, None], cs[..., None, :], out=E)
-    E.add_(bias).exp_()
-    torch.mul(E.view(s, G, H // G, Q, Q), CB[:, :, None], out=W.view(s, G, H // G, Q, Q))
+    bias = torch.full((Q, Q), -torch.inf, dtype=cs.dtype, device=cs.device).triu_(1)
+    E = torch.sub(cs[..., :, None], cs[..., None, :]).add_(bias).exp_()
+    W = (E.view(s, G, H // G, Q, Q) * CB[:, :, None]).view(s, H, Q, Q)
     return E, W
+
+
+def _cb(B: torch.Tensor, C: torch.Tensor) -> torch.Tensor:
+    """C Bᵀ per group: B, C (s, Q, G, N) -> (s, G, Q, Q)."""
+    return torch.matmul(C.transpose(1, 2), B.transpose(1, 2).transpose(-1, -2))
 
 
 class IntraChunk(torch.autograd.Function):
@@ -54,73 +55,57 @@ class IntraChunk(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x, delta, cs, B, C, D, y_off):
         n, Q, H, P = x.shape
+        xd = x.new_empty(n, H, Q, P)
+        torch.mul(x.transpose(1, 2), delta.transpose(1, 2)[..., None], out=xd)
+        y_in = torch.empty_like(xd)
+        tiles = _tiles(n, H * Q * Q)
+        saved = []
+        for r0, r1 in tiles:
+            E, W = _mask_and_weights(cs[r0:r1], _cb(B[r0:r1], C[r0:r1]))
+            torch.matmul(W, xd[r0:r1], out=y_in[r0:r1])
+            if len(tiles) == 1:
+                saved = [E, W]
+        y_hm = y_in if y_off is None else y_in + y_off
         y = torch.empty_like(x)
-        bias = _causal_bias(Q, x.dtype, x.device)
-        bufs = None
-        for r0, r1 in _tiles(n, H * Q * Q):
-            s = r1 - r0
-            if bufs is None or bufs[0].shape[0] != s:
-                bufs = (x.new_empty(s, H, Q, Q), x.new_empty(s, H, Q, Q), x.new_empty(s, H, Q, P))
-            E, W, xd = bufs
-            torch.mul(x[r0:r1].transpose(1, 2), delta[r0:r1].transpose(1, 2)[..., None], out=xd)
-            Cs, Bs = C[r0:r1].transpose(1, 2), B[r0:r1].transpose(1, 2)  # (s, G, Q, N)
-            CB = torch.matmul(Cs, Bs.transpose(-1, -2))  # (s, G, Q, Q)
-            E, W = _mask_and_weights(cs[r0:r1], CB, bias, E, W)
-            yt = torch.matmul(W, xd) if y_off is None else torch.baddbmm(
-                y_off[r0:r1].reshape(s * H, Q, P), W.view(s * H, Q, Q), xd.view(s * H, Q, P)).view(s, H, Q, P)
-            out = y[r0:r1]
-            if D is None:
-                out.copy_(yt.transpose(1, 2))
-            else:
-                torch.addcmul(yt.transpose(1, 2), x[r0:r1], D, out=out)
-        ctx.save_for_backward(x, delta, cs, B, C, D)
-        ctx.has_y_off = y_off is not None
+        if D is None:
+            y.copy_(y_hm.transpose(1, 2))
+        else:
+            torch.addcmul(y_hm.transpose(1, 2), x, D, out=y)
+        ctx.save_for_backward(x, delta, cs, B, C, D, xd, y_in, *saved)
         return y
 
     @staticmethod
     def backward(ctx, dy):
-        x, delta, cs, B, C, D = ctx.saved_tensors
+        x, delta, cs, B, C, D, xd, y_in, *saved = ctx.saved_tensors
         n, Q, H, P = x.shape
         G = B.shape[2]
         R = H // G
-        need = ctx.needs_input_grad
-        dx, ddelta, dcs = torch.empty_like(x), torch.empty_like(delta), torch.empty_like(cs)
-        dB, dC = torch.empty_like(B), torch.empty_like(C)
-        dD = torch.zeros_like(D) if D is not None and need[5] else None
-        dy_off = x.new_empty(n, H, Q, P) if ctx.has_y_off and need[6] else None
-        bias = _causal_bias(Q, x.dtype, x.device)
-        bufs = None
+        dys = dy.transpose(1, 2).contiguous()  # (n, H, Q, P)
+        dxd = torch.empty_like(xd)
+        dB_t = B.new_empty(n, G, Q, B.shape[3])
+        dC_t = torch.empty_like(dB_t)
         for r0, r1 in _tiles(n, H * Q * Q):
             s = r1 - r0
-            if bufs is None or bufs[0].shape[0] != s:
-                bufs = tuple(x.new_empty(s, H, Q, Q) for _ in range(3)) + tuple(
-                    x.new_empty(s, H, Q, P) for _ in range(2))
-            E, W, dW, xd, dys = bufs
-            xs, ds, dy_s = x[r0:r1], delta[r0:r1], dy[r0:r1]
-            torch.mul(xs.transpose(1, 2), ds.transpose(1, 2)[..., None], out=xd)
-            dys.copy_(dy_s.transpose(1, 2))  # (s, H, Q, P)
-            Cs, Bs = C[r0:r1].transpose(1, 2), B[r0:r1].transpose(1, 2)
-            CB = torch.matmul(Cs, Bs.transpose(-1, -2))
-            E, W = _mask_and_weights(cs[r0:r1], CB, bias, E, W)
-            dxd = torch.matmul(W.transpose(-1, -2), dys)  # (s, H, Q, P)
-            torch.matmul(dys, xd.transpose(-1, -2), out=dW)
-            W.mul_(dW)  # G = dW ∘ W
-            torch.sub(W.sum(-1), W.sum(-2), out=dcs[r0:r1])
-            dW.mul_(E)  # dW ∘ Lmask
+            E, W = saved if saved else _mask_and_weights(cs[r0:r1], _cb(B[r0:r1], C[r0:r1]))
+            torch.matmul(W.transpose(-1, -2), dys[r0:r1], out=dxd[r0:r1])
+            # W is not needed any more: dW takes its storage (a second backward through this graph
+            # would then fail loudly on the version check of the saved W instead of reading it).
+            dW = torch.matmul(dys[r0:r1], xd[r0:r1].transpose(-1, -2), out=W).mul_(E)  # dW ∘ Lmask
             dCB = dW.view(s, G, R, Q, Q).sum(2) if R > 1 else dW
-            dC[r0:r1].transpose(1, 2).copy_(torch.matmul(dCB, Bs))
-            dB[r0:r1].transpose(1, 2).copy_(torch.matmul(dCB.transpose(-1, -2), Cs))
-            ddelta[r0:r1].transpose(1, 2).copy_(torch.linalg.vecdot(xs.transpose(1, 2), dxd))
-            out = dx[r0:r1]
-            if D is None:
-                torch.mul(dxd.transpose(1, 2), ds[..., None], out=out)
-            else:
-                torch.mul(dy_s, D, out=out).addcmul_(dxd.transpose(1, 2), ds[..., None])
-                if dD is not None:
-                    dD += torch.linalg.vecdot(dy_s.flatten(0, 1), xs.flatten(0, 1), dim=0)
-            if dy_off is not None:
-                dy_off[r0:r1].copy_(dys)
-        return dx, ddelta, dcs, dB, dC, dD, dy_off
+            torch.matmul(dCB, B[r0:r1].transpose(1, 2), out=dC_t[r0:r1])
+            torch.matmul(dCB.transpose(-1, -2), C[r0:r1].transpose(1, 2), out=dB_t[r0:r1])
+        ddelta = torch.linalg.vecdot(x.transpose(1, 2), dxd)  # (n, H, Q)
+        # Σ_p Xd dXd = Δ Σ_p X dXd = Δ·dΔ
+        dcs = torch.linalg.vecdot(dys, y_in).sub_(ddelta * delta.transpose(1, 2))  # (n, H, Q)
+        dx = dxd.mul_(delta.transpose(1, 2)[..., None])
+        dD = None
+        if D is not None:
+            dx.addcmul_(dys, D[:, None, :])
+            if ctx.needs_input_grad[5]:
+                dD = torch.linalg.vecdot(dy.flatten(0, 1), x.flatten(0, 1), dim=0)
+        dy_off = dys if ctx.needs_input_grad[6] else None
+        return (dx.transpose(1, 2), ddelta.transpose(1, 2), dcs, dB_t.transpose(1, 2), dC_t.transpose(1, 2),
+                dD, dy_off)
 
 
 def intra_chunk(
@@ -146,6 +131,5 @@ def intra_chunk(
         y (n, Q, H, P) = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + y_off + D ⊙ x, all in x's dtype.
     """
     dt = x.dtype
-    args = [t.contiguous() if t is not None else None for t in (x, delta, cs, B, C, D, y_off)]
-    args = [t.to(dt) if t is not None else None for t in args]
+    args = [t.to(dt).contiguous() if t is not None else None for t in (x, delta, cs, B, C, D, y_off)]
     return IntraChunk.apply(*args)

@@ -23,7 +23,7 @@ def make_synthetic_annotations(
     skeleton: str = "ntu25",
     num_bodies: int = 1,
     amplitude: float = 1.0,
-    displacement: float = 0.5,
+    displacement: float = 1.0,
     noise: float = 0.02,
     seed: int = 0,
     train_split: str = "xsub_train",

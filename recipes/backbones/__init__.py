@@ -1,0 +1,1 @@
+"""Backbone fragments that task recipes include (``backbone: backbones/skeleton_mamba.yaml``)."""
