@@ -25,18 +25,23 @@ from common import machine_info, median_ms  # noqa: E402
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig  # noqa: E402
 
 
-def build(kind: str, dim: int, depth: int) -> torch.nn.Module:
+def build(kind: str, dim: int, depth: int, checkpointing: bool) -> torch.nn.Module:
     if kind == "skeleton_mamba":
-        return SkeletonMamba(SkeletonMambaConfig(skeleton="smpl24", in_channels=9, dim=dim, depth=depth))
+        cfg = SkeletonMambaConfig(
+            skeleton="smpl24", in_channels=9, dim=dim, depth=depth, gradient_checkpointing=checkpointing
+        )
+        return SkeletonMamba(cfg)
     return AttentionTwin(9, 24, dim=dim, depth=depth)
 
 
-def measure(kind: str, batch: int, length: int, dim: int, depth: int, repeats: int, threads: int) -> dict:
+def measure(
+    kind: str, batch: int, length: int, dim: int, depth: int, repeats: int, threads: int, checkpointing: bool
+) -> dict:
     """Forward+backward median time and peak memory of one model at one size (run in a subprocess)."""
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     device = "cuda" if torch.cuda.is_available() else "cpu"
-    model = build(kind, dim, depth).to(device)
+    model = build(kind, dim, depth, checkpointing).to(device)
     x = torch.randn(batch, length, 24, 9, device=device)
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
@@ -64,7 +69,9 @@ def measure(kind: str, batch: int, length: int, dim: int, depth: int, repeats: i
 
 def run_isolated(**kwargs) -> dict:
     args = [sys.executable, __file__, "--one", json.dumps(kwargs)]
-    out = subprocess.run(args, capture_output=True, text=True, check=True)
+    out = subprocess.run(args, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"measurement {kwargs} failed (exit {out.returncode}):\n{out.stderr[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -78,21 +85,40 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lengths", type=int, nargs="+", default=[150, 600, 2400])
     parser.add_argument("--dim", type=int, default=128)
     parser.add_argument("--depth", type=int, default=8)
+    parser.add_argument(
+        "--scaling-depth",
+        type=int,
+        default=1,
+        help="blocks in the T-scaling rows (time grows per block alike)",
+    )
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument(
+        "--checkpointing",
+        action="store_true",
+        help="gradient checkpointing in SkeletonMamba (needed for the seed size at batch 4 on 24 GB)",
+    )
     parser.add_argument("--one", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
         print(json.dumps(measure(**json.loads(args.one))))
         return 0
 
-    common = {"dim": args.dim, "depth": args.depth, "threads": args.threads}
+    common = {
+        "dim": args.dim,
+        "depth": args.depth,
+        "threads": args.threads,
+        "checkpointing": args.checkpointing,
+    }
     seed = [
         run_isolated(kind=k, batch=args.batch, length=150, repeats=args.repeats, **common)
         for k in ("skeleton_mamba", "attention_twin")
     ]
+    scaling_common = {**common, "depth": args.scaling_depth}
     scaling = [
-        run_isolated(kind=k, batch=args.scaling_batch, length=t, repeats=max(1, args.repeats - 2), **common)
+        run_isolated(
+            kind=k, batch=args.scaling_batch, length=t, repeats=max(1, args.repeats - 1), **scaling_common
+        )
         for t in args.lengths
         for k in ("skeleton_mamba", "attention_twin")
     ]
@@ -105,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": machine_info(),
         "threads": args.threads,
         "config": common,
+        "scaling_config": scaling_common,
         "seed_config": seed,
         "scaling": scaling,
         "growth_vs_shortest": growth,

@@ -45,6 +45,8 @@ class SkeletonMambaConfig:
         context_dim: width of a condition sequence for cross-attention (``None``: no cross-attention).
         joint_embedding: add a learned embedding per joint before the first block.
         dropout: dropout in the MLP and attention.
+        gradient_checkpointing: recompute each block in the backward pass instead of storing its
+            activations (the seed size at batch 4 x 150 frames needs about 30 GB in fp32 without it).
         mixer: settings of every Mamba-2 mixer.
     """
 
@@ -60,4 +62,5 @@ class SkeletonMambaConfig:
     context_dim: int | None = None
     joint_embedding: bool = True
     dropout: float = 0.0
+    gradient_checkpointing: bool = False
     mixer: MixerConfig | None = None

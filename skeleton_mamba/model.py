@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 from torch import nn
+from torch.utils.checkpoint import checkpoint
 
 from skeleton_mamba.block import SkeletonMambaBlock
 from skeleton_mamba.config import SkeletonMambaConfig
@@ -99,5 +100,8 @@ class SkeletonMamba(nn.Module):
         if self.joint_embedding is not None:
             h = h + self.joint_embedding
         for block in self.blocks:
-            h = block(h, mask=mask, context=context, context_mask=context_mask)
+            if self.config.gradient_checkpointing and self.training and torch.is_grad_enabled():
+                h = checkpoint(block, h, mask, context, context_mask, use_reentrant=False)
+            else:
+                h = block(h, mask=mask, context=context, context_mask=context_mask)
         return self.output_proj(self.norm(h))

@@ -148,3 +148,17 @@ def test_tiny_model_learns_a_sequence_task():
         losses.append(loss.item())
     start, end = sum(losses[:5]) / 5, sum(losses[-10:]) / 10
     assert end < 0.25 * start, (start, end)
+
+
+def test_gradient_checkpointing_gives_the_same_gradients():
+    torch.manual_seed(0)
+    cfg = SkeletonMambaConfig(in_channels=3, dim=16, depth=2, mlp_dim=16, mixer=TINY_MIXER)
+    plain = SkeletonMamba(cfg)
+    ckpt = SkeletonMamba(dataclasses.replace(cfg, gradient_checkpointing=True))
+    ckpt.load_state_dict(plain.state_dict())
+    x = torch.randn(2, 7, 24, 3)
+    grads = []
+    for model in (plain, ckpt):
+        model(x).square().mean().backward()
+        grads.append(torch.cat([p.grad.flatten() for p in model.parameters()]))
+    torch.testing.assert_close(grads[0], grads[1])

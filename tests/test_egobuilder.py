@@ -10,7 +10,14 @@ import pytest
 import torch
 import trimesh
 from skeleton_mamba.tasks.egodance.builder import layout
-from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, build_window, plan_windows, run_build
+from skeleton_mamba.tasks.egodance.builder.build import (
+    BuildConfig,
+    build_window,
+    get_scene,
+    plan_windows,
+    run_build,
+    scene_keys,
+)
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
 from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
 from skeleton_mamba.tasks.egodance.builder.penetration import FOOT_RADIUS, penetration_score, signed_distance
@@ -332,3 +339,17 @@ def test_motion_without_smpl_parameters_is_refused(tmp_path):
     path = save_motion(tmp_path / "joints.npz", joints_only)
     with pytest.raises(ValueError, match="joints.npz: the builder needs SMPL parameters"):
         plan_windows(BuildConfig(out=str(tmp_path / "o")), [path])
+
+
+def test_scene_folder_pattern_picks_replica_meshes(tmp_path):
+    scene = boxes_scene([FLOOR])
+    for rel in ("room_0/mesh.ply", "room_0/habitat/mesh_semantic.ply", "office_1/mesh.ply"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        scene.mesh.export(tmp_path / rel)
+    everything = scene_keys(BuildConfig(out="o", scenes=str(tmp_path)))
+    assert len(everything) == 3
+    keys = scene_keys(BuildConfig(out="o", scenes=str(tmp_path), scene_pattern="*/mesh.ply"))
+    assert keys == [str(tmp_path / "office_1" / "mesh.ply"), str(tmp_path / "room_0" / "mesh.ply")]
+    assert get_scene(keys[1], "y").name == "room_0"
+    with pytest.raises(FileNotFoundError, match=r"\*/nothing.glb"):
+        scene_keys(BuildConfig(out="o", scenes=str(tmp_path), scene_pattern="*/nothing.glb"))

@@ -219,7 +219,9 @@ def test_auto_dispatch_on_cpu():
     x = torch.zeros(1, 40, 2, 2)
     assert choose_impl(x, 64, stateful=False) == "quadratic"
     assert choose_impl(x, 64, stateful=True) == "chunked"
-    assert choose_impl(torch.zeros(1, 65, 2, 2), 64, stateful=False) == "chunked"
+    assert choose_impl(torch.zeros(1, 256, 2, 2), 64, stateful=False) == "quadratic"
+    assert choose_impl(torch.zeros(1, 257, 2, 2), 64, stateful=False) == "chunked"
+    assert choose_impl(torch.zeros(1, 300, 2, 2), 512, stateful=False) == "quadratic"
     assert choose_impl(x, 64, stateful=False, impl="recurrence") == "recurrence"
     inp = make_inputs(2, 70, 2, 3, 1, 4)
     ref = ssd_recurrence(**inp)

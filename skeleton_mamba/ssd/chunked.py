@@ -5,9 +5,14 @@ decay exp(Δ·A) = 1: padding injects nothing and does not change the state) and
 Per chunk k, with ā the inclusive cumulative sum of a = Δ·A inside the chunk and T_k its total:
 
 1. Y_diag: the quadratic form inside the chunk (:func:`intra_chunk`);
-2. s_k = Σ_s exp(T_k - ā_s) X_s ⊗ B_s, the state at the end of chunk k from zero;
-3. S_{k+1} = exp(T_k) S_k + s_k with S_0 the initial state (a sequential scan over chunks);
+2. s_k = Σ_s exp(T_k - ā_s) Δ_s x_s ⊗ B_s, the state at the end of chunk k from zero;
+3. S_{k+1} = exp(T_k) S_k + s_k with S_0 the initial state, evaluated as one product with the
+   (c+1)×(c+1) matrix exp(segsum(0, T_0, ..., T_{c-1})) (stable segment sums; one operation
+   instead of a Python loop over chunks);
 4. Y_off[l] = exp(ā_l) S_k C_l.
+
+Tensors stay in the (chunk, position, head, channel) layout of the input, so B and C are used
+without copies and heads of one B/C group share one matrix product.
 """
 
 from __future__ import annotations
@@ -18,25 +23,25 @@ from einops import rearrange
 
 from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, discretize_dt
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
+from skeleton_mamba.ssd.segsum import segsum_stable
 
 
-def chunk_states(xd: torch.Tensor, cs: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
-    """Step 2: states at the end of every chunk from a zero entering state.
+def chunk_states(x: torch.Tensor, weight: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+    """Step 2: s_k = Σ_s weight_s x_s ⊗ B_s, the state at the end of each chunk from zero.
 
     Args:
-        xd: (b, c, H, Q, P) discretised inputs.
-        cs: (b, c, H, Q) inclusive cumulative log decays within each chunk.
-        B: (b, c, G, Q, N).
+        x: (n, Q, H, P) inputs of n = b·c chunks.
+        weight: (n, Q, H) the factor Δ_s exp(T_k - ā_s).
+        B: (n, Q, G, N).
 
     Returns:
-        s (b, c, H, P, N).
+        s (n, H, P, N).
     """
-    b, c, H, Q, P = xd.shape
-    G = B.shape[2]
-    scaled = xd * torch.exp(cs[..., -1:] - cs)[..., None]  # (b, c, H, Q, P)
-    scaled = rearrange(scaled, "b c (g r) q p -> b c g (r p) q", g=G)
-    s = torch.matmul(scaled, B)  # (b, c, G, R*P, N)
-    return s.view(b, c, H, P, -1)
+    n, Q, H, P = x.shape
+    G, N = B.shape[2], B.shape[3]
+    scaled = (x * weight[..., None]).view(n, Q, G, (H // G) * P)
+    s = torch.matmul(scaled.transpose(1, 2).transpose(-1, -2), B.transpose(1, 2))  # (n, G, R*P, N)
+    return s.reshape(n, H, P, N)
 
 
 def pass_states(
@@ -52,31 +57,32 @@ def pass_states(
     Returns:
         (S_in (b, c, H, P, N) the state entering each chunk, final state (b, H, P, N)).
     """
-    decay = torch.exp(totals)[..., None, None]  # (b, c, H, 1, 1)
-    state = torch.zeros_like(s[:, 0]) if initial_state is None else initial_state.to(s.dtype)
-    entering = []
-    for k in range(s.shape[1]):
-        entering.append(state)
-        state = state * decay[:, k] + s[:, k]
-    return torch.stack(entering, dim=1), state
+    b, c, H, P, N = s.shape
+    h0 = torch.zeros_like(s[:, :1]) if initial_state is None else initial_state.to(s.dtype)[:, None]
+    states = rearrange(torch.cat([h0, s], dim=1), "b k h p n -> b h k (p n)")  # (b, H, c+1, P*N)
+    log_decay = F.pad(rearrange(totals, "b c h -> b h c"), (1, 0))  # (b, H, c+1)
+    # M_kj = exp(T_j + ... + T_{k-1}) for j ≤ k: entry k collects every earlier chunk state.
+    out = torch.matmul(torch.exp(segsum_stable(log_decay)), states)  # (b, H, c+1, P*N)
+    out = rearrange(out, "b h k (p n) -> b k h p n", p=P)
+    return out[:, :c], out[:, c]
 
 
 def state_output(S_in: torch.Tensor, cs: torch.Tensor, C: torch.Tensor) -> torch.Tensor:
     """Step 4: Y_off[k, l] = exp(ā_{k,l}) S_k C_{k,l}.
 
     Args:
-        S_in: (b, c, H, P, N) states entering each chunk.
-        cs: (b, c, H, Q) inclusive cumulative log decays.
-        C: (b, c, G, Q, N).
+        S_in: (n, H, P, N) states entering each chunk.
+        cs: (n, Q, H) inclusive cumulative log decays.
+        C: (n, Q, G, N).
 
     Returns:
-        (b, c, H, Q, P).
+        (n, Q, H, P).
     """
-    b, c, H, P, N = S_in.shape
-    G = C.shape[2]
-    S = rearrange(S_in, "b c (g r) p n -> b c g n (r p)", g=G)
-    y = torch.matmul(C, S)  # (b, c, G, Q, R*P)
-    y = rearrange(y, "b c g q (r p) -> b c (g r) q p", p=P)
+    n, H, P, N = S_in.shape
+    Q, G = C.shape[1], C.shape[2]
+    S = S_in.reshape(n, G, (H // G) * P, N)
+    y = torch.matmul(C.transpose(1, 2), S.transpose(-1, -2))  # (n, G, Q, R*P)
+    y = y.transpose(1, 2).reshape(n, Q, H, P)
     return y * torch.exp(cs)[..., None]
 
 
@@ -104,6 +110,7 @@ def ssd_chunked(
     if chunk_size < 1:
         raise ValueError(f"ssd_chunked: chunk_size must be >= 1, got {chunk_size}")
     b, L, H, P = x.shape
+    G, N = B.shape[2], B.shape[3]
     ct = compute_dtype(x)
     Q = chunk_size
     c = max(1, -(-L // Q))
@@ -115,20 +122,18 @@ def ssd_chunked(
         delta = F.pad(delta, (0, 0, 0, pad))
         Bc = F.pad(Bc, (0, 0, 0, 0, 0, pad))
         Cc = F.pad(Cc, (0, 0, 0, 0, 0, pad))
-    cs = rearrange(delta * A.to(ct), "b (c q) h -> b c h q", q=Q).cumsum(dim=-1)  # (b, c, H, Q)
+    n = b * c
+    xc, delta = xc.reshape(n, Q, H, P), delta.reshape(n, Q, H)
+    Bc, Cc = Bc.reshape(n, Q, G, N), Cc.reshape(n, Q, G, N)
+    cs = (delta * A.to(ct)).cumsum(dim=1)  # (n, Q, H)
     y_off, final = None, None
     if c > 1 or initial_state is not None or return_final_state:
-        xd = rearrange(xc * delta[..., None], "b (c q) h p -> b c h q p", q=Q)
-        Bk = rearrange(Bc, "b (c q) g n -> b c g q n", q=Q)
-        Ck = rearrange(Cc, "b (c q) g n -> b c g q n", q=Q)
-        S_in, final = pass_states(chunk_states(xd, cs, Bk), cs[..., -1], initial_state)
-        y_off = state_output(S_in, cs, Ck).flatten(0, 1)  # (b*c, H, Q, P)
+        total = cs[:, -1:]  # (n, 1, H)
+        s = chunk_states(xc, delta * torch.exp(total - cs), Bc).view(b, c, H, P, N)
+        S_in, final = pass_states(s, total.view(b, c, H), initial_state)
+        y_off = state_output(S_in.reshape(n, H, P, N), cs, Cc)  # (n, Q, H, P)
     D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
-    y = intra_chunk(
-        xc.reshape(b * c, Q, H, P), delta.reshape(b * c, Q, H), cs.flatten(0, 1),
-        Bc.reshape(b * c, Q, *Bc.shape[2:]), Cc.reshape(b * c, Q, *Cc.shape[2:]), D2, y_off,
-    )
-    y = y.view(b, c * Q, H, P)
+    y = intra_chunk(xc, delta, cs.transpose(1, 2), Bc, Cc, D2, y_off).view(b, c * Q, H, P)
     y = (y[:, :L] if pad else y).to(x.dtype)
     if not return_final_state:
         return y

@@ -1,8 +1,13 @@
 """``ssd``: one entry point choosing between the SSD implementations.
 
 impl="auto": the mamba-ssm Triton kernel when installed and x is on CUDA; else the single-chunk
-quadratic form when L <= chunk_size and no initial/final state is involved; else the chunked form.
-impl="torch": the same choice without the kernel.
+quadratic form when L <= max(chunk_size, QUADRATIC_MAX_LEN) and no initial/final state is involved;
+else the chunked form. impl="torch": the same choice without the kernel.
+
+QUADRATIC_MAX_LEN comes from benchmarks/bench_ssd.py (4 heads, P = N = 64, fp32, 2 CPU threads,
+forward + backward): at L = 150 the single chunk was about 2x faster than chunks of 64, at L = 256
+one chunk of 256 and chunks of 64 or 128 were within the noise of a shared machine, and above that
+the O(L²) mask grows faster than the per-chunk state work.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from skeleton_mamba.ssd.kernel import kernel_available, ssd_kernel
 from skeleton_mamba.ssd.quadratic import ssd_quadratic
 from skeleton_mamba.ssd.recurrence import ssd_recurrence
 
+QUADRATIC_MAX_LEN = 256
 IMPLS = ("auto", "torch", "recurrence", "chunked", "quadratic", "kernel")
 
 
@@ -24,7 +30,8 @@ def choose_impl(x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "a
     if impl == "auto" and kernel_available(x):
         return "kernel"
     if impl in ("auto", "torch"):
-        return "quadratic" if x.shape[1] <= chunk_size and not stateful else "chunked"
+        short = x.shape[1] <= max(chunk_size, QUADRATIC_MAX_LEN)
+        return "quadratic" if short and not stateful else "chunked"
     return impl
 
 

@@ -50,7 +50,7 @@ def _cb(B: torch.Tensor, C: torch.Tensor) -> torch.Tensor:
 
 class IntraChunk(torch.autograd.Function):
     """See the module docstring. Layouts: x (n, Q, H, P), delta (n, Q, H), cs (n, H, Q),
-    B, C (n, Q, G, N), D (H, P) or None, y_off (n, H, Q, P) or None -> y (n, Q, H, P)."""
+    B, C (n, Q, G, N), D (H, P) or None, y_off (n, Q, H, P) or None -> y (n, Q, H, P)."""
 
     @staticmethod
     def forward(ctx, x, delta, cs, B, C, D, y_off):
@@ -65,12 +65,13 @@ class IntraChunk(torch.autograd.Function):
             torch.matmul(W, xd[r0:r1], out=y_in[r0:r1])
             if len(tiles) == 1:
                 saved = [E, W]
-        y_hm = y_in if y_off is None else y_in + y_off
         y = torch.empty_like(x)
-        if D is None:
-            y.copy_(y_hm.transpose(1, 2))
+        if y_off is None:
+            y.copy_(y_in.transpose(1, 2))
         else:
-            torch.addcmul(y_hm.transpose(1, 2), x, D, out=y)
+            torch.add(y_in.transpose(1, 2), y_off, out=y)
+        if D is not None:
+            y.addcmul_(x, D)
         ctx.save_for_backward(x, delta, cs, B, C, D, xd, y_in, *saved)
         return y
 
@@ -103,7 +104,7 @@ class IntraChunk(torch.autograd.Function):
             dx.addcmul_(dys, D[:, None, :])
             if ctx.needs_input_grad[5]:
                 dD = torch.linalg.vecdot(dy.flatten(0, 1), x.flatten(0, 1), dim=0)
-        dy_off = dys if ctx.needs_input_grad[6] else None
+        dy_off = dy if ctx.needs_input_grad[6] else None
         return (dx.transpose(1, 2), ddelta.transpose(1, 2), dcs, dB_t.transpose(1, 2), dC_t.transpose(1, 2),
                 dD, dy_off)
 
@@ -125,7 +126,7 @@ def intra_chunk(
         cs: (n, H, Q) inclusive cumulative sums of a = Δ·A within each chunk.
         B, C: (n, Q, G, N); head h reads group h // (H // G).
         D: (H, P) skip weights or ``None``.
-        y_off: (n, H, Q, P) extra term (the contribution of the entering state) or ``None``.
+        y_off: (n, Q, H, P) extra term (the contribution of the entering state) or ``None``.
 
     Returns:
         y (n, Q, H, P) = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + y_off + D ⊙ x, all in x's dtype.

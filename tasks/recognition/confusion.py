@@ -46,7 +46,7 @@ def save_confusion_matrix(
 
     totals = counts.sum(axis=1, keepdims=True)
     recall = np.divide(counts, totals, out=np.zeros(counts.shape, dtype=np.float64), where=totals > 0)
-    size = min(4 + 0.12 * k, 24)
+    size = min(5.5 + 0.12 * k, 24)
     fig, ax = plt.subplots(figsize=(size, size))
     image = ax.imshow(recall, vmin=0.0, vmax=1.0, cmap="Blues")
     fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04, label="fraction of the true class")
@@ -54,7 +54,8 @@ def save_confusion_matrix(
     ax.set_ylabel("true class")
     ax.set_title(
         f"Confusion matrix ({int(counts.sum())} samples, "
-        f"accuracy {np.trace(counts) / max(counts.sum(), 1):.3f})"
+        f"accuracy {np.trace(counts) / max(counts.sum(), 1):.3f})",
+        fontsize=10,
     )
     if k <= MAX_ANNOTATED_CLASSES:
         names = list(class_names) if class_names is not None else [str(i) for i in range(k)]

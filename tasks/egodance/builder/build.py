@@ -16,6 +16,7 @@ The manual verification step of the seed is left to the user (``meta.json`` keep
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
 import zlib
 from collections import Counter
@@ -57,6 +58,7 @@ _FIXED_SETTINGS = (
     "seed",
     "frame_format",
     "up_axis",
+    "scene_pattern",
     "scenes",
     "num_rooms",
     "camera_forward",
@@ -71,6 +73,7 @@ class BuildConfig:
     out: str
     scenes: str = "procedural"
     up_axis: str = "y"
+    scene_pattern: str | None = None  # glob under a scenes folder, e.g. "*/mesh.ply" for Replica
     num_rooms: int = 8
     fps: float = 30.0
     window_s: float = 5.0
@@ -157,9 +160,13 @@ def scene_keys(cfg: BuildConfig) -> list[str]:
         return [str(path)]
     if not path.is_dir():
         raise FileNotFoundError(f"scenes: {path} is neither 'procedural', a scene file nor a folder")
-    files = sorted(str(p) for p in path.rglob("*") if p.suffix.lower() in SCENE_SUFFIXES)
+    if cfg.scene_pattern:
+        files = sorted(str(p) for p in path.glob(cfg.scene_pattern) if p.is_file())
+    else:
+        files = sorted(str(p) for p in path.rglob("*") if p.suffix.lower() in SCENE_SUFFIXES)
     if not files:
-        raise FileNotFoundError(f"{path}: no scene meshes ({', '.join(SCENE_SUFFIXES)})")
+        wanted = cfg.scene_pattern or ", ".join(SCENE_SUFFIXES)
+        raise FileNotFoundError(f"{path}: no scene meshes ({wanted})")
     return files
 
 
@@ -205,7 +212,10 @@ def get_scene(key: str, up_axis: str) -> SceneMesh:
         if key.startswith("procedural:"):
             _SCENES[key, up_axis] = procedural_room(int(key.split(":", 1)[1]))
         else:
-            _SCENES[key, up_axis] = load_scene(key, up_axis)
+            scene = load_scene(key, up_axis)
+            if scene.name == "mesh":  # Replica: <scene>/mesh.ply -> name the scene after its folder
+                scene.name = Path(key).parent.name
+            _SCENES[key, up_axis] = scene
     return _SCENES[key, up_axis]
 
 
@@ -217,10 +227,27 @@ def _windows(path: str, fps: float, window_s: float, stride_s: float) -> list[Mo
     return _WINDOWS[key]
 
 
+def _pool_context() -> multiprocessing.context.BaseContext:
+    """Worker start method: never fork the (possibly multi-threaded) caller.
+
+    A forked child inherits embree/TBB and OpenMP thread-pool state and can hang. ``forkserver`` forks
+    the workers from a clean server that imports this module once; ``spawn`` where it is unavailable.
+    """
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload([__name__])
+        return context
+    return multiprocessing.get_context("spawn")
+
+
+def _init_worker() -> None:
+    """One torch thread per worker process (the processes already share the cores)."""
+    torch.set_num_threads(1)
+
+
 # ---------------------------------------------------------------- one window
 def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
     """Place, score, render and write one window; returns ``{"status", "sample_id", "rejected", ...}``."""
-    torch.set_num_threads(1)
     win = _windows(task.motion_path, cfg.fps, cfg.window_s, cfg.stride)[task.window_index]
     poses = torch.from_numpy(np.asarray(win.poses, dtype=np.float64))
     root = torch.from_numpy(np.asarray(win.root_position(), dtype=np.float64))
@@ -358,12 +385,14 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
     from tqdm.auto import tqdm
 
     bar = tqdm(total=len(todo), desc="make-ego", unit="window", disable=not cfg.progress)
-    if cfg.workers <= 1:
+    if cfg.workers <= 1 or len(todo) <= 1:
         for task in todo:
             record(build_window(task, cfg))
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=cfg.workers) as pool:
+        with ProcessPoolExecutor(
+            max_workers=min(cfg.workers, len(todo)), mp_context=_pool_context(), initializer=_init_worker
+        ) as pool:
             futures = [pool.submit(build_window, task, cfg) for task in todo]
             for future in as_completed(futures):
                 record(future.result())

@@ -2,8 +2,8 @@
 
 Examples::
 
-    sm make-ego --motion aistpp/motions --scenes replica/ --up-axis z --out ego_aistpp \
-        --music-dir aistpp/music
+    sm make-ego --motion aistpp/motions --scenes replica/ --scene-pattern '*/mesh.ply' --up-axis z
+        --out ego_aistpp --music-dir aistpp/music
     sm make-ego --motion synthetic/ --scenes procedural --out ego_demo --workers 2
     sm make-ego --motion one.npz --scenes simple_room.glb --up-axis z --out tiny --width 32 --height 32
 
@@ -35,6 +35,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenes", default=d.scenes, help="'procedural', a scene mesh file, or a folder of meshes"
     )
     p.add_argument("--out", required=True, help="output folder (re-run to resume)")
+    p.add_argument(
+        "--scene-pattern",
+        default=None,
+        help="glob of the scene files under a --scenes folder (Replica: '*/mesh.ply'); default: all meshes",
+    )
     p.add_argument("--up-axis", default=d.up_axis, choices=["x", "y", "z"], help="up axis of the scene files")
     p.add_argument("--num-rooms", type=int, default=d.num_rooms, help="procedural rooms to cycle through")
     p.add_argument("--fps", type=float, default=d.fps, help="frame rate of motion and frames")

@@ -5,8 +5,10 @@
     <out>/
       build.json                 the build settings (fps, window, resolution, fov, seed, threshold, ...);
                                  a resumed build must use the same settings
-      summary.json               counts of the last run: planned, complete, placed, rejected, skipped
+      summary.json               counts of the last run: planned windows, complete samples, and, in
+                                 that run, placed windows, rejected placements, skipped windows
       skipped/<sample_id>.json   a window given up after ``max_attempts`` placements: reason, scores
+                                 (a resumed build does not retry it; delete the file to retry)
       samples/<sample_id>/       ONE COMPLETE SAMPLE (the folder exists only once the sample is complete)
         meta.json                see below
         motion.npz               the placed motion window, our motion format
@@ -33,7 +35,8 @@ null when unknown), ``start_s``, ``end_s``}: the slice of the track that plays d
 Atomicity: a sample is written into ``samples/.tmp-<id>-<pid>/``, the ``COMPLETE`` marker is written
 last, then the folder is renamed to ``samples/<id>`` (``os.replace``, atomic on one file system). A
 reader lists only folders holding ``COMPLETE`` (:func:`complete_samples`), so an interrupted build never
-yields a half-written sample; :func:`clean_incomplete` removes leftovers before a build resumes.
+yields a half-written sample; :func:`clean_incomplete` removes leftovers before a build resumes
+(so run one build per output folder at a time).
 """
 
 from __future__ import annotations

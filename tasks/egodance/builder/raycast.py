@@ -37,6 +37,18 @@ class TriangleCache:
         self.d11 = np.einsum("ij,ij->i", self.e2, self.e2)
         self.inv = 1.0 / np.maximum(self.d00 * self.d11 - self.d01**2, 1e-20)
         self.colors = scene.vertex_colors[np.asarray(mesh.faces)]  # (F, 3 corners, 3 rgb)
+        # everything a hit needs in one row, gathered with a single take per frame
+        self.table = np.concatenate(
+            [
+                self.normals,
+                self.v0,
+                self.e1,
+                self.e2,
+                np.stack([self.d00, self.d01, self.d11, self.inv], 1),
+                self.colors.reshape(-1, 9),
+            ],
+            axis=1,
+        )  # (F, 25)
 
 
 def render_view(
@@ -74,22 +86,23 @@ def render_view(
     depth = np.zeros(len(dirs))
     rgb = np.tile(np.asarray(background, dtype=np.float64) / 255.0, (len(dirs), 1))
     if len(hit):
-        t_hit, d_hit = tri[hit], dirs[hit]
-        normals = cache.normals[t_hit]
+        d_hit = dirs[hit]
+        row = np.take(cache.table, tri[hit], axis=0)
+        normals, v0, e1, e2 = row[:, 0:3], row[:, 3:6], row[:, 6:9], row[:, 9:12]
+        d00, d01, d11, inv = row[:, 12], row[:, 13], row[:, 14], row[:, 15]
         # ray parameter from the hit triangle's plane; it is the z-depth because cam_dirs have z = 1
         denom = np.einsum("ij,ij->i", normals, d_hit)
         denom = np.where(np.abs(denom) < 1e-12, 1e-12, denom)
-        rel = cache.v0[t_hit] - position
+        rel = v0 - position
         s = np.einsum("ij,ij->i", normals, rel) / denom
         depth[hit] = s
         vp = s[:, None] * d_hit - rel  # hit point relative to v0
-        d20 = np.einsum("ij,ij->i", vp, cache.e1[t_hit])
-        d21 = np.einsum("ij,ij->i", vp, cache.e2[t_hit])
-        d00, d01, d11, inv = cache.d00[t_hit], cache.d01[t_hit], cache.d11[t_hit], cache.inv[t_hit]
+        d20 = np.einsum("ij,ij->i", vp, e1)
+        d21 = np.einsum("ij,ij->i", vp, e2)
         b1 = np.clip((d11 * d20 - d01 * d21) * inv, 0.0, 1.0)
         b2 = np.clip((d00 * d21 - d01 * d20) * inv, 0.0, 1.0)
         bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
-        albedo = np.einsum("nk,nkc->nc", bary, cache.colors[t_hit])
+        albedo = np.einsum("nk,nkc->nc", bary, row[:, 16:25].reshape(-1, 3, 3))
         cos = np.abs(denom) / np.sqrt(np.einsum("ij,ij->i", d_hit, d_hit))
         rgb[hit] = albedo * (ambient + (1.0 - ambient) * cos)[:, None]
     image = (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8).reshape(height, width, 3)

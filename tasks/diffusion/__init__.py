@@ -1,0 +1,30 @@
+"""The one Gaussian diffusion shared by every generative task (egodance, text2motion).
+
+The API is generic: a *denoiser* is any callable ``(x_t, t, cond) -> x0_hat`` with x_t (B, ...),
+t (B,) long timesteps in [0, num_steps) and ``cond`` any condition object, or ``None`` for the
+unconditional (null-condition) prediction used by classifier-free guidance.
+"""
+
+from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion
+from skeleton_mamba.tasks.diffusion.samplers import GuidanceTerm, ddim_sample, ddpm_sample, guided_x0
+from skeleton_mamba.tasks.diffusion.schedule import NoiseSchedule, cosine_betas
+from skeleton_mamba.tasks.diffusion.stitching import (
+    WindowConsistency,
+    sample_long,
+    stitch_windows,
+    window_starts,
+)
+
+__all__ = [
+    "GaussianDiffusion",
+    "GuidanceTerm",
+    "NoiseSchedule",
+    "WindowConsistency",
+    "cosine_betas",
+    "ddim_sample",
+    "ddpm_sample",
+    "guided_x0",
+    "sample_long",
+    "stitch_windows",
+    "window_starts",
+]

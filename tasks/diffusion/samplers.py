@@ -1,0 +1,190 @@
+"""Ancestral DDPM and DDIM sampling with classifier-free guidance and pluggable guidance terms.
+
+A denoiser is any callable ``(x_t (B, ...), t (B,) long, cond) -> x0_hat (B, ...)``; ``cond=None`` asks
+for the unconditional prediction (the task model substitutes its learned null condition).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import torch
+from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion, _extract
+from tqdm.auto import tqdm
+
+__all__ = ["Denoiser", "GuidanceTerm", "guided_x0", "ddpm_sample", "ddim_sample", "ddim_timesteps"]
+
+Denoiser = Callable[[torch.Tensor, torch.Tensor, Any], torch.Tensor]
+PostStep = Callable[[torch.Tensor], torch.Tensor]
+
+
+class GuidanceTerm:
+    """A sampling-time guidance term (e.g. EgoMusic's head guidance G_head).
+
+    Subclasses override one or both hooks; the base class leaves its input unchanged.
+    ``adjust_x0`` runs on the (guided, clipped) prediction x0_hat before the posterior is formed;
+    ``adjust_mean`` runs on the mean of p(x_{t-1} | x_t) with its variance (B, ...) at hand.
+    """
+
+    def adjust_x0(self, x0: torch.Tensor, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        return x0
+
+    def adjust_mean(
+        self, mean: torch.Tensor, variance: torch.Tensor, x_t: torch.Tensor, t: torch.Tensor
+    ) -> torch.Tensor:
+        return mean
+
+
+def guided_x0(
+    denoiser: Denoiser, x_t: torch.Tensor, t: torch.Tensor, cond: Any, guidance_weight: float
+) -> torch.Tensor:
+    """Classifier-free guidance on x0: ``unc + w (cond - unc)`` (EDGE; w = 1 is plain conditional).
+
+    w = 0 returns the unconditional prediction and never evaluates the conditional one.
+    """
+    if cond is None or guidance_weight == 0.0:
+        return denoiser(x_t, t, None)
+    cond_x0 = denoiser(x_t, t, cond)
+    if guidance_weight == 1.0:
+        return cond_x0
+    unc_x0 = denoiser(x_t, t, None)
+    return unc_x0 + guidance_weight * (cond_x0 - unc_x0)
+
+
+def _predict_x0(
+    denoiser: Denoiser,
+    x: torch.Tensor,
+    t: torch.Tensor,
+    cond: Any,
+    guidance_weight: float,
+    clip_x0: float | None,
+    guidance: Sequence[GuidanceTerm],
+) -> torch.Tensor:
+    x0 = guided_x0(denoiser, x, t, cond, guidance_weight)
+    if clip_x0 is not None:
+        x0 = x0.clamp(-clip_x0, clip_x0)
+    for term in guidance:
+        x0 = term.adjust_x0(x0, x, t)
+    return x0
+
+
+def _initial_noise(shape, x_T, generator, device, dtype) -> torch.Tensor:
+    if x_T is not None:
+        return x_T
+    return torch.randn(shape, generator=generator, device="cpu", dtype=dtype).to(device)
+
+
+@torch.no_grad()
+def ddpm_sample(
+    diffusion: GaussianDiffusion,
+    denoiser: Denoiser,
+    shape: Sequence[int],
+    cond: Any = None,
+    guidance_weight: float = 1.0,
+    guidance: Sequence[GuidanceTerm] = (),
+    clip_x0: float | None = None,
+    post_step: PostStep | None = None,
+    x_T: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+    device: torch.device | str = "cpu",
+    dtype: torch.dtype = torch.float32,
+    progress: bool = False,
+) -> torch.Tensor:
+    """Ancestral sampling through all T steps: x_{t-1} = mu(x0_hat, x_t) + sigma_t z (z = 0 at t = 0).
+
+    Args:
+        diffusion: the schedule.
+        denoiser: ``(x_t, t, cond) -> x0_hat``.
+        shape: the sample shape (B, ...).
+        cond: the condition passed to the denoiser (``None``: unconditional).
+        guidance_weight: classifier-free guidance weight w.
+        guidance: terms adjusting x0_hat or the posterior mean (:class:`GuidanceTerm`).
+        clip_x0: clamp x0_hat to [-clip, clip] (EDGE: 1 on normalised data); ``None`` disables.
+        post_step: a projection applied to x after every step (e.g. window consistency).
+        x_T: the starting noise (default: drawn with ``generator``).
+        generator: a CPU generator for reproducible noise.
+        device, dtype: where and in which dtype to sample.
+        progress: show a tqdm bar.
+
+    Returns:
+        x0 samples (B, ...).
+    """
+    x = _initial_noise(shape, x_T, generator, device, dtype)
+    if post_step is not None:
+        x = post_step(x)
+    for i in tqdm(
+        reversed(range(diffusion.num_steps)), total=diffusion.num_steps, disable=not progress, desc="DDPM"
+    ):
+        t = torch.full((x.shape[0],), i, device=x.device, dtype=torch.long)
+        x0 = _predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
+        mean, var, log_var = diffusion.q_posterior(x0, x, t)
+        for term in guidance:
+            mean = term.adjust_mean(mean, var, x, t)
+        if i > 0:
+            z = torch.randn(x.shape, generator=generator, device="cpu", dtype=x.dtype).to(x.device)
+            x = mean + (0.5 * log_var).exp() * z
+        else:
+            x = mean
+        if post_step is not None:
+            x = post_step(x)
+    return x
+
+
+def ddim_timesteps(num_steps: int, sampling_steps: int) -> list[int]:
+    """The descending timesteps of a DDIM run: ``sampling_steps`` values evenly spread over [0, T-1]."""
+    if not 1 <= sampling_steps <= num_steps:
+        raise ValueError(f"sampling_steps must be in [1, {num_steps}], got {sampling_steps}")
+    seq = torch.linspace(0, num_steps - 1, sampling_steps).round().long().unique().tolist()
+    return sorted(seq, reverse=True)
+
+
+@torch.no_grad()
+def ddim_sample(
+    diffusion: GaussianDiffusion,
+    denoiser: Denoiser,
+    shape: Sequence[int],
+    cond: Any = None,
+    sampling_steps: int = 50,
+    eta: float = 1.0,
+    guidance_weight: float = 1.0,
+    guidance: Sequence[GuidanceTerm] = (),
+    clip_x0: float | None = None,
+    post_step: PostStep | None = None,
+    x_T: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+    device: torch.device | str = "cpu",
+    dtype: torch.dtype = torch.float32,
+    progress: bool = False,
+) -> torch.Tensor:
+    """DDIM (Song et al. 2021) over ``sampling_steps`` timesteps; EDGE uses 50 steps with eta = 1.
+
+    ``x_prev = sqrt(abar_prev) x0_hat + sqrt(1 - abar_prev - sigma^2) eps_hat + sigma z`` with
+    ``sigma = eta sqrt((1 - abar_prev) / (1 - abar_t)) sqrt(1 - abar_t / abar_prev)`` and abar_prev = 1
+    after the last step, so the final x equals the last x0_hat. Other arguments as :func:`ddpm_sample`.
+    """
+    x = _initial_noise(shape, x_T, generator, device, dtype)
+    if post_step is not None:
+        x = post_step(x)
+    steps = ddim_timesteps(diffusion.num_steps, sampling_steps)
+    for k, i in enumerate(tqdm(steps, disable=not progress, desc="DDIM")):
+        t = torch.full((x.shape[0],), i, device=x.device, dtype=torch.long)
+        x0 = _predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
+        eps = diffusion.predict_noise_from_x0(x, t, x0)
+        abar = _extract(diffusion.alphas_cumprod, t, x)
+        if k + 1 < len(steps):
+            abar_prev = _extract(diffusion.alphas_cumprod, torch.full_like(t, steps[k + 1]), x)
+        else:
+            abar_prev = torch.ones_like(abar)
+        sigma = eta * ((1 - abar_prev) / (1 - abar) * (1 - abar / abar_prev)).clamp_min(0).sqrt()
+        mean = abar_prev.sqrt() * x0 + (1 - abar_prev - sigma**2).clamp_min(0).sqrt() * eps
+        for term in guidance:
+            mean = term.adjust_mean(mean, (sigma**2).expand_as(x), x, t)
+        if k + 1 < len(steps) and eta > 0:
+            z = torch.randn(x.shape, generator=generator, device="cpu", dtype=x.dtype).to(x.device)
+            x = mean + sigma * z
+        else:
+            x = mean
+        if post_step is not None:
+            x = post_step(x)
+    return x

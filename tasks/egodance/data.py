@@ -1,0 +1,313 @@
+"""LightningDataModule for EgoAIST++-style data (the layout ``sm make-ego`` writes, ``builder/layout.py``).
+
+Each complete sample folder gives one training window of ``window`` frames (150 = 5 s at 30 fps):
+
+- ``motion`` (T, 24, 10): motion tokens (:mod:`.representation`) of the placed motion, *canonicalised*:
+  the scene floor is moved to y = 0 and the root's horizontal position at frame 0 to x = z = 0 (the
+  yaw is kept: the egocentric view fixes it);
+- ``music`` (T, 35): the 35-d librosa features at 30 fps of the music slice in ``meta.json``;
+- ``frames`` (T, 3, S, S) float in [0, 1]: the egocentric RGB frames resized to ``image_size``;
+- ``head`` (T, 3): head joint targets from the camera trajectory (:func:`.guidance.head_targets_from_camera`),
+  in the same canonical frame, for head guidance and the head error.
+
+Splits are by motion *source* so windows of one sequence never straddle splits: an AIST++ sequence in the
+cross-modal test list is test; the other sources, ranked by a stable hash of their name, fill val
+(``val_fraction``) then train; without AIST++ sources (the synthetic generators) ``test_fraction`` of
+them go to test first (:func:`assign_splits`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zlib
+from pathlib import Path
+
+import kornia
+import numpy as np
+import torch
+from lightning.pytorch import LightningDataModule
+from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
+from skeleton_mamba.tasks.egodance.guidance import head_targets_from_camera
+from skeleton_mamba.tasks.egodance.representation import encode_motion
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion import aistpp
+from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music import extract_music_features
+from torch.utils.data import DataLoader, Dataset
+
+__all__ = ["EgoDanceDataset", "EgoDanceDataModule", "SyntheticEgoDanceDataModule", "assign_splits"]
+
+REQUIRED_FILES = ("meta.json", "motion.npz", "camera.npz")
+
+
+def assign_splits(sources: list[str], val_fraction: float, test_fraction: float) -> dict[str, str]:
+    """Motion source -> ``train`` | ``val`` | ``test`` (see the module docstring).
+
+    Sources are ranked by a stable hash of their name; AIST++ cross-modal test sequences go to test,
+    the first ``ceil(val_fraction * n)`` of the rest to val, and for non-AIST++ sources the first
+    ``ceil(test_fraction * n)`` to test before that.
+    """
+    aist_test = set(aistpp.load_split("test"))
+    ranked = sorted(set(sources), key=lambda s: (zlib.crc32(Path(s).stem.encode()), s))
+    out: dict[str, str] = {}
+    rest = []
+    for src in ranked:
+        stem = Path(src).stem
+        if stem in aist_test:
+            out[src] = "test"
+        else:
+            rest.append(src)
+    is_aist = bool(aist_test & {Path(s).stem for s in ranked})
+    n_test = 0 if is_aist else math.ceil(test_fraction * len(rest))
+    n_val = math.ceil(val_fraction * len(rest))
+    for i, src in enumerate(rest):
+        out[src] = "test" if i < n_test else "val" if i < n_test + n_val else "train"
+    return out
+
+
+def _missing(folder: Path) -> list[str]:
+    missing = [f for f in REQUIRED_FILES if not (folder / f).is_file()]
+    if not (folder / "rgb.mp4").is_file() and not (folder / "rgb").is_dir():
+        missing.append("rgb.mp4 or rgb/")
+    return missing
+
+
+class EgoDanceDataset(Dataset):
+    """Sample folders -> dicts of ``motion``, ``music``, ``head`` (and ``frames``), plus ``sample_id``.
+
+    Motion, music and head targets are read once at construction; frames are decoded per item.
+    """
+
+    def __init__(
+        self,
+        folders: list[Path],
+        window: int = 150,
+        fps: int = 30,
+        load_frames: bool = True,
+        image_size: int = 224,
+        music_cache_dir: str | None = None,
+    ):
+        self.folders = folders
+        self.window = window
+        self.load_frames = load_frames
+        self.image_size = image_size
+        self.items = [self._read(f, fps, music_cache_dir) for f in folders]
+
+    def _read(self, folder: Path, fps: int, cache_dir: str | None) -> dict:
+        missing = _missing(folder)
+        if missing:
+            raise DatasetNotFoundError(f"{folder}: sample folder lacks {', '.join(missing)}")
+        meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+        motion = load_motion(folder / "motion.npz")
+        if motion.poses is None or motion.trans is None:
+            raise ValueError(f"{folder / 'motion.npz'}: needs smpl_poses and smpl_trans")
+        if abs(motion.fps - fps) > 1e-6:
+            raise ValueError(
+                f"{folder / 'motion.npz'}: motion at {motion.fps} fps, the data module expects {fps}"
+            )
+        if motion.poses.shape[0] < self.window:
+            raise ValueError(
+                f"{folder}: {motion.poses.shape[0]} frames, shorter than the window of {self.window}"
+            )
+        t = self.window
+        root = motion.trans[:t] / motion.scaling
+        with np.load(folder / "camera.npz", allow_pickle=False) as cam:
+            head = head_targets_from_camera(cam["positions"][:t], cam["rotations"][:t])
+        shift = np.array([root[0, 0], meta.get("scene", {}).get("floor_height", 0.0), root[0, 2]])
+        music_meta = meta.get("music") or {}
+        if not music_meta.get("path"):
+            raise DatasetNotFoundError(
+                f"{folder / 'meta.json'}: no music file for this sample (music.path is null); rebuild with "
+                "`sm make-ego --music_dir DIR` pointing at the AIST++ music (<music id>.wav)"
+            )
+        analysis = extract_music_features(music_meta["path"], fps=fps, cache_dir=cache_dir)
+        start = int(round(music_meta.get("start_s", 0.0) * fps))
+        music = analysis.features[start : start + t]
+        if music.shape[0] < t:  # the track ends inside the window: repeat the last frame
+            music = np.concatenate([music, np.repeat(music[-1:], t - music.shape[0], axis=0)], axis=0)
+        poses = torch.from_numpy(np.asarray(motion.poses[:t], dtype=np.float32))
+        return {
+            "sample_id": meta.get("sample_id", folder.name),
+            "motion": encode_motion(poses, torch.from_numpy((root - shift).astype(np.float32))),
+            "music": torch.from_numpy(music.astype(np.float32)),
+            "head": torch.from_numpy((head - shift).astype(np.float32)),
+        }
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __getitem__(self, index: int) -> dict:
+        item = dict(self.items[index])
+        if self.load_frames:
+            rgb = torch.from_numpy(read_frames(self.folders[index])[: self.window]).permute(0, 3, 1, 2)
+            size = (self.image_size, self.image_size)
+            item["frames"] = kornia.geometry.transform.resize(rgb.float() / 255.0, size, antialias=True)
+        return item
+
+
+class EgoDanceDataModule(LightningDataModule):
+    """EgoAIST++ windows from ``root`` (built by ``sm make-ego``).
+
+    Args:
+        root: the dataset folder (holding ``samples/``).
+        window: frames per window T (seed 000: 150 at 30 fps).
+        fps: motion and music frame rate (30).
+        batch_size: per-device batch (linked to the model).
+        num_workers: DataLoader workers.
+        load_frames: decode egocentric frames (False for music-only models).
+        image_size: frames are resized to this square size (the ResNet input).
+        val_fraction: share of motion sources held out for validation.
+        test_fraction: share of non-AIST++ sources held out for testing.
+        music_cache_dir: cache of music features (default ``~/.cache/skeleton_mamba/music``).
+    """
+
+    def __init__(
+        self,
+        root: str = "data/egoaistpp",
+        window: int = 150,
+        fps: int = 30,
+        batch_size: int = 64,
+        num_workers: int = 0,
+        load_frames: bool = True,
+        image_size: int = 224,
+        val_fraction: float = 0.1,
+        test_fraction: float = 0.1,
+        music_cache_dir: str | None = None,
+    ):
+        super().__init__()
+        self.save_hyperparameters()
+        self.root = Path(root)
+        self.batch_size = batch_size
+        self.datasets: dict[str, EgoDanceDataset] = {}
+
+    def check_data(self) -> list[Path]:
+        """The complete sample folders; raises :class:`DatasetNotFoundError` saying what is missing."""
+        if not self.root.is_dir():
+            raise DatasetNotFoundError(
+                f"EgoAIST++ folder {self.root} does not exist; build it with "
+                f"`sm make-ego --motion <AIST++ motions/> --out {self.root}` (see `sm make-ego --help`)"
+            )
+        folders = complete_samples(self.root)
+        if not folders:
+            where = self.root / SAMPLES
+            state = "has no complete sample (no COMPLETE markers)" if where.is_dir() else "does not exist"
+            raise DatasetNotFoundError(
+                f"{where} {state}: {self.root} is not a finished `sm make-ego` build; run or resume "
+                f"`sm make-ego --out {self.root} ...`"
+            )
+        return folders
+
+    def split_folders(self) -> dict[str, list[Path]]:
+        """The sample folders of each split (motion sources never straddle splits)."""
+        folders = self.check_data()
+        sources = []
+        for folder in folders:
+            meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+            sources.append((meta.get("motion") or {}).get("source") or folder.name)
+        split_of = assign_splits(sources, self.hparams.val_fraction, self.hparams.test_fraction)
+        splits: dict[str, list[Path]] = {"train": [], "val": [], "test": []}
+        for folder, source in zip(folders, sources, strict=True):
+            splits[split_of[source]].append(folder)
+        return splits
+
+    def setup(self, stage: str) -> None:
+        if self.datasets:
+            return
+        hp = self.hparams
+        for name, folders in self.split_folders().items():
+            self.datasets[name] = EgoDanceDataset(
+                folders, hp.window, hp.fps, hp.load_frames, hp.image_size, hp.music_cache_dir
+            )
+        if len(self.datasets["train"]) == 0 and stage == "fit":
+            raise DatasetNotFoundError(f"{self.root}: every sample fell into val/test; no training windows")
+
+    def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        return DataLoader(
+            self.datasets[split],
+            batch_size=self.batch_size,
+            shuffle=shuffle,
+            num_workers=self.hparams.num_workers,
+            drop_last=False,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", False)
+
+    def predict_dataloader(self) -> DataLoader:
+        return self._loader("test", False)
+
+
+class SyntheticEgoDanceDataModule(EgoDanceDataModule):
+    """A small EgoAIST++-style set generated on first use (no download): the procedural dances and
+    music of ``tasks/motion/synthetic`` placed in procedural rooms by the EgoAIST++ builder.
+
+    Args:
+        root: where the generated motions (``motions/``) and the built set (``ego/``) go.
+        count: generated dance/music pairs (motion sources).
+        duration_s: seconds per generated dance (windows of ``window / fps`` seconds are cut from it).
+        frame_size: rendered egocentric frame size (pixels, square).
+        num_rooms: procedural rooms to place the dances in.
+        seed: generator seed.
+        Other arguments as :class:`EgoDanceDataModule`.
+    """
+
+    def __init__(
+        self,
+        root: str = "runs/egodance_demo/data",
+        count: int = 6,
+        duration_s: float = 10.0,
+        frame_size: int = 64,
+        num_rooms: int = 2,
+        seed: int = 0,
+        window: int = 150,
+        fps: int = 30,
+        batch_size: int = 4,
+        num_workers: int = 0,
+        load_frames: bool = True,
+        image_size: int = 64,
+        val_fraction: float = 0.17,
+        test_fraction: float = 0.17,
+        music_cache_dir: str | None = None,
+    ):
+        super().__init__(
+            str(Path(root) / "ego"),
+            window,
+            fps,
+            batch_size,
+            num_workers,
+            load_frames,
+            image_size,
+            val_fraction,
+            test_fraction,
+            music_cache_dir,
+        )
+        self.source_root = Path(root).resolve()
+
+    def prepare_data(self) -> None:
+        """Generate and build the set unless a finished build is already there."""
+        from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
+        from skeleton_mamba.tasks.motion.synthetic import make_demo_set
+
+        hp = self.hparams
+        motions = self.source_root / "motions"
+        if not (motions.is_dir() and any(motions.glob("*.npz"))):
+            make_demo_set(motions, count=hp.count, duration_s=hp.duration_s, seed=hp.seed, fps=float(hp.fps))
+        config = BuildConfig(
+            out=str(self.source_root / "ego"),
+            num_rooms=hp.num_rooms,
+            fps=float(hp.fps),
+            window_s=hp.window / hp.fps,
+            width=hp.frame_size,
+            height=hp.frame_size,
+            seed=hp.seed,
+            workers=1,
+        )
+        run_build(config, motions)
+        self.root = self.source_root / "ego"

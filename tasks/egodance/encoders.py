@@ -1,0 +1,146 @@
+"""EMM condition encoders (seed 000 Table 1 rows 1-3, section 6.2).
+
+- :class:`MusicEncoder`: per-frame music features (B, T, L) -> Linear -> 2 Transformer encoder layers ->
+  (B, T, Dc). The supplement uses Jukebox (L = 4800); the original code and our default use the 35-d
+  librosa feature at 30 fps (``tasks/motion/music.py``); ``music_dim`` selects either.
+- :class:`VisionEncoder`: egocentric frames (B, T, 3, H, W) -> kornia resize + ImageNet normalisation ->
+  ResNet (``transformers.ResNetModel``; pretrained from a local folder, else random init with a warning)
+  -> pooled feature -> MLP -> (B, T, Dc).
+- :class:`FusionModule`: music and vision tokens (each (B, T, Dc), plus a modality embedding) are joined
+  along time, mixed by 2 Transformer encoder layers, and the two tokens of each frame are averaged back to
+  (B, T, Dc) (the exact wiring is unpublished; the authors' rewrite lists it as missing).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import kornia
+import torch
+from torch import nn
+from transformers import ResNetConfig, ResNetModel
+
+__all__ = ["sinusoidal_embedding", "transformer_encoder", "MusicEncoder", "VisionEncoder", "FusionModule"]
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+
+def sinusoidal_embedding(positions: torch.Tensor, dim: int) -> torch.Tensor:
+    """(...,) positions -> (..., dim) sin/cos embedding (Vaswani et al.; DDPM timestep embedding)."""
+    half = dim // 2
+    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, device=positions.device) / max(half, 1))
+    args = positions.float()[..., None] * freqs
+    emb = torch.cat([torch.sin(args), torch.cos(args)], dim=-1)
+    return nn.functional.pad(emb, (0, dim % 2))
+
+
+def transformer_encoder(
+    dim: int, layers: int, heads: int, ff_dim: int, dropout: float
+) -> nn.TransformerEncoder:
+    """Pre-norm GELU Transformer encoder over (B, S, dim)."""
+    layer = nn.TransformerEncoderLayer(
+        dim, heads, ff_dim, dropout, activation="gelu", batch_first=True, norm_first=True
+    )
+    return nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
+
+
+class MusicEncoder(nn.Module):
+    """(B, T, music_dim) -> (B, T, Dc)."""
+
+    def __init__(
+        self,
+        music_dim: int = 35,
+        dim: int = 256,
+        layers: int = 2,
+        heads: int = 4,
+        ff_dim: int = 512,
+        dropout: float = 0.1,
+    ):
+        super().__init__()
+        self.proj = nn.Linear(music_dim, dim)
+        self.encoder = transformer_encoder(dim, layers, heads, ff_dim, dropout)
+
+    def forward(self, music: torch.Tensor) -> torch.Tensor:
+        h = self.proj(music)
+        pos = sinusoidal_embedding(torch.arange(music.shape[1], device=music.device), h.shape[-1])
+        return self.encoder(h + pos.to(h.dtype))
+
+
+class VisionEncoder(nn.Module):
+    """(B, T, 3, H, W) frames in [0, 1] -> (B, T, Dc).
+
+    Args:
+        dim: Dc.
+        resnet_path: a local folder with a ``transformers`` ResNet (e.g. ``microsoft/resnet-50`` saved with
+            ``save_pretrained``); ``None`` builds ``resnet_config`` with random weights and warns.
+        resnet_config: the architecture when no path is given (default: ResNet-50).
+        image_size: frames are resized to (image_size, image_size).
+        freeze: keep the ResNet weights fixed (the original code freezes its pretrained ResNet).
+        chunk: frames per ResNet call (bounds memory for long windows).
+    """
+
+    def __init__(
+        self,
+        dim: int = 256,
+        resnet_path: str | None = None,
+        resnet_config: ResNetConfig | None = None,
+        image_size: int = 224,
+        freeze: bool = True,
+        chunk: int = 64,
+    ):
+        super().__init__()
+        if resnet_path is not None:
+            if not Path(resnet_path).is_dir():
+                raise FileNotFoundError(
+                    f"ResNet folder {resnet_path!r} does not exist (save_pretrained output)"
+                )
+            self.resnet = ResNetModel.from_pretrained(resnet_path)
+        else:
+            warnings.warn(
+                "VisionEncoder: no resnet_path given, the ResNet is randomly initialised (not pretrained)",
+                stacklevel=2,
+            )
+            self.resnet = ResNetModel(resnet_config or ResNetConfig())
+        self.freeze = freeze
+        if freeze:
+            self.resnet.requires_grad_(False)
+        self.image_size = image_size
+        self.normalize = kornia.enhance.Normalize(torch.tensor(IMAGENET_MEAN), torch.tensor(IMAGENET_STD))
+        feat = self.resnet.config.hidden_sizes[-1]
+        self.mlp = nn.Sequential(nn.Linear(feat, dim), nn.GELU(), nn.Linear(dim, dim))
+        self.chunk = chunk
+
+    def forward(self, frames: torch.Tensor) -> torch.Tensor:
+        if frames.ndim != 5 or frames.shape[2] != 3:
+            raise ValueError(f"expected frames (B, T, 3, H, W), got {tuple(frames.shape)}")
+        b, t = frames.shape[:2]
+        flat = frames.flatten(0, 1).float()
+        feats = []
+        for i in range(0, flat.shape[0], self.chunk):
+            x = kornia.geometry.transform.resize(flat[i : i + self.chunk], (self.image_size,) * 2)
+            x = self.normalize(x)
+            with torch.set_grad_enabled(torch.is_grad_enabled() and not self.freeze):
+                pooled = self.resnet(pixel_values=x).pooler_output.flatten(1)
+            feats.append(pooled)
+        return self.mlp(torch.cat(feats).reshape(b, t, -1))
+
+
+class FusionModule(nn.Module):
+    """(B, T, Dc) music and (B, T, Dc) vision -> (B, T, Dc)."""
+
+    def __init__(
+        self, dim: int = 256, layers: int = 2, heads: int = 4, ff_dim: int = 512, dropout: float = 0.1
+    ):
+        super().__init__()
+        self.modality = nn.Parameter(torch.randn(2, dim) * 0.02)
+        self.encoder = transformer_encoder(dim, layers, heads, ff_dim, dropout)
+
+    def forward(self, music: torch.Tensor, vision: torch.Tensor) -> torch.Tensor:
+        t = music.shape[1]
+        pos = sinusoidal_embedding(torch.arange(t, device=music.device), music.shape[-1]).to(music.dtype)
+        h = torch.cat([music + pos + self.modality[0], vision + pos + self.modality[1]], dim=1)
+        h = self.encoder(h)
+        return 0.5 * (h[:, :t] + h[:, t:])

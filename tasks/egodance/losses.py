@@ -1,0 +1,103 @@
+"""EMM training losses: the x0 reconstruction loss and the kinematic losses of seed 000 Eqs. 26-29.
+
+All inputs are motion tokens (B, T, 24, 10) (:mod:`.representation`); FK maps them to joint positions.
+Norms are squared Euclidean over every joint coordinate of a frame, averaged over frames then batch:
+
+- ``L_pos = 1/T sum_i ||FK(x^i) - FK(x_hat^i)||^2`` (Eq. 26)
+- ``L_vel = 1/(T-1) sum_i ||(x^{i+1} - x^i) - (x_hat^{i+1} - x_hat^i)||^2`` (Eq. 27) over the pose channels
+  (rot6d + root; contacts excluded, as in EDGE)
+- ``L_contact = 1/(T-1) sum_i ||(FK(x_hat^{i+1}) - FK(x_hat^i)) * b_hat^i||^2`` (Eq. 28) over the four foot
+  joints, with ``b_hat^i`` the model's own contact prediction thresholded (EDGE: > 0.95)
+- ``L_kin = lambda_pos L_pos + lambda_vel L_vel + lambda_contact L_contact`` (Eq. 29; weights unpublished)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from skeleton_mamba.tasks.egodance.representation import (
+    CONTACT,
+    FOOT_JOINTS,
+    channel_mask,
+    decode_motion,
+    motion_joints,
+)
+
+__all__ = [
+    "KinematicLossWeights",
+    "reconstruction_loss",
+    "position_loss",
+    "velocity_loss",
+    "contact_loss",
+    "emm_losses",
+]
+
+
+@dataclass
+class KinematicLossWeights:
+    """lambda of Eq. 29 (unpublished; defaults: the authors' rewrite's guesses pos 1, vel 0.1, contact 1)."""
+
+    pos: float = 1.0
+    vel: float = 0.1
+    contact: float = 1.0
+
+
+def _frame_sq_norm(diff: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
+    """(B, T, J, C) -> (B, T) squared norm per frame."""
+    sq = diff.pow(2)
+    if weight is not None:
+        sq = sq * weight
+    return sq.flatten(2).sum(-1)
+
+
+def reconstruction_loss(x0_hat: torch.Tensor, x0: torch.Tensor, kind: str = "l2") -> torch.Tensor:
+    """x0 loss over the data-carrying channels: squared (EDGE) or absolute (original code) error."""
+    w = channel_mask(x0.dtype, x0.device)
+    err = (x0_hat - x0) * w
+    per = err.pow(2) if kind == "l2" else err.abs() if kind == "l1" else None
+    if per is None:
+        raise ValueError(f"unknown reconstruction loss {kind!r} (l1 | l2)")
+    return per.sum() / (w.sum() * x0.shape[0] * x0.shape[1])
+
+
+def position_loss(x0_hat: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
+    """Eq. 26 (FK positions, metres^2)."""
+    return _frame_sq_norm(motion_joints(x0) - motion_joints(x0_hat)).mean()
+
+
+def velocity_loss(x0_hat: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
+    """Eq. 27 on the pose channels (contacts excluded)."""
+    w = channel_mask(x0.dtype, x0.device)
+    w[:, CONTACT] = 0
+    d = (x0[:, 1:] - x0[:, :-1]) - (x0_hat[:, 1:] - x0_hat[:, :-1])
+    return _frame_sq_norm(d, w).mean()
+
+
+def contact_loss(x0_hat: torch.Tensor, threshold: float = 0.95) -> torch.Tensor:
+    """Eq. 28: foot velocity of the prediction where its own contact prediction exceeds ``threshold``."""
+    _, _, contacts = decode_motion(x0_hat)
+    b = (contacts[:, :-1] > threshold).to(x0_hat.dtype)  # (B, T-1, 4), b_hat^i
+    feet = motion_joints(x0_hat)[..., list(FOOT_JOINTS), :]
+    vel = (feet[:, 1:] - feet[:, :-1]) * b[..., None]
+    return _frame_sq_norm(vel).mean()
+
+
+def emm_losses(
+    x0_hat: torch.Tensor,
+    x0: torch.Tensor,
+    weights: KinematicLossWeights | None = None,
+    reconstruction: str = "l2",
+    contact_threshold: float = 0.95,
+) -> dict[str, torch.Tensor]:
+    """All terms: ``recon``, ``pos``, ``vel``, ``contact``, ``kin`` (Eq. 29) and ``loss = recon + kin``."""
+    weights = weights or KinematicLossWeights()
+    out = {
+        "recon": reconstruction_loss(x0_hat, x0, reconstruction),
+        "pos": position_loss(x0_hat, x0),
+        "vel": velocity_loss(x0_hat, x0),
+        "contact": contact_loss(x0_hat, contact_threshold),
+    }
+    out["kin"] = weights.pos * out["pos"] + weights.vel * out["vel"] + weights.contact * out["contact"]
+    out["loss"] = out["recon"] + out["kin"]
+    return out

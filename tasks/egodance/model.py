@@ -1,0 +1,140 @@
+"""EMM, the EgoMusic Motion network (seed 000 Tables 1-2, section 6.2): a conditional x0 denoiser.
+
+::
+
+    music (B, T, L) -> MusicEncoder -> (B, T, Dc) --+
+                                                     +-> FusionModule -> c (B, T, Dc)
+    frames (B, T, 3, H, W) -> VisionEncoder -> ...--+
+    x_t (B, T, 24, 10) -> Linear -> + time embedding -> SkeletonMamba(N blocks, cross-attention to
+        [time token; c]) -> Linear -> x0_hat (B, T, 24, 10)
+
+``forward(x_t, t, context)`` is a denoiser for :mod:`skeleton_mamba.tasks.diffusion` (``context=None``:
+the learned null condition, for classifier-free guidance). Defaults are the seed's: D 128, Dc 256, G 5,
+P 6, E 768, N 8, 4 heads, MLP 1024, Transformer feed-forward 512.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from skeleton_mamba.tasks.egodance.encoders import (
+    FusionModule,
+    MusicEncoder,
+    VisionEncoder,
+    sinusoidal_embedding,
+)
+from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS
+from torch import nn
+from transformers import ResNetConfig
+
+from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+
+__all__ = ["EMM"]
+
+
+class EMM(nn.Module):
+    """The EgoMusic Motion network.
+
+    Args:
+        backbone: the SkeletonMamba settings (skeleton, channels and ``context_dim`` are set here).
+        context_dim: Dc, the width of the condition tokens.
+        music_dim: L, per-frame music features (35: librosa; 4800: Jukebox).
+        use_vision: encode egocentric frames (``False``: music-only condition).
+        resnet_path: local folder of a pretrained ``transformers`` ResNet (None: random init, warned).
+        resnet_config: the ResNet architecture without a path (default ResNet-50).
+        image_size: square size the frames are resized to.
+        freeze_resnet: keep the ResNet fixed.
+        encoder_layers: Transformer layers of the music encoder (2).
+        fusion_layers: Transformer layers of the fusion module (2).
+        heads: attention heads of the encoders.
+        transformer_ff: feed-forward width of the encoders ("Transformer dim" 512).
+        dropout: dropout of the encoders.
+    """
+
+    def __init__(
+        self,
+        backbone: SkeletonMambaConfig | None = None,
+        context_dim: int = 256,
+        music_dim: int = 35,
+        use_vision: bool = True,
+        resnet_path: str | None = None,
+        resnet_config: ResNetConfig | None = None,
+        image_size: int = 224,
+        freeze_resnet: bool = True,
+        encoder_layers: int = 2,
+        fusion_layers: int = 2,
+        heads: int = 4,
+        transformer_ff: int = 512,
+        dropout: float = 0.1,
+    ):
+        super().__init__()
+        cfg = dataclasses.replace(
+            backbone or SkeletonMambaConfig(),
+            skeleton="smpl24",
+            in_channels=None,
+            out_channels=NUM_CHANNELS,
+            context_dim=context_dim,
+        )
+        d = cfg.dim
+        self.context_dim = context_dim
+        self.input_proj = nn.Linear(NUM_CHANNELS, d)
+        self.time_mlp = nn.Sequential(nn.Linear(d, 4 * d), nn.SiLU(), nn.Linear(4 * d, d))
+        self.time_token = nn.Linear(d, context_dim)
+        self.backbone = SkeletonMamba(cfg)
+        self.music_encoder = MusicEncoder(
+            music_dim, context_dim, encoder_layers, heads, transformer_ff, dropout
+        )
+        self.vision_encoder = (
+            VisionEncoder(context_dim, resnet_path, resnet_config, image_size, freeze_resnet)
+            if use_vision
+            else None
+        )
+        self.fusion = (
+            FusionModule(context_dim, fusion_layers, heads, transformer_ff, dropout) if use_vision else None
+        )
+        self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
+
+    def encode_condition(self, music: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
+        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] -> fused condition c (B, T, Dc)."""
+        z_a = self.music_encoder(music)
+        if self.vision_encoder is None:
+            return z_a
+        if frames is None:
+            raise ValueError("this EMM encodes egocentric frames (use_vision=True) but none were given")
+        if frames.shape[:2] != music.shape[:2]:
+            raise ValueError(
+                f"frames {tuple(frames.shape[:2])} and music {tuple(music.shape[:2])} disagree on (B, T)"
+            )
+        return self.fusion(z_a, self.vision_encoder(frames))
+
+    def drop_condition(self, context: torch.Tensor, drop: torch.Tensor) -> torch.Tensor:
+        """Replace the condition of samples where ``drop`` (B,) is True by the learned null condition."""
+        null = self.null_context.to(context.dtype).expand_as(context)
+        return torch.where(drop[:, None, None], null, context)
+
+    def forward(
+        self,
+        x_t: torch.Tensor,
+        t: torch.Tensor,
+        context: torch.Tensor | None = None,
+        mask: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Predict x0.
+
+        Args:
+            x_t: (B, T, 24, 10) noisy motion tokens.
+            t: (B,) long diffusion timesteps.
+            context: (B, S, Dc) condition tokens, or None for the null condition.
+            mask: (B, T) bool valid frames (right padding).
+
+        Returns:
+            x0_hat (B, T, 24, 10).
+        """
+        b, n = x_t.shape[:2]
+        if context is None:
+            context = self.null_context.to(x_t.dtype).expand(b, n, -1)
+        temb = self.time_mlp(sinusoidal_embedding(t, self.input_proj.out_features).to(x_t.dtype))
+        h = self.input_proj(x_t) + temb[:, None, None, :]
+        context = torch.cat([self.time_token(temb)[:, None], context], dim=1)
+        return self.backbone(h, mask=mask, context=context)

@@ -1,0 +1,115 @@
+"""Dance generation with a trained EMM: one window, or long-form by stitched windows, and decoding.
+
+The sampler is DDIM (EDGE: 50 steps, eta 1) or ancestral DDPM (the original code, 1000 steps), with
+classifier-free guidance (weight ``guidance_weight``) and the head guidance G_head when head targets
+are given (:mod:`.guidance`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, WindowConsistency, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.diffusion.stitching import split_windows, stitch_windows
+from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
+from skeleton_mamba.tasks.egodance.model import EMM
+from skeleton_mamba.tasks.egodance.representation import (
+    NUM_CHANNELS,
+    NUM_JOINTS,
+    decode_motion,
+    motion_joints,
+)
+from skeleton_mamba.tasks.motion.motion_file import MotionData
+from skeleton_mamba.tasks.motion.rotations import matrix_to_axis_angle
+
+__all__ = ["sample_dance", "sample_long_dance", "tokens_to_motion"]
+
+
+@torch.no_grad()
+def sample_dance(
+    model: EMM,
+    diffusion: GaussianDiffusion,
+    music: torch.Tensor,
+    frames: torch.Tensor | None = None,
+    head: torch.Tensor | None = None,
+    sampler: str = "ddim",
+    steps: int = 50,
+    eta: float = 1.0,
+    guidance_weight: float = 2.0,
+    head_weight: float = 0.05,
+    head_steps: int = 1,
+    post_step=None,
+    generator: torch.Generator | None = None,
+    progress: bool = False,
+) -> torch.Tensor:
+    """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
+
+    ``sampler`` is ``"ddim"`` (``steps`` steps) or ``"ddpm"`` (all T steps; ``steps`` is ignored).
+    """
+    b, t = music.shape[:2]
+    context = model.encode_condition(music, frames)
+    guidance = []
+    if head is not None and head_weight > 0:
+        guidance.append(HeadGuidance(head, head_weight, head_steps, num_steps=diffusion.num_steps))
+    common = dict(
+        cond=context,
+        guidance_weight=guidance_weight,
+        guidance=guidance,
+        post_step=post_step,
+        generator=generator,
+        device=music.device,
+        dtype=music.dtype,
+        progress=progress,
+    )
+    shape = (b, t, NUM_JOINTS, NUM_CHANNELS)
+    if sampler == "ddim":
+        return ddim_sample(diffusion, model, shape, sampling_steps=steps, eta=eta, **common)
+    if sampler == "ddpm":
+        return ddpm_sample(diffusion, model, shape, **common)
+    raise ValueError(f"unknown sampler {sampler!r} (ddim | ddpm)")
+
+
+def sample_long_dance(
+    model: EMM,
+    diffusion: GaussianDiffusion,
+    music: torch.Tensor,
+    frames: torch.Tensor | None = None,
+    head: torch.Tensor | None = None,
+    window: int = 150,
+    overlap: int = 75,
+    **kwargs,
+) -> torch.Tensor:
+    """A whole track: music (T, L), frames (T, 3, S, S), head (T, 3) -> tokens (T, 24, 10).
+
+    The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75), sampled as
+    one batch whose overlaps are kept equal after every step, and stitched. Other arguments as
+    :func:`sample_dance`.
+    """
+    total = music.shape[0]
+    if total <= window:
+        pad = window - total
+        music_w = split_windows(music, window, 0)
+        frames_w = None if frames is None else split_windows(frames, window, 0)
+        head_w = None if head is None else split_windows(head, window, 0)
+        out = sample_dance(model, diffusion, music_w, frames_w, head_w, **kwargs)
+        return out[0, : window - pad]
+    music_w = split_windows(music, window, overlap)
+    frames_w = None if frames is None else split_windows(frames, window, overlap)
+    head_w = None if head is None else split_windows(head, window, overlap)
+    windows = sample_dance(
+        model, diffusion, music_w, frames_w, head_w, post_step=WindowConsistency(overlap), **kwargs
+    )
+    return stitch_windows(windows, overlap, total)
+
+
+def tokens_to_motion(tokens: torch.Tensor, fps: float = 30.0) -> MotionData:
+    """(T, 24, 10) tokens -> :class:`MotionData` with SMPL axis-angle poses, root and FK joints."""
+    rotations, root, _ = decode_motion(tokens.detach().cpu().float())
+    return MotionData(
+        fps=fps,
+        skeleton="smpl24",
+        poses=matrix_to_axis_angle(rotations).numpy().astype(np.float32),
+        trans=root.numpy().astype(np.float64),
+        scaling=1.0,
+        joints=motion_joints(tokens.detach().cpu().float()).numpy(),
+    )

@@ -1,0 +1,275 @@
+"""LightningDataModule for QEAN on AIST++ (seed 003 section 4; dance.md section 3).
+
+Layout read (``root`` = the AIST++ annotations folder)::
+
+    <root>/motions/<name>.pkl      SMPL motions (smpl_poses, smpl_trans, smpl_scaling), 60 fps
+    <music_dir>/<music id>.wav     music (.mp3 also accepted), e.g. mBR0.wav; default <root>/music
+
+Splits are the toolkit's packaged crossmodal lists (``"train"``, ``"test"``; 980 / 20 names) or a path to a
+text file with one sequence name per line; the 45 sequences of the AIST++ ignore list are dropped.
+
+Samples (all at 60 fps, motion frame t aligned with music frame t):
+
+* training: windows starting at ``s`` every ``window_stride`` frames: ``motion`` (seed_frames, 219) =
+  frames ``[s, s + seed_frames)``, ``music`` (music_frames, 35) = music frames ``[s, s + music_frames)``,
+  ``target`` (predict_frames, 219) = motion frames ``[s + seed_frames, s + seed_frames + predict_frames)``;
+* test: one item per sequence: its first ``seed_frames`` frames as ``seed`` and its music features
+  zero-padded to the ``generate_frames + music_frames - 1`` frames that generation reads;
+* predict: ``predict_seed`` (an AIST++ ``.pkl`` or our ``.npz``) and ``predict_music`` (any audio file).
+
+The 219-d motion vector is :mod:`.representation`'s; music features are the toolkit's cached 35-d ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import torch
+from lightning.pytorch import LightningDataModule
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.qean.generate import pad_music
+from skeleton_mamba.tasks.qean.representation import features_to_joints, motion_to_features
+from torch.utils.data import DataLoader, Dataset
+from tqdm import tqdm
+
+__all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
+
+MUSIC_SUFFIXES = (".wav", ".mp3")
+
+
+class DanceWindowDataset(Dataset):
+    """Training windows ``{motion, music, target}`` over in-memory sequences (see the module docstring)."""
+
+    def __init__(
+        self,
+        sequences: dict[str, tuple[torch.Tensor, torch.Tensor]],
+        seed_frames: int,
+        music_frames: int,
+        predict_frames: int,
+        stride: int,
+    ) -> None:
+        self.sequences = sequences
+        self.lengths = (seed_frames, music_frames, predict_frames)
+        self.index: list[tuple[str, int]] = []
+        for name, (motion, music) in sequences.items():
+            last = min(len(motion) - seed_frames - predict_frames, len(music) - music_frames)
+            self.index.extend((name, s) for s in range(0, last + 1, stride))
+        if not self.index:
+            raise ValueError(
+                f"no training window fits: every sequence needs >= {seed_frames + predict_frames} motion "
+                f"frames and >= {music_frames} music frames ({len(sequences)} sequences)"
+            )
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        name, s = self.index[i]
+        motion, music = self.sequences[name]
+        seed, window, predict = self.lengths
+        return {
+            "motion": motion[s : s + seed],
+            "music": music[s : s + window],
+            "target": motion[s + seed : s + seed + predict],
+        }
+
+
+class SequenceDataset(Dataset):
+    """Generation inputs ``{seed, music, name, music_path}``, one per sequence (test and predict)."""
+
+    def __init__(self, items: list[dict]) -> None:
+        self.items = items
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __getitem__(self, i: int) -> dict:
+        return self.items[i]
+
+
+class AISTPPDanceDataModule(LightningDataModule):
+    """AIST++ motions and music for QEAN.
+
+    Args:
+        root: the AIST++ annotations folder (holding ``motions/``).
+        music_dir: folder of ``<music id>.wav|.mp3`` files (default ``<root>/music``).
+        train_split: ``"train"`` (packaged crossmodal list) or a text file of names.
+        test_split: ``"test"`` (packaged crossmodal list) or a text file of names.
+        reference_splits: splits whose full motions form the real set of FID and the normalisation of
+            Dist (FACT/Bailando code: every AIST++ sequence minus the ignore list = train + test here).
+        seed_frames: seed motion frames (120).
+        music_frames: music frames per window (240).
+        predict_frames: frames predicted per window (20).
+        generate_frames: frames generated after the seed at test time (1200 = 20 s).
+        window_stride: frames between training windows.
+        exclude_ignored: drop the AIST++ ignore list.
+        batch_size: training batch (16).
+        test_batch_size: sequences generated together at test and predict time.
+        num_workers: DataLoader worker processes.
+        music_cache_dir: cache folder for music features (default: the toolkit's).
+        predict_seed: seed motion file for ``sm predict`` (AIST++ ``.pkl`` or ``.npz``).
+        predict_music: music file for ``sm predict``.
+    """
+
+    def __init__(
+        self,
+        root: str = "data/aistpp",
+        music_dir: str | None = None,
+        train_split: str = "train",
+        test_split: str = "test",
+        reference_splits: list[str] | None = None,
+        seed_frames: int = 120,
+        music_frames: int = 240,
+        predict_frames: int = 20,
+        generate_frames: int = 1200,
+        window_stride: int = 1,
+        exclude_ignored: bool = True,
+        batch_size: int = 16,
+        test_batch_size: int = 8,
+        num_workers: int = 4,
+        music_cache_dir: str | None = None,
+        predict_seed: str | None = None,
+        predict_music: str | None = None,
+    ) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.root = Path(root).expanduser()
+        self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
+        self.reference_splits = ["train", "test"] if reference_splits is None else list(reference_splits)
+        self.batch_size = batch_size
+        self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+        self.datasets: dict[str, Dataset] = {}
+        if predict_seed is None:  # fail before the model is built; `sm predict` needs no AIST++ copy
+            self.check_layout()
+
+    # ----- files -----
+    def check_layout(self) -> None:
+        """Raise :class:`DatasetNotFoundError` naming the expected folders when they are missing."""
+        if not (self.root / "motions").is_dir():
+            raise DatasetNotFoundError(
+                f"AIST++ motions not found: {(self.root / 'motions').resolve()} is not a folder.\n"
+                "Download the AIST++ annotations (https://google.github.io/aistplusplus_dataset) and point "
+                "the recipe at them with --data.init_args.root PATH (the folder holding motions/)."
+            )
+        if not self.music_dir.is_dir():
+            raise DatasetNotFoundError(
+                f"AIST++ music folder not found: {self.music_dir.resolve()}.\n"
+                "Put the AIST Dance DB music as <music id>.wav (e.g. mBR0.wav) there, or pass "
+                "--data.init_args.music_dir PATH."
+            )
+
+    def split_names(self, split: str) -> list[str]:
+        """Sequence names of a packaged split or a name-list file, minus the ignore list."""
+        path = Path(split).expanduser()
+        if path.suffix == ".txt" or path.is_file():
+            if not path.is_file():
+                raise FileNotFoundError(f"split list {path} not found")
+            names = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()]
+            names = [Path(n).stem for n in names if n and not n.startswith("#")]
+        else:
+            names = load_split(split)
+        if self.hparams.exclude_ignored:
+            ignored = ignore_list()
+            names = [n for n in names if n not in ignored]
+        if not names:
+            raise ValueError(f"split {split!r} holds no sequence names")
+        return names
+
+    def music_file(self, name: str) -> Path:
+        """The music file of a sequence (``<music_dir>/<music id>.wav`` or ``.mp3``)."""
+        mid = music_id(name)
+        for suffix in MUSIC_SUFFIXES:
+            path = self.music_dir / f"{mid}{suffix}"
+            if path.is_file():
+                return path
+        raise FileNotFoundError(f"music for {name} not found: {self.music_dir / mid}.wav (or .mp3)")
+
+    def music_features(self, path: Path) -> torch.Tensor:
+        """(T, 35) float32 music features at 60 fps (cached on disk by the toolkit)."""
+        analysis = extract_music_features(path, fps=60, cache_dir=self.hparams.music_cache_dir)
+        return torch.from_numpy(analysis.features)
+
+    def sequence(self, name: str) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(motion (T, 219), music (T', 35))`` of one sequence, loaded once."""
+        if name not in self._sequences:
+            pkl = self.root / "motions" / f"{name}.pkl"
+            if not pkl.is_file():
+                raise FileNotFoundError(f"{pkl}: motion of split sequence {name} not found")
+            motion = motion_to_features(load_aistpp_motion(pkl))
+            self._sequences[name] = (motion, self.music_features(self.music_file(name)))
+        return self._sequences[name]
+
+    def _load(self, names: list[str], what: str) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+        return {n: self.sequence(n) for n in tqdm(names, desc=f"AIST++ {what}", disable=len(names) < 50)}
+
+    def reference_joints(self) -> Iterator[torch.Tensor]:
+        """Full-length joint positions (T, 24, 3) of every sequence of ``reference_splits`` (the real set)."""
+        self.check_layout()
+        names = dict.fromkeys(n for split in self.reference_splits for n in self.split_names(split))
+        for name in names:
+            yield features_to_joints(self.sequence(name)[0])
+
+    # ----- datasets -----
+    def _generation_item(self, name: str, seed: torch.Tensor, music: torch.Tensor, music_path: Path) -> dict:
+        h = self.hparams
+        if len(seed) < h.seed_frames:
+            raise ValueError(f"{name}: the seed motion has {len(seed)} frames, QEAN needs {h.seed_frames}")
+        padded = pad_music(music[None], h.generate_frames, h.music_frames)[0]
+        return {"seed": seed[: h.seed_frames], "music": padded, "name": name, "music_path": str(music_path)}
+
+    def _predict_items(self) -> list[dict]:
+        h = self.hparams
+        if not h.predict_seed or not h.predict_music:
+            raise ValueError(
+                "sm predict needs --data.init_args.predict_seed MOTION (.pkl or .npz) and "
+                "--data.init_args.predict_music AUDIO"
+            )
+        seed_path, music_path = Path(h.predict_seed).expanduser(), Path(h.predict_music).expanduser()
+        if not seed_path.is_file():
+            raise FileNotFoundError(f"{seed_path}: seed motion not found")
+        motion = load_aistpp_motion(seed_path) if seed_path.suffix == ".pkl" else load_motion(seed_path)
+        name = f"{music_path.stem}_{seed_path.stem}"
+        return [
+            self._generation_item(
+                name, motion_to_features(motion), self.music_features(music_path), music_path
+            )
+        ]
+
+    def setup(self, stage: str) -> None:
+        h = self.hparams
+        if stage == "fit" and "train" not in self.datasets:
+            self.check_layout()
+            sequences = self._load(self.split_names(h.train_split), "train")
+            self.datasets["train"] = DanceWindowDataset(
+                sequences, h.seed_frames, h.music_frames, h.predict_frames, h.window_stride
+            )
+        elif stage == "test" and "test" not in self.datasets:
+            self.check_layout()
+            names = self.split_names(h.test_split)
+            items = []
+            for name, (motion, music) in self._load(names, "test").items():
+                items.append(self._generation_item(name, motion, music, self.music_file(name)))
+            self.datasets["test"] = SequenceDataset(items)
+        elif stage == "predict" and "predict" not in self.datasets:
+            self.datasets["predict"] = SequenceDataset(self._predict_items())
+
+    def train_dataloader(self) -> DataLoader:
+        workers = self.hparams.num_workers
+        return DataLoader(
+            self.datasets["train"],
+            batch_size=self.batch_size,
+            shuffle=True,
+            drop_last=len(self.datasets["train"]) >= self.batch_size,
+            num_workers=workers,
+            persistent_workers=workers > 0,
+        )
+
+    def test_dataloader(self) -> DataLoader:
+        return DataLoader(self.datasets["test"], batch_size=self.hparams.test_batch_size)
+
+    def predict_dataloader(self) -> DataLoader:
+        return DataLoader(self.datasets["predict"], batch_size=1)

@@ -1,0 +1,71 @@
+"""``sm convert FEATURES.npy --out JOINTS.npy [--normalized --stats DIR]``.
+
+Turns HumanML3D 263-d features (T, 263) into joint positions (T, 22, 3) with
+:func:`~skeleton_mamba.tasks.text2motion.features.recover_from_ric`. Features written by the dataset
+(``new_joint_vecs``) are de-normalised already; ``--normalized`` first maps ``x * Std + Mean`` with
+``DIR/Mean.npy`` and ``DIR/Std.npy``. The result renders with ``sm render JOINTS.npy --out clip.mp4``
+(22 joints are read as the HumanML3D skeleton at 20 fps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+import torch
+from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, denormalize, recover_from_ric
+
+__all__ = ["convert_file", "main"]
+
+
+def convert_file(
+    features: str | PathLike[str], out: str | PathLike[str], stats: str | PathLike[str] | None = None
+) -> Path:
+    """Read (T, 263) features, de-normalise with ``stats`` (folder of Mean/Std) if given, save (T, 22, 3)."""
+    path = Path(features)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such feature file")
+    array = np.load(path, allow_pickle=False)
+    if array.ndim != 2 or array.shape[1] != FEATURE_DIM:
+        raise ValueError(f"{path}: expected HumanML3D features (T, {FEATURE_DIM}), got shape {array.shape}")
+    x = torch.from_numpy(array.astype(np.float64))
+    if stats is not None:
+        from skeleton_mamba.tasks.text2motion.humanml3d import read_statistics
+
+        mean, std = read_statistics(stats)
+        x = denormalize(x, torch.from_numpy(mean).double(), torch.from_numpy(std).double())
+    joints = recover_from_ric(x).numpy().astype(np.float32)
+    out = Path(out)
+    if out.suffix != ".npy":
+        raise ValueError(f"{out}: the output must be a .npy file")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.save(out, joints)
+    return out
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm convert", description="HumanML3D features -> joints (T, 22, 3).")
+    p.add_argument("features", help="(T, 263) .npy feature file")
+    p.add_argument("--out", required=True, help="output .npy of joint positions (T, 22, 3), metres, y-up")
+    p.add_argument("--normalized", action="store_true", help="the features are (x - Mean) / Std")
+    p.add_argument("--stats", default=None, help="folder with Mean.npy and Std.npy (for --normalized)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm convert``; returns 0 on success, 2 on a bad file or argument."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    if args.normalized and args.stats is None:
+        print("sm convert: error: --normalized needs --stats DIR (Mean.npy, Std.npy)", file=sys.stderr)
+        return 2
+    try:
+        out = convert_file(args.features, args.out, stats=args.stats if args.normalized else None)
+    except (OSError, ValueError) as e:
+        print(f"sm convert: error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
+    return 0

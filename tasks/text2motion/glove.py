@@ -1,0 +1,117 @@
+"""The T2M evaluator's word features: GloVe vectors plus a 15-way POS one-hot (``WordVectorizer``).
+
+Files (``EricGuo5513/text-to-motion utils/word_vectorizer.py``; downloaded by MDM
+``prepare/download_glove.sh``) in one folder, prefix ``our_vab``::
+
+    our_vab_data.npy   (V, 300) float vectors
+    our_vab_words.pkl  list of V words
+    our_vab_idx.pkl    dict word -> row
+
+A token ``word/POS`` maps to the word's vector (``unk`` when unknown, with POS ``OTHER``) and a POS
+one-hot; words of the five "VIP" lists override the spaCy POS. Captions become ``sos`` + at most 20
+tokens + ``eos``, padded with ``unk/OTHER`` to 22 (``Text2MotionDatasetV2``). The pickles are read with
+the toolkit's restricted unpickler.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+
+__all__ = ["POS_ENUMERATOR", "VIP_WORDS", "MAX_TEXT_LENGTH", "WordVectorizer", "pad_tokens"]
+
+POS_ENUMERATOR = {
+    "VERB": 0,
+    "NOUN": 1,
+    "DET": 2,
+    "ADP": 3,
+    "NUM": 4,
+    "AUX": 5,
+    "PRON": 6,
+    "ADJ": 7,
+    "ADV": 8,
+    "Loc_VIP": 9,
+    "Body_VIP": 10,
+    "Obj_VIP": 11,
+    "Act_VIP": 12,
+    "Desc_VIP": 13,
+    "OTHER": 14,
+}
+# fmt: off
+VIP_WORDS: dict[str, tuple[str, ...]] = {
+    "Loc_VIP": ("left", "right", "clockwise", "counterclockwise", "anticlockwise", "forward", "back",
+                "backward", "up", "down", "straight", "curve"),
+    "Body_VIP": ("arm", "chin", "foot", "feet", "face", "hand", "mouth", "leg", "waist", "eye", "knee",
+                 "shoulder", "thigh"),
+    "Obj_VIP": ("stair", "dumbbell", "chair", "window", "floor", "car", "ball", "handrail", "baseball",
+                "basketball"),
+    "Act_VIP": ("walk", "run", "swing", "pick", "bring", "kick", "put", "squat", "throw", "hop", "dance",
+                "jump", "turn", "stumble", "dance", "stop", "sit", "lift", "lower", "raise", "wash", "stand",
+                "kneel", "stroll", "rub", "bend", "balance", "flap", "jog", "shuffle", "lean", "rotate",
+                "spin", "spread", "climb"),
+    "Desc_VIP": ("slowly", "carefully", "fast", "careful", "slow", "quickly", "happy", "angry", "sad",
+                 "happily", "angrily", "sadly"),
+}
+# fmt: on
+MAX_TEXT_LENGTH = 20
+
+
+def pad_tokens(tokens: Sequence[str], max_length: int = MAX_TEXT_LENGTH) -> tuple[list[str], int]:
+    """``sos`` + tokens (cut to ``max_length``) + ``eos``, padded with ``unk/OTHER`` to ``max_length + 2``.
+
+    Returns:
+        ``(tokens, sentence_length)`` with the length counting ``sos`` and ``eos``.
+    """
+    words = ["sos/OTHER", *list(tokens)[:max_length], "eos/OTHER"]
+    length = len(words)
+    return words + ["unk/OTHER"] * (max_length + 2 - length), length
+
+
+class WordVectorizer:
+    """GloVe vector and POS one-hot of ``word/POS`` tokens.
+
+    Args:
+        root: folder holding ``{prefix}_data.npy``, ``{prefix}_words.pkl`` and ``{prefix}_idx.pkl``.
+        prefix: file prefix (``our_vab``).
+    """
+
+    def __init__(self, root: str | PathLike[str], prefix: str = "our_vab") -> None:
+        root = Path(root)
+        paths = [root / f"{prefix}_{suffix}" for suffix in ("data.npy", "words.pkl", "idx.pkl")]
+        for path in paths:
+            if not path.is_file():
+                raise FileNotFoundError(f"{path}: missing GloVe file of the T2M evaluator")
+        vectors = np.load(paths[0], allow_pickle=False)
+        words, word_to_row = safe_load_pickle(paths[1]), safe_load_pickle(paths[2])
+        if not isinstance(words, list) or not isinstance(word_to_row, dict):
+            raise ValueError(f"{root}: expected a word list in {paths[1].name} and a dict in {paths[2].name}")
+        if vectors.ndim != 2:
+            raise ValueError(f"{paths[0]}: expected (V, dim) vectors, got shape {vectors.shape}")
+        self.word_to_vector = {w: vectors[word_to_row[w]].astype(np.float32) for w in words}
+        if "unk" not in self.word_to_vector:
+            raise ValueError(f"{paths[1]}: the vocabulary has no 'unk' entry")
+        self.dim = int(vectors.shape[1])
+
+    @staticmethod
+    def pos_one_hot(pos: str) -> np.ndarray:
+        """(15,) one-hot of a POS tag (unknown tags -> ``OTHER``)."""
+        vector = np.zeros(len(POS_ENUMERATOR), np.float32)
+        vector[POS_ENUMERATOR.get(pos, POS_ENUMERATOR["OTHER"])] = 1.0
+        return vector
+
+    def __getitem__(self, token: str) -> tuple[np.ndarray, np.ndarray]:
+        word, _, pos = token.partition("/")
+        if word not in self.word_to_vector:
+            return self.word_to_vector["unk"], self.pos_one_hot("OTHER")
+        vip = next((key for key, values in VIP_WORDS.items() if word in values), None)
+        return self.word_to_vector[word], self.pos_one_hot(vip or pos)
+
+    def encode(self, tokens: Sequence[str]) -> tuple[np.ndarray, np.ndarray, int]:
+        """Padded caption -> word vectors (22, 300), POS one-hots (22, 15) and the sentence length."""
+        padded, length = pad_tokens(tokens)
+        pairs = [self[t] for t in padded]
+        return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs]), length

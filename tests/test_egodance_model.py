@@ -1,0 +1,185 @@
+"""EMM: motion representation, losses (Eqs. 26-29) by hand, head guidance, one training step."""
+
+import warnings
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample
+from skeleton_mamba.tasks.egodance.builder.camera import head_camera
+from skeleton_mamba.tasks.egodance.guidance import (
+    HeadGuidance,
+    head_guidance_objective,
+    head_targets_from_camera,
+)
+from skeleton_mamba.tasks.egodance.losses import (
+    contact_loss,
+    emm_losses,
+    position_loss,
+    reconstruction_loss,
+    velocity_loss,
+)
+from skeleton_mamba.tasks.egodance.model import EMM
+from skeleton_mamba.tasks.egodance.representation import decode_motion, encode_motion, motion_joints
+from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from transformers import ResNetConfig
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+
+IDENTITY_6D = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]  # first two columns of the identity
+
+
+def _rest_motion(t: int, root: torch.Tensor | None = None) -> torch.Tensor:
+    """(1, T, 24, 10) tokens of the rest pose (identity rotations) at the given root positions (T, 3)."""
+    x = torch.zeros(1, t, 24, 10, dtype=torch.float64)
+    x[..., :6] = torch.tensor(IDENTITY_6D, dtype=torch.float64)
+    if root is not None:
+        x[0, :, 0, 6:9] = root
+    return x
+
+
+def _rest_joints() -> np.ndarray:
+    """Rest-pose joint positions by summing offsets along the parent chain (independent of the FK code)."""
+    parents = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]
+    off = np.asarray(SMPL_REST_OFFSETS)
+    pos = np.zeros((24, 3))
+    for j in range(1, 24):
+        pos[j] = pos[parents[j]] + off[j]
+    return pos
+
+
+def test_representation_round_trip_and_contacts():
+    rng = np.random.default_rng(0)
+    t = 6
+    poses = torch.from_numpy(rng.normal(scale=0.4, size=(t, 24, 3)))
+    root = torch.zeros(t, 3, dtype=torch.float64)
+    root[3:, 0] = (
+        torch.arange(1, t - 2, dtype=torch.float64) * 0.05
+    )  # still for 4 frames, then 5 cm per frame
+    poses[:, 1:] = poses[0, 1:]  # only the root orientation could move the feet: keep it fixed as well
+    poses[:, 0] = poses[0, 0]
+    x = encode_motion(poses, root)
+    assert int((x != 0).sum()) <= 151 * t
+    rot, root_back, contacts = decode_motion(x)
+    expected_rot = Rotation.from_rotvec(poses.reshape(-1, 3).numpy()).as_matrix().reshape(t, 24, 3, 3)
+    np.testing.assert_allclose(rot.numpy(), expected_rot, atol=1e-6)
+    np.testing.assert_allclose(root_back.numpy(), root.numpy())
+    # frame i is in contact when the foot moves < 1 cm to frame i + 1; the last frame counts as still
+    np.testing.assert_array_equal(contacts[:, 0].numpy(), [1, 1, 0, 0, 0, 1])
+    rest = motion_joints(_rest_motion(1))[0, 0].numpy()
+    np.testing.assert_allclose(rest, _rest_joints(), atol=1e-9)
+
+
+def test_losses_against_hand_computation():
+    t = 3
+    d = torch.tensor([0.1, -0.2, 0.3], dtype=torch.float64)
+    x0 = _rest_motion(t)
+    shifted = _rest_motion(t, d.expand(t, 3))
+    # every joint moves by d: |FK - FK_hat|^2 = 24 |d|^2 per frame
+    assert position_loss(shifted, x0).item() == pytest.approx(24 * 0.14)
+    # constant offsets have no velocity error; a root drifting by v per frame gives |v|^2 per frame pair
+    assert velocity_loss(shifted, x0).item() == pytest.approx(0.0, abs=1e-12)
+    v = torch.tensor([0.0, 0.5, 0.0], dtype=torch.float64)
+    drift = _rest_motion(t, torch.arange(t, dtype=torch.float64)[:, None] * v)
+    assert velocity_loss(drift, x0).item() == pytest.approx(0.25)
+    # contacts: predicted contact on frame 0 only (> 0.95), feet move by v -> (4 |v|^2 + 0) / (T - 1)
+    drift[0, 0, [7, 8, 10, 11], 9] = 1.0
+    assert contact_loss(drift).item() == pytest.approx(4 * 0.25 / 2)
+    drift[0, 0, [7, 8, 10, 11], 9] = 0.9  # below the 0.95 threshold
+    assert contact_loss(drift).item() == pytest.approx(0.0)
+    # reconstruction: mean over the 151 data channels per frame; unused slots ignored
+    noisy = x0.clone()
+    noisy[..., 0, 6] += 2.0  # one data channel off by 2 in every frame
+    noisy[..., 3, 9] += 5.0  # an unused slot (joint 3 has no contact channel)
+    assert reconstruction_loss(noisy, x0, "l2").item() == pytest.approx(4.0 / 151)
+    assert reconstruction_loss(noisy, x0, "l1").item() == pytest.approx(2.0 / 151)
+    terms = emm_losses(shifted, x0)
+    assert terms["kin"].item() == pytest.approx(24 * 0.14)  # pos only (weights 1 / 0.1 / 1)
+
+
+def test_head_targets_invert_the_builder_camera():
+    rng = np.random.default_rng(1)
+    heads = rng.normal(size=(5, 3))
+    rots = Rotation.random(5, random_state=2).as_matrix()
+    cam = head_camera(heads, rots, np.eye(3), 64, 48, forward_offset=0.1, up_offset=0.06)
+    np.testing.assert_allclose(
+        head_targets_from_camera(cam.positions, cam.rotations, 0.1, 0.06), heads, atol=1e-12
+    )
+
+
+def test_head_guidance_moves_head_toward_target():
+    torch.manual_seed(0)
+    x0 = _rest_motion(8).float() + 0.05 * torch.randn(1, 8, 24, 10)
+    target = motion_joints(x0)[..., 15, :] + torch.tensor([0.3, 0.0, -0.2])
+    guide = HeadGuidance(target, weight=0.05, steps=5, num_steps=10)
+    before = head_guidance_objective(x0, target)
+    after = head_guidance_objective(guide.adjust_x0(x0, x0, torch.tensor([3])), target)
+    assert after.item() < 0.5 * before.item()
+    late = HeadGuidance(target, weight=0.05, start_fraction=0.2, num_steps=10)
+    torch.testing.assert_close(late.adjust_x0(x0, x0, torch.tensor([5])), x0)  # t >= 0.2 T: unchanged
+
+
+def _tiny_emm(use_vision: bool = True) -> EMM:
+    backbone = SkeletonMambaConfig(
+        dim=16, depth=1, mlp_dim=32, heads=2, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
+    )
+    resnet = ResNetConfig(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return EMM(
+            backbone,
+            context_dim=16,
+            use_vision=use_vision,
+            resnet_config=resnet,
+            image_size=32,
+            freeze_resnet=False,
+            heads=2,
+            transformer_ff=32,
+        )
+
+
+def test_one_training_step_and_sampling():
+    torch.manual_seed(0)
+    model = _tiny_emm()
+    diffusion = GaussianDiffusion(100)
+    b, t = 2, 12
+    music = torch.randn(b, t, 35)
+    frames = torch.rand(b, t, 3, 40, 40)
+    poses = 0.3 * torch.randn(b, t, 24, 3)
+    x0 = encode_motion(poses, torch.randn(b, t, 3) * 0.1)
+    opt = torch.optim.AdamW(model.parameters(), lr=2e-4)
+    context = model.encode_condition(music, frames)
+    assert context.shape == (b, t, 16)
+    context = model.drop_condition(context, torch.tensor([True, False]))
+    torch.testing.assert_close(context[0], model.null_context[0].expand(t, -1))
+    x_t, ts, target = diffusion.training_pair(x0)
+    losses = emm_losses(model(x_t, ts, context), target)
+    assert torch.isfinite(losses["loss"])
+    before = [p.detach().clone() for p in model.parameters()]
+    opt.zero_grad()
+    losses["loss"].backward()
+    assert model.vision_encoder.mlp[0].weight.grad.abs().sum() > 0  # gradient reaches the vision branch
+    opt.step()
+    changed = sum(not torch.equal(p0, p) for p0, p in zip(before, model.parameters(), strict=True))
+    assert changed > 0.5 * len(before)
+    model.eval()
+    with torch.no_grad():
+        cond = model.encode_condition(music, frames)
+    out = ddim_sample(
+        diffusion,
+        model,
+        (b, t, 24, 10),
+        cond=cond,
+        sampling_steps=3,
+        guidance_weight=2.0,
+        generator=torch.Generator().manual_seed(0),
+    )
+    assert out.shape == (b, t, 24, 10) and torch.isfinite(out).all()
+
+
+def test_vision_model_needs_frames_music_only_does_not():
+    model = _tiny_emm(use_vision=True)
+    with pytest.raises(ValueError, match="frames"):
+        model.encode_condition(torch.randn(1, 4, 35))
+    assert _tiny_emm(use_vision=False).encode_condition(torch.randn(1, 4, 35)).shape == (1, 4, 16)

@@ -1,0 +1,125 @@
+"""QEAN through ``sm`` and the AIST++ data module on tiny generated data in the AIST++ layout."""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import soundfile
+import torch
+from lightning.pytorch import Trainer
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
+from skeleton_mamba.tasks.qean.module import QEANModule
+from skeleton_mamba.tasks.qean.representation import smpl_to_features
+
+NAMES = ["gBR_sBM_cAll_d04_mBR0_ch01", "gPO_sBM_cAll_d10_mPO1_ch02", "gBR_sBM_cAll_d05_mBR0_ch03"]
+TINY_MODEL = {
+    "hidden": 32, "heads": 2, "motion_layers": 1, "audio_layers": 1, "cross_layers": 1, "mlp_dim": 64,
+    "num_periods": 2, "seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20,
+}  # fmt: skip
+TINY_DATA = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
+
+
+@pytest.fixture(scope="module")
+def aistpp(tmp_path_factory):
+    """motions/*.pkl (smpl_poses (N, 72) float32, smpl_trans, smpl_scaling) and music/<id>.wav, 1.2 s each."""
+    root = tmp_path_factory.mktemp("aistpp")
+    (root / "motions").mkdir()
+    (root / "music").mkdir()
+    rng = np.random.default_rng(0)
+    for name in NAMES:
+        n = 60 + 10 * NAMES.index(name)
+        data = {
+            "smpl_poses": (0.3 * rng.normal(size=(n, 72))).astype(np.float32),
+            "smpl_trans": rng.normal(size=(n, 3)).astype(np.float32) * 90.0,
+            "smpl_scaling": np.array([90.0], dtype=np.float32),
+        }
+        with open(root / "motions" / f"{name}.pkl", "wb") as f:
+            pickle.dump(data, f)
+    sr = 22050
+    t = np.arange(int(1.2 * sr)) / sr
+    for mid in ("mBR0", "mPO1"):
+        clicks = (np.sin(2 * np.pi * 440 * t) * (np.mod(t, 0.5) < 0.05)).astype(np.float32)
+        soundfile.write(root / "music" / f"{mid}.wav", clicks, sr)
+    (root / "train.txt").write_text("\n".join(NAMES[:2]) + "\n")
+    (root / "test.txt").write_text("\n".join(NAMES[1:]) + "\n")
+    return root
+
+
+def _data(root, **kw) -> AISTPPDanceDataModule:
+    args = dict(TINY_DATA, train_split=str(root / "train.txt"), test_split=str(root / "test.txt"))
+    args.update(
+        music_cache_dir=str(root / "cache"),
+        batch_size=2,
+        num_workers=0,
+        reference_splits=[args["train_split"]],
+    )
+    return AISTPPDanceDataModule(str(root), **(args | kw))
+
+
+def test_data_module_windows_match_the_files(aistpp):
+    dm = _data(aistpp)
+    dm.setup("fit")
+    item = dm.datasets["train"][0]
+    assert (
+        item["motion"].shape == (12, 219)
+        and item["music"].shape == (24, 35)
+        and item["target"].shape == (4, 219)
+    )
+    with open(aistpp / "motions" / f"{NAMES[0]}.pkl", "rb") as f:
+        raw = pickle.load(f)  # our own test file
+    poses = torch.from_numpy(raw["smpl_poses"]).double().reshape(-1, 24, 3)
+    expected = smpl_to_features(poses, torch.from_numpy(raw["smpl_trans"]).double() / 90.0)
+    torch.testing.assert_close(item["motion"].double(), expected[:12], atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(item["target"].double(), expected[12:16], atol=1e-5, rtol=1e-5)
+    # windows per sequence: min(motion - 16, music - 24) + 1, music has 1 + 1.2 s * 30720 // 512 = 73 frames
+    music_len = dm.sequence(NAMES[0])[1].shape[0]
+    assert music_len == 1 + int(1.2 * 30720) // 512
+    assert len(dm.datasets["train"]) == sum(min(n - 16, music_len - 24) + 1 for n in (60, 70))
+
+
+def test_data_module_reports_missing_layout(tmp_path):
+    with pytest.raises(DatasetNotFoundError, match="motions"):
+        AISTPPDanceDataModule(str(tmp_path))
+    (tmp_path / "motions").mkdir()
+    with pytest.raises(DatasetNotFoundError, match="music"):
+        AISTPPDanceDataModule(str(tmp_path))
+
+
+def test_test_metrics_and_predict(aistpp, tmp_path):
+    torch.manual_seed(0)
+    module = QEANModule(**TINY_MODEL, output_dir=str(tmp_path / "out"), render=False)
+    trainer = Trainer(accelerator="cpu", logger=False, enable_progress_bar=False, enable_checkpointing=False)
+    results = trainer.test(module, datamodule=_data(aistpp), verbose=False)[0]
+    for name in ("FID_k", "FID_g", "Dist_k", "Dist_g", "BeatAlign"):
+        assert np.isfinite(results[f"test/{name}"]), name
+    assert 0.0 <= results["test/BeatAlign"] <= 1.0
+    dm = _data(
+        aistpp,
+        predict_seed=str(aistpp / "motions" / f"{NAMES[0]}.pkl"),
+        predict_music=str(aistpp / "music" / "mBR0.wav"),
+    )
+    paths = trainer.predict(module, datamodule=dm)[0]
+    with np.load(paths[0], allow_pickle=False) as saved:
+        assert saved["smpl_poses"].shape == (12 + 20, 72) and saved["joints"].shape == (32, 24, 3)
+        assert float(saved["fps"]) == 60.0
+
+
+def test_sm_fit_one_training_step(aistpp, tmp_path):
+    model_args = [f"--model.init_args.{k}={v}" for k, v in TINY_MODEL.items()]
+    data_args = [f"--data.init_args.{k}={v}" for k, v in TINY_DATA.items()]
+    cmd = [
+        sys.executable, "-m", "skeleton_mamba.cli", "fit", "--recipe", "qean.yaml",
+        "--trainer.fast_dev_run", "1", "--trainer.accelerator", "cpu", "--trainer.logger", "false",
+        "--trainer.callbacks", "null",
+        f"--data.init_args.root={aistpp}", f"--data.init_args.train_split={aistpp / 'train.txt'}",
+        f"--data.init_args.music_cache_dir={aistpp / 'cache'}", "--data.init_args.batch_size=2",
+        "--data.init_args.num_workers=0", *model_args, *data_args,
+    ]  # fmt: skip
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "train/loss" in proc.stdout + proc.stderr or "fast_dev_run" in proc.stdout + proc.stderr
