@@ -4,7 +4,10 @@ Setting (defaults): 4 heads of width P = 64, state N = 64, one B/C group, fp32, 
 batch 192 at T = 150 and batch * T kept at 28,800 tokens for the other lengths (24 at 1200, 6 at 4800).
 ``sdpa_ms`` is ``torch.nn.functional.scaled_dot_product_attention(is_causal=True)`` with the same
 heads, width and batch. ``max_abs_err`` compares ``ssd`` in fp32 with the float64 recurrence on
-``--err-batch`` sequences of the same length.
+``--err-batch`` sequences of the same length (``max_rel_err`` divides it by max |y|, and
+``fp32_recurrence_abs_err`` is the error of the fp32 recurrence itself, for scale). The recurrence
+(one Python step per time step) is timed at the first length, and at later lengths only when the
+per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
 
     python benchmarks/bench_ssd.py --json
     python benchmarks/bench_ssd.py --lengths 150 --batch 64 --repeats 3
@@ -71,39 +74,51 @@ def sdpa_fwd_bwd(batch: int, T: int):
     return run
 
 
-def bench_row(T: int, batch: int, repeats: int, recurrence_max_tokens: int, err_batch: int,
-              chunk_size: int, impl: str) -> dict:
+def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step_s: float | None,
+              err_batch: int, chunk_size: int, impl: str) -> tuple[dict, float | None]:
+    """One row; ``step_s`` is the recurrence time per time step measured on an earlier row."""
     inp = make_inputs(batch, T)
     ssd_ms = median_ms(fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl), repeats=repeats)
     sdpa_ms = median_ms(sdpa_fwd_bwd(batch, T), repeats=repeats)
     recurrence_ms = None
-    if batch * T <= recurrence_max_tokens and T <= 1200:
-        reps = repeats if T <= 200 else 1
-        recurrence_ms = median_ms(fwd_bwd(ssd_recurrence, inp), repeats=reps, warmup=1 if T <= 200 else 0)
+    # The recurrence is one Python step per time step; run it only when the cost measured on an
+    # earlier row says it fits in the budget (it is never extrapolated into a reported number).
+    # One step costs about the same for any batch here (many small operations), hence per step.
+    if step_s is None or step_s * T <= recurrence_budget_s:
+        recurrence_ms = median_ms(fwd_bwd(ssd_recurrence, inp), repeats=1, warmup=0)
+        step_s = recurrence_ms / 1e3 / T
     small = make_inputs(err_batch, T, seed=1)
     with torch.no_grad():
         y = ssd(**small, chunk_size=chunk_size, impl=impl)
         y_ref = ssd_recurrence(**{k: v.double() for k, v in small.items()})
+        y_rec32 = ssd_recurrence(**small)
     err = (y.double() - y_ref).abs().max().item()
-    return dict(T=T, batch=batch, ssd_ms=round(ssd_ms, 2),
-                recurrence_ms=None if recurrence_ms is None else round(recurrence_ms, 2),
-                sdpa_ms=round(sdpa_ms, 2), max_abs_err=err,
-                ssd_vs_sdpa=round(sdpa_ms / ssd_ms, 2),
-                ssd_vs_recurrence=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1))
+    row = dict(T=T, batch=batch, ssd_ms=round(ssd_ms, 2),
+               recurrence_ms=None if recurrence_ms is None else round(recurrence_ms, 2),
+               sdpa_ms=round(sdpa_ms, 2), max_abs_err=err,
+               max_rel_err=err / y_ref.abs().max().item(),
+               fp32_recurrence_abs_err=(y_rec32.double() - y_ref).abs().max().item(),
+               sdpa_over_ssd=round(sdpa_ms / ssd_ms, 2),
+               recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1))
+    return row, step_s
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--lengths", type=int, nargs="+", default=[150, 1200, 4800])
     parser.add_argument("--batch", type=int, nargs="+", default=None,
                         help="batch per length (one value for all, or one per length); "
                              f"default {TOKENS} tokens / T")
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per median (after 1 warm-up); "
+                        "the recurrence runs once")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--chunk-size", type=int, default=64)
     parser.add_argument("--impl", default="torch", help="ssd impl (default: torch = auto without kernel)")
     parser.add_argument("--err-batch", type=int, default=2)
-    parser.add_argument("--recurrence-max-tokens", type=int, default=TOKENS)
+    parser.add_argument("--recurrence-budget-s", type=float, default=40.0,
+                        help="skip the recurrence (null) where the cost measured at an earlier length "
+                             "predicts more than this many seconds")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -112,10 +127,10 @@ def main(argv: list[str] | None = None) -> int:
         batches = batches * len(args.lengths)
     if len(batches) != len(args.lengths):
         parser.error("--batch takes one value or one per length")
-    rows = []
+    rows, step_s = [], None
     for T, batch in zip(args.lengths, batches):
-        row = bench_row(T, batch, args.repeats, args.recurrence_max_tokens, args.err_batch,
-                        args.chunk_size, args.impl)
+        row, step_s = bench_row(T, batch, args.repeats, args.recurrence_budget_s, step_s, args.err_batch,
+                                args.chunk_size, args.impl)
         rows.append(row)
         if not args.json:
             print(row, flush=True)

@@ -183,3 +183,28 @@ def test_vision_model_needs_frames_music_only_does_not():
     with pytest.raises(ValueError, match="frames"):
         model.encode_condition(torch.randn(1, 4, 35))
     assert _tiny_emm(use_vision=False).encode_condition(torch.randn(1, 4, 35)).shape == (1, 4, 16)
+
+
+def test_long_form_dance_and_decoding():
+    from skeleton_mamba.tasks.egodance.sampling import sample_long_dance, tokens_to_motion
+
+    torch.manual_seed(0)
+    model = _tiny_emm(use_vision=False).eval()
+    music = torch.randn(40, 35)
+    head = torch.zeros(40, 3)
+    tokens = sample_long_dance(
+        model,
+        GaussianDiffusion(10),
+        music,
+        None,
+        head,
+        window=16,
+        overlap=8,
+        steps=2,
+        generator=torch.Generator().manual_seed(0),
+    )
+    assert tokens.shape == (40, 24, 10) and torch.isfinite(tokens).all()
+    motion = tokens_to_motion(tokens)
+    assert motion.poses.shape == (40, 24, 3) and motion.joints.shape == (40, 24, 3)
+    again = encode_motion(torch.from_numpy(motion.poses).double(), torch.from_numpy(motion.trans))
+    np.testing.assert_allclose(motion_joints(again).numpy(), motion.joints, atol=1e-4)

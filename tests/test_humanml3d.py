@@ -208,3 +208,30 @@ def test_convert_cli_and_render_the_sample(shared_data, sample, tmp_path):
     )
     with Image.open(gif) as image:
         assert image.n_frames == 30 and image.size == (160, 120)
+
+
+def test_joints_to_features_reproduces_the_real_sample_after_frame_0(sample):
+    # The sample's own features (not our code) are the oracle; frame 0 of the dataset is special (its
+    # root rotation velocity and ric carry the heading offset of the original processing).
+    joints = F.recover_from_ric(torch.from_numpy(sample))
+    features = F.joints_to_features(joints).numpy()  # (169, 263) from 170 positions
+    real = sample[1:-1]
+    tolerances = [(F.ROOT_ROT_VELOCITY, 1e-3), (F.ROOT_LINEAR_VELOCITY, 1e-3), (F.ROOT_HEIGHT, 1e-9)]
+    tolerances += [(F.RIC, 1e-2), (F.LOCAL_VELOCITY, 1e-3), (F.FOOT_CONTACT, 0.0)]
+    for part, tolerance in tolerances:
+        np.testing.assert_allclose(features[1:, part], real[:, part], atol=tolerance, err_msg=str(part))
+
+
+def test_joints_to_features_round_trips_through_recover_from_ric():
+    from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
+
+    motion = synthesize_dance(120, 3.0, fps=20, style="sway", seed=1)
+    joints = torch.from_numpy(motion.joint_positions()[:, :22]).double()
+    turn = torch.from_numpy(Rotation.from_rotvec([0, 1.0, 0]).as_matrix())
+    joints = joints @ turn.T + torch.tensor([2.0, 0.5, 1.0])  # anywhere, facing anywhere
+    features = F.joints_to_features(joints)
+    assert features.shape == (59, 263)
+    canonical = F.canonicalize(joints)
+    torch.testing.assert_close(F.recover_from_ric(features), canonical[:-1], atol=1e-9, rtol=0)
+    assert canonical[..., 1].min() == 0 and canonical[0, 0, [0, 2]].abs().max() < 1e-12
+    assert abs(F.facing_angle(canonical)[0]) < 1e-9

@@ -176,3 +176,44 @@ def test_word_vectorizer_reads_glove_files_and_applies_vip_and_unknown_rules(tmp
     assert embs.shape == (22, 3) and onehots.shape == (22, 15) and length == 3
     with pytest.raises(FileNotFoundError, match="missing GloVe file"):
         WordVectorizer(tmp_path, prefix="other")
+
+
+def test_contrastive_loss_by_hand():
+    from skeleton_mamba.tasks.text2motion.evaluator_module import contrastive_loss
+
+    a = torch.tensor([[0.0, 0.0], [0.0, 0.0]])
+    b = torch.tensor([[3.0, 4.0], [6.0, 8.0]])  # distances 5 and 10
+    # positives: mean(d^2) = (25 + 100) / 2; negatives with margin 10: mean(max(0, 10 - d)^2) = (25 + 0) / 2
+    assert contrastive_loss(a, b, torch.zeros(2), 10.0).item() == pytest.approx(62.5, rel=1e-6)
+    assert contrastive_loss(a, b, torch.ones(2), 10.0).item() == pytest.approx(12.5, rel=1e-6)
+
+
+def test_evaluator_trains_one_step_through_sm(tmp_path, monkeypatch):
+    import pickle
+
+    from skeleton_mamba.cli import main
+
+    root, glove = tmp_path / "humanml3d", tmp_path / "glove"
+    (root / "new_joint_vecs").mkdir(parents=True)
+    (root / "texts").mkdir()
+    glove.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(1, 3):
+        np.save(root / "new_joint_vecs" / f"00000{i}.npy", rng.normal(size=(44, 263)).astype(np.float32))
+        (root / "texts" / f"00000{i}.txt").write_text("a person walks.#a/DET person/NOUN walk/VERB#0.0#0.0\n")
+    np.save(root / "Mean.npy", np.zeros(263, np.float32))
+    np.save(root / "Std.npy", np.ones(263, np.float32))
+    (root / "train.txt").write_text("000001\n000002\n")
+    (root / "val.txt").write_text("000001\n000002\n")
+    words = ["unk", "sos", "eos", "a", "person", "walk"]
+    np.save(glove / "our_vab_data.npy", rng.normal(size=(6, 300)).astype(np.float32))
+    (glove / "our_vab_words.pkl").write_bytes(pickle.dumps(words))
+    (glove / "our_vab_idx.pkl").write_bytes(pickle.dumps({w: i for i, w in enumerate(words)}))
+    monkeypatch.chdir(tmp_path)
+    args = ["fit", "--recipe", "t2m_evaluator.yaml", "--trainer.max_steps", "1", "--trainer.logger", "false"]
+    args += ["--trainer.callbacks", "[]", "--trainer.enable_progress_bar", "false"]
+    args += ["--trainer.accelerator", "cpu"]
+    args += ["--data.root", str(root), "--data.glove_dir", str(glove), "--data.batch_size", "2"]
+    args += ["--data.num_workers", "0", "--trainer.limit_val_batches", "0"]
+    assert main(args) == 0
+    assert list((tmp_path / "checkpoints").glob("*.ckpt"))

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import torch
 
+from skeleton_mamba.ssd.segsum import decay_mask
+
 # Largest number of Q×Q mask entries (n·H·Q²) kept between forward and backward / held per tile.
 SAVE_ELEMENTS = 1 << 25
 
@@ -37,8 +39,7 @@ def _mask_and_weights(cs: torch.Tensor, CB: torch.Tensor) -> tuple[torch.Tensor,
     """Lmask (s, H, Q, Q) (zero above the diagonal) and W = Lmask ∘ CB from cs (s, H, Q), CB (s, G, Q, Q)."""
     s, H, Q = cs.shape
     G = CB.shape[1]
-    bias = torch.full((Q, Q), -torch.inf, dtype=cs.dtype, device=cs.device).triu_(1)
-    E = torch.sub(cs[..., :, None], cs[..., None, :]).add_(bias).exp_()
+    E = decay_mask(cs)
     W = (E.view(s, G, H // G, Q, Q) * CB[:, :, None]).view(s, H, Q, Q)
     return E, W
 

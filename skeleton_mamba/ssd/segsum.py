@@ -28,18 +28,20 @@ def segsum_stable(a: torch.Tensor) -> torch.Tensor:
 def decay_mask(cs: torch.Tensor) -> torch.Tensor:
     """exp(segsum) from the inclusive cumulative sum ``cs`` of the log decays of one chunk.
 
-    Entry [i, j] = exp(cs_i - cs_j) for i ≥ j, 0 above the diagonal. The difference of two cumulative
-    sums carries an absolute error of about u·|cs_i| (u = 2^-24 in fp32), i.e. a relative error of
-    u·|cs_i| on the mask, below 1e-5 while |cs_i| < 160 (chunk sums of Δ·A). With a ≤ 0 the fp32
-    cumsum is non-increasing (rounding is monotone), so cs_i - cs_j ≤ 0 for i ≥ j also after
-    rounding: no clamp is needed, and its gradient stays exactly ±(mask entry).
+    Entry [i, j] = exp(cs_i - cs_j) for i ≥ j, 0 above the diagonal (exp(-inf)); three passes over
+    the T×T result (difference, causal -inf bias, exp) and no -inf - (-inf). The difference of two
+    cumulative sums carries an absolute error of about u·|cs_i| (u = 2^-24 in fp32), i.e. a relative
+    error of u·|cs_i| on the mask: below 1e-5 while |cs_i| < 160, which the tests check against
+    :func:`segsum_stable` in float64. With a ≤ 0 the fp32 cumsum is non-increasing (rounding is
+    monotone), so cs_i - cs_j ≤ 0 for i ≥ j also after rounding and no clamp is needed.
+    Not differentiable by autograd (in-place); :class:`IntraChunk` has its own backward.
 
     Args:
-        cs: (..., T) inclusive cumulative sums of a = Δ·A ≤ 0.
+        cs: (..., T) inclusive cumulative sums of a = Δ·A ≤ 0 (any strides).
 
     Returns:
         (..., T, T) decay mask, zero above the diagonal.
     """
     T = cs.shape[-1]
-    upper = torch.ones(T, T, dtype=torch.bool, device=cs.device).triu(1)
-    return (cs[..., :, None] - cs[..., None, :]).exp_().masked_fill_(upper, 0.0)
+    bias = torch.full((T, T), -torch.inf, dtype=cs.dtype, device=cs.device).triu_(1)
+    return torch.sub(cs[..., :, None], cs[..., None, :]).add_(bias).exp_()

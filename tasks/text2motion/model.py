@@ -1,0 +1,154 @@
+"""The text-to-motion denoiser: Skeleton Mamba over HumanML3D features mapped to joints (seed 000, 8.2).
+
+The 263-d frame is split into 22 joint tokens of :data:`JOINT_CHANNELS` (13) channels each, so the
+backbone's Human Tokenizer (HUMANML3D22 groups) sees a skeleton:
+
+=========  ===================================================  ====================================
+channels   joint 0 (root)                                       joints 1..21
+=========  ===================================================  ====================================
+0:4        root rotation velocity, XZ velocity, height          ric position (3) + rot6d[0] (1)
+4:9        zero                                                 rot6d[1:6]
+9:12       root local velocity                                  local velocity
+12         zero                                                 foot contact (joints 7, 10, 8, 11)
+=========  ===================================================  ====================================
+
+(joints 1..21 hold ric 0:3 and their 6D rotation 3:9.) Every feature has exactly one slot, so
+:func:`features_to_tokens` and :func:`tokens_to_features` are exact inverses.
+
+Conditioning: the timestep (sinusoidal embedding + MLP) is concatenated to every joint token's input
+channels and also forms the first cross-attention token; the caption's token embeddings follow it
+(projected to ``text_dim``). The unconditional prediction used by classifier-free guidance masks out
+every text token, leaving the timestep token. The network predicts x0 (MDM).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import torch
+from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
+from torch import nn
+
+from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+
+__all__ = [
+    "JOINT_CHANNELS",
+    "TextCondition",
+    "feature_index",
+    "features_to_tokens",
+    "tokens_to_features",
+    "timestep_embedding",
+    "TextToMotionDenoiser",
+]
+
+JOINT_CHANNELS = 13
+_CONTACT_JOINTS = (7, 10, 8, 11)  # order of the feature slice [259:263]
+
+
+def feature_index() -> torch.Tensor:
+    """(22, 13) long: the feature index of each joint-token channel, ``263`` for an empty slot."""
+    index = torch.full((NUM_JOINTS, JOINT_CHANNELS), FEATURE_DIM, dtype=torch.long)
+    index[0, 0:4] = torch.arange(0, 4)
+    for j in range(1, NUM_JOINTS):
+        index[j, 0:3] = 4 + 3 * (j - 1) + torch.arange(3)
+        index[j, 3:9] = 67 + 6 * (j - 1) + torch.arange(6)
+    for j in range(NUM_JOINTS):
+        index[j, 9:12] = 193 + 3 * j + torch.arange(3)
+    for k, j in enumerate(_CONTACT_JOINTS):
+        index[j, 12] = 259 + k
+    return index
+
+
+_INDEX = feature_index()
+
+
+def features_to_tokens(features: torch.Tensor) -> torch.Tensor:
+    """(..., T, 263) -> (..., T, 22, 13) joint tokens (zeros in empty slots)."""
+    padded = torch.cat([features, features.new_zeros(*features.shape[:-1], 1)], dim=-1)
+    return padded[..., _INDEX.to(features.device)]
+
+
+def tokens_to_features(tokens: torch.Tensor) -> torch.Tensor:
+    """(..., T, 22, 13) -> (..., T, 263): each feature read from its slot (empty slots ignored)."""
+    flat_index = _INDEX.to(tokens.device).flatten()
+    used = flat_index < FEATURE_DIM
+    flat = tokens.flatten(-2)[..., used]
+    out = tokens.new_zeros(*tokens.shape[:-2], FEATURE_DIM)
+    return out.index_copy(-1, flat_index[used], flat)
+
+
+def timestep_embedding(t: torch.Tensor, dim: int, max_period: float = 10000.0) -> torch.Tensor:
+    """Sinusoidal embedding (B,) -> (B, dim): ``[cos(t f_k), sin(t f_k)]``, ``f_k = max_period^(-k/half)``."""
+    half = dim // 2
+    freqs = torch.exp(-math.log(max_period) * torch.arange(half, device=t.device, dtype=torch.float32) / half)
+    args = t.float()[:, None] * freqs[None]
+    return torch.cat([torch.cos(args), torch.sin(args)], dim=-1)
+
+
+@dataclass
+class TextCondition:
+    """Caption token embeddings (B, S, D) and their mask (B, S) bool (True = real token)."""
+
+    tokens: torch.Tensor
+    mask: torch.Tensor
+
+
+class TextToMotionDenoiser(nn.Module):
+    """x0 prediction ``(x_t (B, T, 263), t (B,), cond, mask (B, T)) -> x0_hat (B, T, 263)``.
+
+    Args:
+        backbone: Skeleton Mamba configuration; ``skeleton``, ``in_channels``, ``out_channels`` and
+            ``context_dim`` are set here (humanml3d22, 13 + ``time_channels``, 13, ``text_dim``).
+        text_dim: width of the caption token embeddings (384 MiniLM, 512 CLIP ViT-B/32).
+        time_channels: timestep channels appended to every joint token.
+        time_embedding_dim: sinusoidal embedding size of the timestep.
+    """
+
+    def __init__(
+        self,
+        backbone: SkeletonMambaConfig,
+        text_dim: int,
+        time_channels: int = 16,
+        time_embedding_dim: int = 128,
+    ) -> None:
+        super().__init__()
+        config = dataclasses.replace(
+            backbone,
+            skeleton="humanml3d22",
+            in_channels=JOINT_CHANNELS + time_channels,
+            out_channels=JOINT_CHANNELS,
+            context_dim=text_dim,
+        )
+        self.backbone = SkeletonMamba(config)
+        self.time_embedding_dim = time_embedding_dim
+        width = time_embedding_dim
+        self.time_mlp = nn.Sequential(nn.Linear(width, width), nn.SiLU(), nn.Linear(width, width))
+        self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
+        self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
+        self.text_proj = nn.Linear(text_dim, text_dim)
+
+    def forward(
+        self,
+        x_t: torch.Tensor,
+        t: torch.Tensor,
+        cond: TextCondition | None = None,
+        mask: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        b, frames, _ = x_t.shape
+        emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
+        channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
+        tokens = torch.cat([features_to_tokens(x_t), channels], dim=-1)  # (B, T, 22, 13 + C_t)
+        time_token = self.time_to_token(emb)[:, None, :]  # (B, 1, D)
+        if cond is None:
+            context, context_mask = time_token, torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
+        else:
+            context = torch.cat([time_token, self.text_proj(cond.tokens.to(x_t.dtype))], dim=1)
+            ones = torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
+            context_mask = torch.cat([ones, cond.mask.to(x_t.device)], dim=1)
+        out = self.backbone(tokens, mask=mask, context=context, context_mask=context_mask)
+        x0 = tokens_to_features(out)
+        if mask is not None:
+            x0 = x0 * mask[..., None].to(x0.dtype)
+        return x0

@@ -1,0 +1,155 @@
+"""LightningModule for text-to-motion diffusion (seed 000 section 8.2, MDM's recipe).
+
+Training (MDM, ``GuyTevet/motion-diffusion-model``): x0 prediction with the shared
+:class:`~skeleton_mamba.tasks.diffusion.GaussianDiffusion` (cosine schedule, 1,000 steps, uniform t),
+masked MSE ``|x0 - x0_hat|^2`` over valid frames, the caption dropped with probability 0.1 for
+classifier-free guidance, AdamW (lr 1e-4, weight decay 0). Sampling: classifier-free guidance
+``unc + s (cond - unc)`` with s = 2.5, ancestral DDPM over all steps or DDIM with ``sampling_steps``.
+
+The text encoder (:class:`~.text_encoder.TextEncoder`, frozen) is kept outside the module's state:
+checkpoints hold only the denoiser and the feature statistics (``feature_mean``, ``feature_std``,
+copied from the data module's ``statistics()`` at setup), so generation de-normalises on its own.
+"""
+
+from __future__ import annotations
+
+import torch
+from lightning.pytorch import LightningModule
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.recognition.module import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
+from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser
+from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
+
+from skeleton_mamba import SkeletonMambaConfig
+
+__all__ = ["TextToMotionModule"]
+
+
+class TextToMotionModule(LightningModule):
+    """Skeleton Mamba text-to-motion diffusion.
+
+    Args:
+        backbone: backbone configuration (recipes include ``backbones/skeleton_mamba.yaml``).
+        text_encoder_path: local CLIP / transformers folder; ``None`` = the packaged MiniLM.
+        max_tokens: caption tokens kept by the text encoder.
+        time_channels: timestep channels appended to every joint token.
+        num_steps: diffusion steps T (1000).
+        cond_drop_prob: probability of dropping the caption in training (0.1).
+        guidance_weight: classifier-free guidance scale s at sampling (2.5).
+        sampling_steps: ``None`` = DDPM over all T steps; else DDIM with this many steps.
+        lr: AdamW learning rate (1e-4).
+        weight_decay: AdamW weight decay (0).
+    """
+
+    def __init__(
+        self,
+        backbone: SkeletonMambaConfig | None = None,
+        text_encoder_path: str | None = None,
+        max_tokens: int = 77,
+        time_channels: int = 16,
+        num_steps: int = 1000,
+        cond_drop_prob: float = 0.1,
+        guidance_weight: float = 2.5,
+        sampling_steps: int | None = None,
+        lr: float = 1e-4,
+        weight_decay: float = 0.0,
+    ) -> None:
+        super().__init__()
+        config = backbone_config(backbone)
+        self.save_hyperparameters(ignore=["backbone"])
+        self.hparams["backbone"] = plain_backbone_config(config)
+        # not a registered submodule: frozen pretrained weights stay out of checkpoints
+        self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
+        self.denoiser = TextToMotionDenoiser(config, self.text_encoder.dim, time_channels)
+        self.diffusion = GaussianDiffusion(num_steps)
+        self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
+        self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
+
+    def setup(self, stage: str) -> None:
+        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        if stage == "fit" and datamodule is not None and hasattr(datamodule, "statistics"):
+            mean, std = datamodule.statistics()
+            self.feature_mean.copy_(mean)
+            self.feature_std.copy_(std)
+
+    def encode_text(self, captions: list[str]) -> TextCondition:
+        """Frozen text encoding on the module's device: tokens (B, S, D) and mask (B, S)."""
+        self.text_encoder.to(self.device)
+        tokens, mask = self.text_encoder(captions)
+        return TextCondition(tokens, mask)
+
+    def loss(self, batch: dict, drop_prob: float) -> torch.Tensor:
+        """Masked x0 MSE of one batch with caption dropout ``drop_prob``."""
+        x0, mask = batch["motion"], batch["mask"]
+        cond = self.encode_text(batch["caption"])
+        if drop_prob > 0:
+            keep = torch.rand(x0.shape[0], device=self.device) >= drop_prob
+            cond = TextCondition(cond.tokens, cond.mask & keep[:, None])
+        x_t, t, target = self.diffusion.training_pair(x0)
+        x0_hat = self.denoiser(x_t, t, cond, mask)
+        weights = mask[..., None].to(x0.dtype)
+        return ((x0_hat - target) ** 2 * weights).sum() / (weights.sum() * x0.shape[-1])
+
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        loss = self.loss(batch, self.hparams.cond_drop_prob)
+        self.log("train/loss", loss, prog_bar=True, batch_size=len(batch["caption"]))
+        return loss
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        loss = self.loss(batch, 0.0)
+        self.log("val/loss", loss, prog_bar=True, batch_size=len(batch["caption"]), sync_dist=True)
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        self.log("test/loss", self.loss(batch, 0.0), batch_size=len(batch["caption"]), sync_dist=True)
+
+    @torch.no_grad()
+    def generate(
+        self,
+        captions: list[str],
+        lengths: list[int],
+        generator: torch.Generator | None = None,
+        guidance_weight: float | None = None,
+        sampling_steps: int | None = -1,
+        progress: bool = False,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Sample motions for captions.
+
+        Args:
+            captions: B captions.
+            lengths: B lengths in frames (20 fps).
+            generator: CPU generator for reproducible noise.
+            guidance_weight: CFG scale (default: the module's).
+            sampling_steps: DDIM steps; ``None`` = DDPM over all steps; ``-1`` (default) = the module's.
+            progress: show a progress bar.
+
+        Returns:
+            De-normalised features (B, T_max, 263) (zeros past each length) and the mask (B, T_max).
+        """
+        steps = self.hparams.sampling_steps if sampling_steps == -1 else sampling_steps
+        weight = self.hparams.guidance_weight if guidance_weight is None else guidance_weight
+        lengths_t = torch.tensor(lengths, device=self.device)
+        mask = torch.arange(int(lengths_t.max()), device=self.device)[None] < lengths_t[:, None]
+        cond = self.encode_text(captions)
+
+        def denoiser(x_t: torch.Tensor, t: torch.Tensor, c: TextCondition | None) -> torch.Tensor:
+            return self.denoiser(x_t, t, c, mask)
+
+        shape = (len(captions), mask.shape[1], FEATURE_DIM)
+        common = dict(cond=cond, guidance_weight=weight, generator=generator, device=self.device)
+        common["progress"] = progress
+        if steps is None:
+            x = ddpm_sample(self.diffusion, denoiser, shape, **common)
+        else:
+            x = ddim_sample(self.diffusion, denoiser, shape, sampling_steps=steps, eta=0.0, **common)
+        features = (x * self.feature_std + self.feature_mean) * mask[..., None]
+        return features, mask
+
+    def predict_step(self, batch: dict, batch_idx: int) -> dict:
+        features, mask = self.generate(batch["caption"], batch["length"].tolist())
+        return {"features": features, "mask": mask, "caption": batch["caption"]}
+
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        return torch.optim.AdamW(
+            self.denoiser.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
+        )

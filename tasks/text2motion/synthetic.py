@@ -1,0 +1,61 @@
+"""A SYNTHETIC captioned motion set for demos without HumanML3D (no download).
+
+Each clip is a procedural dance of :mod:`skeleton_mamba.tasks.motion.synthetic.dance` (styles
+``bounce``, ``sway``, ``arms``; random tempo 90-140 BPM and length) at 20 fps, turned into the
+HumanML3D 263-d representation by :func:`~skeleton_mamba.tasks.text2motion.features.joints_to_features`
+(the SMPL-24 joints 0..21 as the 22 HumanML3D joints, the SMPL local rotations as the 6D rotations),
+with a caption drawn from a few templates of its style. Every caption starts with "synthetic:" so
+generated demo data is never mistaken for HumanML3D.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_rotation_6d
+from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
+from skeleton_mamba.tasks.text2motion.features import FPS, NUM_JOINTS, joints_to_features
+from skeleton_mamba.tasks.text2motion.humanml3d import Caption, MotionClip
+
+__all__ = ["CAPTIONS", "synthetic_clip", "synthetic_clips"]
+
+CAPTIONS: dict[str, tuple[str, ...]] = {
+    "bounce": (
+        "synthetic: a person bounces to the beat, bending the knees.",
+        "synthetic: someone bobs up and down in place while swinging the arms.",
+    ),
+    "sway": (
+        "synthetic: a person sways the hips from side to side.",
+        "synthetic: someone rocks the torso left and right with loose arms.",
+    ),
+    "arms": (
+        "synthetic: a person waves both arms up and down.",
+        "synthetic: someone raises and lowers the arms in big waves.",
+    ),
+}
+
+
+def synthetic_clip(style: str, frames: int, seed: int) -> MotionClip:
+    """One captioned clip of ``frames`` feature frames (``frames + 1`` positions) at 20 fps."""
+    rng = np.random.default_rng(seed)
+    bpm = float(rng.integers(90, 141))
+    motion = synthesize_dance(bpm, (frames + 1) / FPS, fps=FPS, style=style, seed=seed)
+    joints = torch.from_numpy(motion.joint_positions()[: frames + 1, :NUM_JOINTS]).double()
+    local = axis_angle_to_matrix(torch.from_numpy(motion.poses[: frames + 1, 1:NUM_JOINTS]).double())
+    features = joints_to_features(joints, matrix_to_rotation_6d(local)).float().numpy()
+    text = CAPTIONS[style][int(rng.integers(len(CAPTIONS[style])))]
+    caption = Caption(text, tuple(f"{w.strip('.,:')}/OTHER" for w in text.split()), 0.0, 0.0)
+    return MotionClip(f"synthetic_{style}_{seed}", features, [caption])
+
+
+def synthetic_clips(
+    count: int, seed: int = 0, min_frames: int = 40, max_frames: int = 196
+) -> list[MotionClip]:
+    """``count`` clips, styles in turn, lengths uniform in ``[min_frames, max_frames]``."""
+    rng = np.random.default_rng(seed)
+    styles = sorted(CAPTIONS)
+    clips = []
+    for k in range(count):
+        frames = int(rng.integers(min_frames, max_frames + 1))
+        clips.append(synthetic_clip(styles[k % len(styles)], frames, seed * 100_003 + k))
+    return clips

