@@ -23,6 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info  # noqa: E402
+
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build  # noqa: E402
 from skeleton_mamba.tasks.egodance.builder.camera import CameraTrajectory, head_camera, intrinsics, pixel_rays  # noqa: E402
 from skeleton_mamba.tasks.egodance.builder.placement import Placement, place_points  # noqa: E402
@@ -35,11 +36,11 @@ from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance  # noqa
 def _trajectory(frames: int, size: int) -> CameraTrajectory:
     """A head camera following a synthetic dance in the middle of procedural room 0."""
     import torch
+
+    from skeleton_mamba.skeletons import SMPL24
     from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
     from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix
     from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
-
-    from skeleton_mamba.skeletons import SMPL24
 
     motion = synthesize_dance(120, frames / 30, 30, "arms", 0)
     local = axis_angle_to_matrix(torch.from_numpy(motion.poses).double())

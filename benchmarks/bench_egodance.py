@@ -25,13 +25,13 @@ from torch import nn
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
 from skeleton_mamba.tasks.egodance.encoders import MusicEncoder, sinusoidal_embedding  # noqa: E402
 from skeleton_mamba.tasks.egodance.losses import emm_losses  # noqa: E402
 from skeleton_mamba.tasks.egodance.model import EMM  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
-
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
 
 PRESETS = {
     "seed": dict(dim=128, depth=8, heads=4, mlp_dim=1024, context_dim=256, d_state=64, headdim=64, chunk=64),

@@ -21,6 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info  # noqa: E402
+
 from skeleton_mamba.tasks.recognition.prepare import prepare_ntu  # noqa: E402
 
 

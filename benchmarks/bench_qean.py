@@ -22,6 +22,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import machine_info, median_ms  # noqa: E402
+
 from skeleton_mamba.tasks.qean.generate import generate_fast, generate_plain  # noqa: E402
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig  # noqa: E402
 

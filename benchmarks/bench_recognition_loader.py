@@ -23,10 +23,10 @@ import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info  # noqa: E402
-from skeleton_mamba.tasks.recognition.data import SyntheticRecognitionDataModule  # noqa: E402
-from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
+from skeleton_mamba.tasks.recognition.data import SyntheticRecognitionDataModule  # noqa: E402
+from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule  # noqa: E402
 
 BACKBONES = {
     # One block of width 16: the cheapest step, the hardest case for the loader.

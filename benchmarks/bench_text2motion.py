@@ -23,12 +23,12 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, guided_x0  # noqa: E402
 from skeleton_mamba.tasks.text2motion.features import recover_from_ric  # noqa: E402
 from skeleton_mamba.tasks.text2motion.metrics import RPrecision, embedding_fid  # noqa: E402
 from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser  # noqa: E402
-
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
 
 BACKBONES = {
     "tiny": SkeletonMambaConfig(

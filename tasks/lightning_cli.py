@@ -24,10 +24,10 @@ from collections.abc import Sequence
 import lightning.pytorch as pl
 from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
-from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
 
 from skeleton_mamba import __version__
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
 
 __all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "list_recipes", "run"]
 

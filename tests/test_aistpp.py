@@ -9,6 +9,7 @@ import pickle
 import numpy as np
 import pytest
 import torch
+
 from skeleton_mamba.tasks.motion.aistpp import (
     load_aistpp_motion,
     load_split,

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 import torch
+
 from skeleton_mamba.tasks.motion.audio_encoder import PretrainedAudioEncoder, resample_frames
 
 SR = 16000

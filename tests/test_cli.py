@@ -13,11 +13,11 @@ import sys
 from pathlib import Path
 
 import pytest
-import skeleton_mamba.tasks.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
 import yaml
-from skeleton_mamba.tasks.recipe_resolution import packaged_recipes, recipe_description, resolve_recipe
 
+import skeleton_mamba.tasks.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
 from skeleton_mamba.cli import main as sm_main
+from skeleton_mamba.tasks.recipe_resolution import packaged_recipes, recipe_description, resolve_recipe
 
 RECIPES_DIR = Path(__file__).resolve().parents[1] / "recipes"
 EXPECTED_RECIPES = {

@@ -9,6 +9,7 @@ import pytest
 import torch
 from scipy import linalg
 from scipy.ndimage import gaussian_filter
+
 from skeleton_mamba.tasks.motion.metrics import (
     MMV,
     PFC,

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+
+from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import (
     BuildConfig,
@@ -29,8 +31,6 @@ from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle, smpl_rest_offsets
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
-
-from skeleton_mamba.skeletons import SMPL24
 
 FEET = [7, 8, 10, 11]
 

@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
+from transformers import ResNetConfig
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera
 from skeleton_mamba.tasks.egodance.guidance import (
@@ -23,9 +26,6 @@ from skeleton_mamba.tasks.egodance.losses import (
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import decode_motion, encode_motion, motion_joints
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
-from transformers import ResNetConfig
-
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 
 IDENTITY_6D = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]  # first two columns of the identity
 

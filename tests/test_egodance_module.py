@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 import torch
 from lightning.pytorch import Trainer
+from torch.utils.data import DataLoader
+
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
-from torch.utils.data import DataLoader
 
 TINY_BACKBONE = {
     "dim": 16,
@@ -95,6 +96,7 @@ def test_module_trains_tests_and_predicts(tmp_path):
 
     # `sm dance` on a checkpoint of this module: a 2 s track and video, long-form windows of 16 frames
     import imageio.v3 as iio
+
     from skeleton_mamba.tasks.egodance.dance_cli import main as dance_main
     from skeleton_mamba.tasks.motion.motion_file import load_motion
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music

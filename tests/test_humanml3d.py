@@ -7,6 +7,8 @@ import pytest
 import torch
 from PIL import Image
 from scipy.spatial.transform import Rotation
+
+from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 from skeleton_mamba.tasks.text2motion import features as F
@@ -21,8 +23,6 @@ from skeleton_mamba.tasks.text2motion.humanml3d import (
     read_split,
     read_statistics,
 )
-
-from skeleton_mamba.skeletons import HUMANML3D22
 
 SAMPLE = "humanml3d/new_joint_vecs/012314.npy"
 

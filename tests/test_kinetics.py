@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from skeleton_mamba.tasks.recognition.kinetics import KineticsFileError, read_kinetics_clip
-from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 
 from skeleton_mamba.cli import main as sm_main
+from skeleton_mamba.tasks.recognition.kinetics import KineticsFileError, read_kinetics_clip
+from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 
 
 def person(seed: int, score: float) -> dict:

@@ -9,6 +9,7 @@ import librosa
 import numpy as np
 import pytest
 import soundfile as sf
+
 from skeleton_mamba.tasks.motion import music
 from skeleton_mamba.tasks.motion.analyze_music import main as analyze_main
 from skeleton_mamba.tasks.motion.cache import FeatureCache

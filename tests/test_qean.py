@@ -10,6 +10,8 @@ import torch
 import torch.nn.functional as F
 from scipy.linalg import polar
 from scipy.spatial.transform import Rotation
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, quaternion_rotary_attention
 from skeleton_mamba.tasks.qean.generate import generate_fast, generate_plain
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
@@ -26,8 +28,6 @@ from skeleton_mamba.tasks.qean.representation import (
     smpl_to_features,
 )
 from skeleton_mamba.tasks.qean.rotary import SpinPositionEmbedding, apply_rotary
-
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 
 ONE, I, J, K = (torch.eye(4, dtype=torch.float64)[n] for n in range(4))
 

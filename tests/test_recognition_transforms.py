@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from test_ntu import STANDING
+
 from skeleton_mamba.tasks.recognition.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.transforms import (
     SkeletonPipeline,
@@ -14,7 +16,6 @@ from skeleton_mamba.tasks.recognition.transforms import (
     random_rotate_scale,
     uniform_sample_indices,
 )
-from test_ntu import STANDING
 
 # NTU bones, 1-based child -> parent (reference section 1.3)
 BONES = [(1, 2), (2, 21), (3, 21), (4, 3), (5, 21), (6, 5), (7, 6), (8, 7), (9, 21), (10, 9), (11, 10),

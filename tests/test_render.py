@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from PIL import Image
 from scipy.io import wavfile
+
+from skeleton_mamba.skeletons import HUMANML3D22, SMPL24
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle, joint_sides, render_frames, render_motion
 from skeleton_mamba.tasks.motion.render_cli import load_joints, main
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
-
-from skeleton_mamba.skeletons import HUMANML3D22, SMPL24
 
 
 def dancing_smpl(frames: int, fps: float, seed: int = 0) -> MotionData:

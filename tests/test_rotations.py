@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
+
 from skeleton_mamba.tasks.motion import axes, resample
 from skeleton_mamba.tasks.motion import rotations as rot
 

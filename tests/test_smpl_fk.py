@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
+
+from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.smpl import (
     SMPL_REST_OFFSETS,
     smpl_forward_kinematics,
     smpl_forward_kinematics_axis_angle,
 )
-
-from skeleton_mamba.skeletons import SMPL24
 
 # Reference dance.md section 4 (Stanford-TML/EDGE vis.py).
 REFERENCE_PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]

@@ -7,6 +7,7 @@ import pytest
 import soundfile as sf
 import torch
 from scipy.signal import argrelmin
+
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 from skeleton_mamba.tasks.motion.synthetic import make_demo_set

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 from scipy import linalg
+
 from skeleton_mamba.tasks.text2motion.metrics import (
     Diversity,
     EmbeddingFID,

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.text2motion.data import TextMotionDataset, collate_text_motion
 from skeleton_mamba.tasks.text2motion.features import group_statistics
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length
@@ -15,8 +17,6 @@ from skeleton_mamba.tasks.text2motion.model import (
     features_to_tokens,
     tokens_to_features,
 )
-
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 
 TINY = SkeletonMambaConfig(
     dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)

@@ -7,8 +7,9 @@ seed 000 Eq. 7 (posterior mean with "alpha-hat = sum of alpha_s") is garbled and
 from __future__ import annotations
 
 import torch
-from skeleton_mamba.tasks.diffusion.schedule import NoiseSchedule
 from torch import nn
+
+from skeleton_mamba.tasks.diffusion.schedule import NoiseSchedule
 
 __all__ = ["GaussianDiffusion"]
 

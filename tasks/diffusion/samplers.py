@@ -10,8 +10,9 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import torch
-from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion, _extract
 from tqdm.auto import tqdm
+
+from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion, _extract
 
 __all__ = ["Denoiser", "GuidanceTerm", "guided_x0", "ddpm_sample", "ddim_sample", "ddim_timesteps"]
 

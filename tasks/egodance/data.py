@@ -27,6 +27,8 @@ import kornia
 import numpy as np
 import torch
 from lightning.pytorch import LightningDataModule
+from torch.utils.data import DataLoader, Dataset
+
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
 from skeleton_mamba.tasks.egodance.guidance import head_targets_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
@@ -34,7 +36,6 @@ from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import extract_music_features
-from torch.utils.data import DataLoader, Dataset
 
 __all__ = ["EgoDanceDataset", "EgoDanceDataModule", "SyntheticEgoDanceDataModule", "assign_splits"]
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.diffusion.samplers import GuidanceTerm
 from skeleton_mamba.tasks.egodance.builder.camera import HEAD_TO_CAMERA
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+
 from skeleton_mamba.tasks.egodance.representation import (
     CONTACT,
     FOOT_JOINTS,

@@ -18,6 +18,10 @@ from __future__ import annotations
 import dataclasses
 
 import torch
+from torch import nn
+from transformers import ResNetConfig
+
+from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.tasks.egodance.encoders import (
     FusionModule,
     MusicEncoder,
@@ -25,10 +29,6 @@ from skeleton_mamba.tasks.egodance.encoders import (
     sinusoidal_embedding,
 )
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS
-from torch import nn
-from transformers import ResNetConfig
-
-from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 
 __all__ = ["EMM"]
 

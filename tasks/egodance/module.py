@@ -14,18 +14,18 @@ from __future__ import annotations
 
 import torch
 from lightning.pytorch import LightningModule
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+from torchmetrics import MeanMetric
+from transformers import ResNetConfig
+
+from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance
 from skeleton_mamba.tasks.motion.metrics import PFC, BeatAlign
-from skeleton_mamba.tasks.recognition.module import backbone_config, plain_backbone_config
-from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
-from torchmetrics import MeanMetric
-from transformers import ResNetConfig
-
-from skeleton_mamba import SkeletonMambaConfig
 
 __all__ = ["EgoDanceModule"]
 

@@ -19,6 +19,7 @@ foot joint below 0.01 m at 30 fps (the last frame's displacement counts as 0).
 from __future__ import annotations
 
 import torch
+
 from skeleton_mamba.tasks.motion.rotations import (
     axis_angle_to_matrix,
     matrix_to_rotation_6d,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, WindowConsistency, ddim_sample, ddpm_sample
 from skeleton_mamba.tasks.diffusion.stitching import split_windows, stitch_windows
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.motion.motion_file import MotionData, MotionFileError
 from skeleton_mamba.tasks.motion.resample import resample_smpl
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle

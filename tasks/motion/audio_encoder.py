@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-from skeleton_mamba.tasks.motion.cache import FeatureCache
 from torch import nn
+
+from skeleton_mamba.tasks.motion.cache import FeatureCache
 
 __all__ = ["PretrainedAudioEncoder", "resample_frames"]
 

@@ -112,6 +112,7 @@ class MotionData:
         if self.joints is not None:
             return self.joints
         import torch
+
         from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 
         poses = torch.from_numpy(np.asarray(self.poses, dtype=np.float64))

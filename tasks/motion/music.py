@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from skeleton_mamba.tasks.motion.cache import FeatureCache
 
 __all__ = [

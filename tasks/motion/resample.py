@@ -13,6 +13,7 @@ import math
 
 import torch
 from kornia.geometry.quaternion import Quaternion
+
 from skeleton_mamba.tasks.motion.rotations import (
     axis_angle_to_matrix,
     matrix_to_axis_angle,

@@ -10,10 +10,10 @@ to, those of the SMPL model (metrics computed from them are close, not identical
 from __future__ import annotations
 
 import torch
-from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix
 
 from skeleton_mamba.skeletons import SMPL24
+from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix
 
 __all__ = [
     "SMPL_REST_OFFSETS",

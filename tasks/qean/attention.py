@@ -26,9 +26,10 @@ import math
 import torch
 import torch.nn.functional as F
 from einops import rearrange
+from torch import nn
+
 from skeleton_mamba.tasks.qean.quaternion import hamilton_product, quaternion_flatten, quaternion_parameterise
 from skeleton_mamba.tasks.qean.rotary import SpinPositionEmbedding
-from torch import nn
 
 __all__ = [
     "QuaternionRotaryAttention",

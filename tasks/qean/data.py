@@ -27,14 +27,15 @@ from pathlib import Path
 
 import torch
 from lightning.pytorch import LightningDataModule
+from torch.utils.data import DataLoader, Dataset
+from tqdm import tqdm
+
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.qean.generate import pad_music
 from skeleton_mamba.tasks.qean.representation import features_to_joints, motion_to_features
-from torch.utils.data import DataLoader, Dataset
-from tqdm import tqdm
 
 __all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
 

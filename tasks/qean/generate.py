@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
-from skeleton_mamba.tasks.qean.model import QEAN
 from tqdm import tqdm
+
+from skeleton_mamba.tasks.qean.model import QEAN
 
 __all__ = ["generate_fast", "generate_plain", "pad_music"]
 

@@ -22,10 +22,10 @@ import dataclasses
 
 import torch
 from einops import rearrange
-from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
 
 __all__ = [
     "QEAN",

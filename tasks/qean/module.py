@@ -26,6 +26,9 @@ import torch
 import torch.nn.functional as F
 from lightning.pytorch import LightningModule
 from lightning.pytorch.utilities import rank_zero_info
+
+from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.motion.metrics import BeatAlign, FrechetMotionDistance, MotionDiversity
 from skeleton_mamba.tasks.motion.metrics.fid import motion_features
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
@@ -33,9 +36,6 @@ from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.qean.representation import FPS, features_to_joints, features_to_smpl
-from skeleton_mamba.tasks.recognition.module import backbone_config, plain_backbone_config
-
-from skeleton_mamba import SkeletonMambaConfig
 
 __all__ = ["QEANModule", "SEED_TABLE1"]
 

@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 import torch
 from lightning.pytorch import LightningDataModule
+from torch.utils.data import DataLoader, Dataset
+
+from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline
-from torch.utils.data import DataLoader, Dataset
-
-from skeleton_mamba.skeletons import get_skeleton
 
 __all__ = ["RecognitionDataModule", "SkeletonClipDataset", "SyntheticRecognitionDataModule"]
 

@@ -22,50 +22,21 @@ saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
 from lightning.pytorch import LightningModule
 from lightning.pytorch.utilities import rank_zero_info
-from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
-from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
 
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
+from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 
-__all__ = ["ActionRecognitionModule", "backbone_config", "plain_backbone_config"]
-
-
-def backbone_config(value: SkeletonMambaConfig | Mapping | None) -> SkeletonMambaConfig:
-    """A :class:`SkeletonMambaConfig` from a config, a plain mapping (checkpoint hparams) or ``None``."""
-    if value is None:
-        return SkeletonMambaConfig()
-    if isinstance(value, SkeletonMambaConfig):
-        return value
-    fields = dict(value)
-    mixer = fields.get("mixer")
-    if isinstance(mixer, Mapping):
-        mixer = dict(mixer)
-        if "A_init_range" in mixer:
-            mixer["A_init_range"] = tuple(mixer["A_init_range"])
-        fields["mixer"] = MixerConfig(**mixer)
-    return SkeletonMambaConfig(**fields)
-
-
-def plain_backbone_config(config: SkeletonMambaConfig) -> dict:
-    """The config as plain dicts and lists (checkpoints load with ``weights_only=True``)."""
-
-    def plain(value):
-        if isinstance(value, dict):
-            return {k: plain(v) for k, v in value.items()}
-        if isinstance(value, list | tuple):
-            return [plain(v) for v in value]
-        return value
-
-    return plain(dataclasses.asdict(config))
+__all__ = ["ActionRecognitionModule"]
 
 
 class ActionRecognitionModule(LightningModule):

@@ -29,6 +29,8 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
+from tqdm import tqdm
+
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,
@@ -37,7 +39,6 @@ from skeleton_mamba.tasks.recognition.kinetics import (
 from skeleton_mamba.tasks.recognition.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
 from skeleton_mamba.tasks.recognition.pyskl import save_annotations
 from skeleton_mamba.tasks.recognition.splits import benchmark_splits, in_dataset, load_missing_samples
-from tqdm import tqdm
 
 __all__ = ["main", "prepare_kinetics", "prepare_ntu"]
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, denormalize, recover_from_ric
 
 __all__ = ["convert_file", "main"]

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 from lightning.pytorch import LightningDataModule
+from torch.utils.data import DataLoader, Dataset
+
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.text2motion.features import group_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import (
@@ -27,7 +29,6 @@ from skeleton_mamba.tasks.text2motion.humanml3d import (
     read_statistics,
 )
 from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clips
-from torch.utils.data import DataLoader, Dataset
 
 __all__ = [
     "TextMotionDataset",

@@ -21,9 +21,10 @@ from os import PathLike
 from pathlib import Path
 
 import torch
-from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
 from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
+
+from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
 
 __all__ = ["TextEncoderBiGRUCo", "MovementConvEncoder", "MotionEncoderBiGRUCo", "T2MEvaluator"]
 

@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.utils.data import DataLoader
+
 from skeleton_mamba.tasks.text2motion.data import HumanML3DDataModule, TextMotionDataset
 from skeleton_mamba.tasks.text2motion.glove import WordVectorizer
 from skeleton_mamba.tasks.text2motion.humanml3d import MAX_MOTION_LENGTH, MotionClip, crop_length, load_clips
-from torch.utils.data import DataLoader
 
 __all__ = ["EvaluatorDataset", "T2MEvaluatorDataModule"]
 

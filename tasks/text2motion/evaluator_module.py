@@ -16,6 +16,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 from lightning.pytorch import LightningModule
+
 from skeleton_mamba.tasks.text2motion.evaluator import T2MEvaluator
 from skeleton_mamba.tasks.text2motion.metrics import RPrecision
 

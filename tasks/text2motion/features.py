@@ -21,6 +21,7 @@ slice          dims   content
 from __future__ import annotations
 
 import torch
+
 from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
 
 __all__ = [

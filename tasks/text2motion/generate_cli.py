@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 
 __all__ = ["parse_length", "main"]
@@ -92,9 +93,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         np.save(stem.with_name(stem.name + "_features.npy"), features[i].numpy())
         np.save(stem.with_suffix(".npy"), joints[i])
         if args.render:
-            from skeleton_mamba.tasks.motion.render import render_motion
-
             from skeleton_mamba.skeletons import HUMANML3D22
+            from skeleton_mamba.tasks.motion.render import render_motion
 
             render_motion(
                 joints[i],

@@ -20,6 +20,7 @@ from os import PathLike
 from pathlib import Path
 
 import numpy as np
+
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 
 __all__ = ["POS_ENUMERATOR", "VIP_WORDS", "MAX_TEXT_LENGTH", "WordVectorizer", "pad_tokens"]

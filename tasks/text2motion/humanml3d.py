@@ -26,6 +26,7 @@ from os import PathLike
 from pathlib import Path
 
 import numpy as np
+
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, FPS
 

@@ -20,9 +20,10 @@ from __future__ import annotations
 from typing import Any
 
 import torch
-from skeleton_mamba.tasks.motion.metrics.fid import frechet_distance
 from torchmetrics import Metric
 from torchmetrics.utilities import dim_zero_cat
+
+from skeleton_mamba.tasks.motion.metrics.fid import frechet_distance
 
 __all__ = [
     "R_PRECISION_BATCH",

@@ -28,10 +28,10 @@ import math
 from dataclasses import dataclass
 
 import torch
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 
 __all__ = [
     "JOINT_CHANNELS",

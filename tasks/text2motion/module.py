@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import torch
 from lightning.pytorch import LightningModule
+
+from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample
-from skeleton_mamba.tasks.recognition.module import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
-
-from skeleton_mamba import SkeletonMambaConfig
 
 __all__ = ["TextToMotionModule"]
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_rotation_6d
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.text2motion.features import FPS, NUM_JOINTS, joints_to_features

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
 from skeleton_mamba.tasks.egodance.builder.penetration import penetration_score
@@ -38,8 +40,6 @@ from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
-
-from skeleton_mamba.skeletons import SMPL24
 
 __all__ = ["BuildConfig", "WindowTask", "plan_windows", "build_window", "run_build", "SCENE_SUFFIXES"]
 

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 
 __all__ = [

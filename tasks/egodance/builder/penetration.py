@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
-from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh
 
 from skeleton_mamba.skeletons import SMPL24
+from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh
 
 __all__ = ["BONE_RADII", "HEAD_RADIUS", "FOOT_RADIUS", "body_spheres", "signed_distance", "penetration_score"]
 

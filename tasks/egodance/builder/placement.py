@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
 from skeleton_mamba.tasks.egodance.builder.penetration import FOOT_JOINTS, FOOT_RADIUS
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, make_scene
 
 __all__ = ["RoomSpec", "procedural_room"]

@@ -12,6 +12,7 @@ One ray per pixel centre (:func:`~camera.pixel_rays`); the first triangle hit gi
 from __future__ import annotations
 
 import numpy as np
+
 from skeleton_mamba.tasks.egodance.builder.camera import CameraTrajectory, pixel_rays
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh
 

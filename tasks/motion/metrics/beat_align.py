@@ -29,8 +29,9 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter
 from scipy.signal import argrelextrema
-from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences, beat_indices
 from torchmetrics import Metric
+
+from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences, beat_indices
 
 __all__ = ["BeatAlign", "alignment_score", "kinematic_beats", "sequence_beat_align"]
 

@@ -29,11 +29,12 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import torch
+from torchmetrics import Metric
+from torchmetrics.utilities import dim_zero_cat
+
 from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences
 from skeleton_mamba.tasks.motion.metrics.geometric import geometric_features
 from skeleton_mamba.tasks.motion.metrics.kinetic import kinetic_features
-from torchmetrics import Metric
-from torchmetrics.utilities import dim_zero_cat
 
 __all__ = [
     "FrechetMotionDistance",

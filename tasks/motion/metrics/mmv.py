@@ -27,13 +27,14 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter
 from scipy.signal import argrelextrema
+from torchmetrics import Metric
+
 from skeleton_mamba.tasks.motion.metrics.beat_align import (
     alignment_score,
     kinematic_beats,
     sequence_beat_align,
 )
 from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences
-from torchmetrics import Metric
 
 __all__ = ["MMV", "flow_magnitudes", "load_video_frames", "visual_beats"]
 

@@ -19,8 +19,9 @@ from __future__ import annotations
 from typing import Any
 
 import torch
-from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences
 from torchmetrics import Metric
+
+from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences
 
 __all__ = ["PFC", "pfc_sequence_score"]
 

@@ -13,6 +13,7 @@ from os import PathLike
 from pathlib import Path
 
 import numpy as np
+
 from skeleton_mamba.tasks.motion.synthetic.dance import STYLES, synthesize_dance, write_dance
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.rotations import euler_to_matrix, matrix_to_axis_angle
 
