@@ -167,3 +167,40 @@ def test_stitched_sampling_windows_agree_on_overlaps():
         overlap,
     )
     assert long.shape == (8 + 3 * 5, 2)
+
+
+def _walking_denoiser(velocity: float):
+    """An oracle of a model trained on per-window canonical data: every window's x0 is a straight walk
+    starting at the origin (channel 0) plus a constant height (channel 1), whatever x_t is."""
+
+    def denoiser(x_t, t, cond):
+        k = torch.arange(x_t.shape[1], dtype=x_t.dtype)
+        out = torch.empty_like(x_t)
+        out[..., 0] = velocity * k
+        out[..., 1] = 0.9
+        return out
+
+    return denoiser
+
+
+@pytest.mark.parametrize("sampler", ["ddim", "ddpm"])
+def test_relative_channels_continue_across_window_seams(sampler):
+    diff = GaussianDiffusion(20)
+    windows, width, overlap, v = 4, 10, 4, 0.05
+    total = width + (windows - 1) * (width - overlap)
+    relative = torch.tensor([1.0, 0.0])  # channel 0 is relative to each window's start, channel 1 absolute
+
+    def run(post):
+        kwargs = dict(post_step=post, generator=torch.Generator().manual_seed(0))
+        if sampler == "ddim":
+            return ddim_sample(diff, _walking_denoiser(v), (windows, width, 2), sampling_steps=5, **kwargs)
+        return ddpm_sample(diff, _walking_denoiser(v), (windows, width, 2), **kwargs)
+
+    long = sample_long(run, overlap, relative=relative)
+    # one continuous walk: x = v * frame over the whole sequence, the height untouched
+    expected = torch.stack([v * torch.arange(total, dtype=torch.float32), torch.full((total,), 0.9)], -1)
+    torch.testing.assert_close(long, expected, rtol=0, atol=1e-5)
+    # without the relative channel every window restarts at the origin: a jump of v * (W - overlap) at seams
+    plain = sample_long(run, overlap)
+    steps = plain[1:, 0] - plain[:-1, 0]
+    assert steps.min() < -0.5 * v * (width - overlap)

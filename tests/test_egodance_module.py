@@ -1,6 +1,7 @@
 """EgoDance LightningModule and data module; the demo recipe through the real ``sm`` entry point."""
 
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -129,6 +130,16 @@ def test_module_trains_tests_and_predicts(tmp_path):
     assert dance.poses.shape == (60, 24, 3) and np.isfinite(dance.joints).all()
 
 
+def _audio_streams(path) -> int:
+    """Audio streams of a media file, read by the ffmpeg binary of imageio-ffmpeg (independent of our code)."""
+    import imageio_ffmpeg
+
+    probe = subprocess.run(
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True, text=True
+    )
+    return sum(" Audio: " in line for line in probe.stderr.splitlines())
+
+
 def test_demo_recipe_through_sm(tmp_path):
     sm = Path(sys.executable).with_name("sm")
     if not sm.exists():
@@ -137,16 +148,37 @@ def test_demo_recipe_through_sm(tmp_path):
     args = [
         str(sm), "fit", "--recipe", "egodance_demo.yaml", "--trainer.max_steps", "2",
         "--trainer.log_every_n_steps", "1", "--trainer.limit_val_batches", "0",
-        "--data.init_args.count", "1", "--data.init_args.duration_s", "5",
+        "--data.init_args.count", "2", "--data.init_args.duration_s", "5",
         "--data.init_args.frame_size", "32", "--data.init_args.image_size", "32",
         "--model.init_args.image_size", "32", "--data.init_args.val_fraction", "0",
-        "--data.init_args.test_fraction", "0", "--data.init_args.music_cache_dir", str(tmp_path / "cache"),
+        "--data.init_args.test_fraction", "0.5", "--data.init_args.music_cache_dir", str(tmp_path / "cache"),
+        "--model.init_args.sampling_steps", "2",
     ]  # fmt: skip
     proc = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert len(list((tmp_path / "runs/egodance_demo/data/ego/samples").iterdir())) == 1
+    assert len(list((tmp_path / "runs/egodance_demo/data/ego/samples").iterdir())) == 2
     run = tmp_path / "runs/egodance_demo/version_0"
     assert (run / "checkpoints/last.ckpt").is_file()
     rows = list(csv.DictReader((run / "metrics.csv").open()))
     losses = [float(r["train/loss"]) for r in rows if r.get("train/loss")]
     assert len(losses) == 2 and all(v == v and v > 0 for v in losses)
+    aligns = [float(r["train/align"]) for r in rows if r.get("train/align")]
+    assert len(aligns) == 2 and all(v > 0 for v in aligns)  # the alignment loss is part of training
+
+    # the DanceDemo callback: a held-out (test split) window danced, written as npz + bvh + mp4, labelled
+    import imageio.v3 as iio
+
+    from skeleton_mamba.tasks.motion.bvh import load_bvh
+    from skeleton_mamba.tasks.motion.motion_file import load_motion
+
+    demo = run / "demo"
+    summary = json.loads((demo / "demo.json").read_text())
+    assert summary["synthetic"] is True and summary["held_out_split"] == "test"
+    files = summary["samples"][0]["dance"]
+    assert all(Path(files[k]).name.startswith("synthetic_") for k in ("npz", "bvh", "mp4"))
+    assert "SYNTHETIC" in proc.stdout and str(Path(files["mp4"]).name) in proc.stdout
+    motion = load_motion(files["npz"])
+    assert motion.poses.shape == (150, 24, 3) and np.isfinite(motion.joints).all()
+    assert load_bvh(files["bvh"]).num_frames == 150
+    assert len(iio.imread(files["mp4"])) == 150
+    assert _audio_streams(files["mp4"]) == 1  # the music is muxed in

@@ -271,3 +271,17 @@ def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_pa
     (row,) = [r for r in read_metrics(test_dir / "metrics.csv") if r.get("test/top1")]
     assert float(row["test/top1"]) == pytest.approx(np.trace(counts) / counts.sum(), abs=1e-6)
     assert float(row["test/top1"]) > 0.6
+
+    predict = run_sm(["predict", "--recipe", "recipe.yaml", "--ckpt_path", str(checkpoint)], tmp_path)
+    assert predict.returncode == 0, predict.stderr[-3000:]
+    with (tmp_path / "runs" / "lightning_logs" / "version_2" / "predictions.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 24 and len({r["sample"] for r in rows}) == 24
+    predicted = np.zeros((3, 3), dtype=np.int64)
+    for r in rows:
+        predicted[int(r["label"]), int(r["predicted"])] += 1
+        probs = [float(pair.split(":")[1]) for pair in r["top5"].split(";")]
+        assert len(probs) == 3 and probs == sorted(probs, reverse=True)
+        assert sum(probs) == pytest.approx(1.0, abs=1e-3)
+        assert probs[0] == pytest.approx(float(r["probability"]), abs=1e-4)
+    np.testing.assert_array_equal(predicted, counts)  # the same clips and weights as `sm test`

@@ -17,7 +17,10 @@ from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion, _extract
 __all__ = ["Denoiser", "GuidanceTerm", "guided_x0", "ddpm_sample", "ddim_sample", "ddim_timesteps"]
 
 Denoiser = Callable[[torch.Tensor, torch.Tensor, Any], torch.Tensor]
-PostStep = Callable[[torch.Tensor], torch.Tensor]
+PostStep = Callable[[torch.Tensor, torch.Tensor | None, torch.Tensor], torch.Tensor]
+"""``post_step(x, x0_hat, signal) -> x``: a projection of the new sample x (B, ...) after every step, given
+the prediction x0_hat it came from (None before the first step) and ``signal`` (B, 1, ..., 1) =
+sqrt(alpha_bar) of x's noise level (x = signal * x0 + noise; 1 after the last step)."""
 
 
 class GuidanceTerm:
@@ -102,7 +105,8 @@ def ddpm_sample(
         guidance_weight: classifier-free guidance weight w.
         guidance: terms adjusting x0_hat or the posterior mean (:class:`GuidanceTerm`).
         clip_x0: clamp x0_hat to [-clip, clip] (EDGE: 1 on normalised data); ``None`` disables.
-        post_step: a projection applied to x after every step (e.g. window consistency).
+        post_step: a projection ``(x, x0_hat, signal) -> x`` applied after every step (:data:`PostStep`;
+            e.g. window consistency).
         x_T: the starting noise (default: drawn with ``generator``).
         generator: a CPU generator for reproducible noise.
         device, dtype: where and in which dtype to sample.
@@ -113,7 +117,8 @@ def ddpm_sample(
     """
     x = _initial_noise(shape, x_T, generator, device, dtype)
     if post_step is not None:
-        x = post_step(x)
+        last = torch.full((x.shape[0],), diffusion.num_steps - 1, device=x.device, dtype=torch.long)
+        x = post_step(x, None, _extract(diffusion.alphas_cumprod, last, x).sqrt())
     for i in tqdm(
         reversed(range(diffusion.num_steps)), total=diffusion.num_steps, disable=not progress, desc="DDPM"
     ):
@@ -128,7 +133,7 @@ def ddpm_sample(
         else:
             x = mean
         if post_step is not None:
-            x = post_step(x)
+            x = post_step(x, x0, _extract(diffusion.alphas_cumprod_prev, t, x).sqrt())
     return x
 
 
@@ -165,9 +170,10 @@ def ddim_sample(
     after the last step, so the final x equals the last x0_hat. Other arguments as :func:`ddpm_sample`.
     """
     x = _initial_noise(shape, x_T, generator, device, dtype)
-    if post_step is not None:
-        x = post_step(x)
     steps = ddim_timesteps(diffusion.num_steps, sampling_steps)
+    if post_step is not None:
+        first = torch.full((x.shape[0],), steps[0], device=x.device, dtype=torch.long)
+        x = post_step(x, None, _extract(diffusion.alphas_cumprod, first, x).sqrt())
     for k, i in enumerate(tqdm(steps, disable=not progress, desc="DDIM")):
         t = torch.full((x.shape[0],), i, device=x.device, dtype=torch.long)
         x0 = _predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
@@ -187,5 +193,5 @@ def ddim_sample(
         else:
             x = mean
         if post_step is not None:
-            x = post_step(x)
+            x = post_step(x, x0, abar_prev.sqrt())
     return x

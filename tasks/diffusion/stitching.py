@@ -4,6 +4,9 @@ A long sequence is cut into B windows of W frames starting every ``hop = W - ove
 windows are sampled as one batch and, after every denoising step, the first ``overlap`` frames of window
 b are overwritten by the last ``overlap`` frames of window b - 1 (:class:`WindowConsistency`), so the
 windows agree on their overlaps when sampling ends and :func:`stitch_windows` joins them seamlessly.
+Channels that the task expresses relative to each window's start (a root trajectory canonicalised to
+start at the origin) are in-painted shifted by where the window starts, so the model sees in-distribution
+inputs and the stitched trajectory continues across seams (:meth:`WindowConsistency.to_global`).
 """
 
 from __future__ import annotations
@@ -42,23 +45,57 @@ def split_windows(sequence: torch.Tensor, window: int, overlap: int) -> torch.Te
 
 
 class WindowConsistency:
-    """Post-step projection ``x[b, :overlap] = x[b - 1, W - overlap:]`` for b >= 1; x (B, W, ...).
+    """Post-step in-painting of the overlaps (:data:`.samplers.PostStep`); x (B, W, ...).
 
-    Windows are processed in order, so every overlap chain starts from window 0.
+    For b >= 1, in order (so every overlap chain starts from window 0)::
+
+        x[b, :overlap] = x[b - 1, W - overlap:] - signal * offset_b,
+        offset_b = relative * x0_hat[b - 1, W - overlap]
+
+    ``relative`` (broadcastable to one frame, x.shape[2:]; None: no such channel) marks the channels that
+    hold positions relative to each window's own first frame, as in data canonicalised per window (e.g.
+    the root's horizontal position, 0 at frame 0). ``offset_b`` is where window b starts in window b - 1's
+    frame, taken from the clean prediction x0_hat; it is scaled by ``signal`` = sqrt(alpha_bar) because
+    x = signal * x0 + noise (shifting x0 by d shifts x by signal * d). After the last step (signal 1,
+    x = x0_hat) window b starts exactly at 0 in its own frame and continues window b - 1 exactly;
+    :meth:`to_global` adds the accumulated offsets to bring every window into window 0's frame.
+
+    Args:
+        overlap: frames shared by consecutive windows.
+        relative: the per-window-relative channel mask, or None.
     """
 
-    def __init__(self, overlap: int):
+    def __init__(self, overlap: int, relative: torch.Tensor | None = None):
         self.overlap = overlap
+        self.relative = relative
+        self.offsets: torch.Tensor | None = None  # (B, ...) offset_b of the last call (offset_0 = 0)
 
-    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+    def __call__(
+        self, x: torch.Tensor, x0: torch.Tensor | None = None, signal: torch.Tensor | float = 1.0
+    ) -> torch.Tensor:
         _check(x.shape[1], self.overlap)
+        offsets = x.new_zeros(x.shape[0], *x.shape[2:])
         if self.overlap == 0 or x.shape[0] < 2:
+            self.offsets = offsets
             return x
-        x = x.clone()
         w = x.shape[1]
+        hop = w - self.overlap
+        if self.relative is not None and x0 is not None:
+            rel = self.relative.to(x.device, x.dtype)
+            offsets[1:] = x0[:-1, hop] * rel
+        scale = torch.as_tensor(signal, dtype=x.dtype, device=x.device).reshape(-1)
+        scale = scale.expand(x.shape[0]).reshape(-1, *([1] * (x.ndim - 2)))
+        x = x.clone()
         for b in range(1, x.shape[0]):
-            x[b, : self.overlap] = x[b - 1, w - self.overlap :]
+            x[b, : self.overlap] = x[b - 1, hop:] - scale[b] * offsets[b]
+        self.offsets = offsets
         return x
+
+    def to_global(self, windows: torch.Tensor) -> torch.Tensor:
+        """(B, W, ...) windows in their own frames -> in window 0's frame (cumulative offsets added)."""
+        if self.offsets is None:
+            return windows
+        return windows + self.offsets.cumsum(0)[:, None].to(windows.dtype)
 
 
 def stitch_windows(windows: torch.Tensor, overlap: int, total_frames: int | None = None) -> torch.Tensor:
@@ -92,11 +129,14 @@ def stitch_windows(windows: torch.Tensor, overlap: int, total_frames: int | None
 
 
 def sample_long(
-    sample_fn: Callable[[Callable[[torch.Tensor], torch.Tensor]], torch.Tensor],
+    sample_fn: Callable[[WindowConsistency], torch.Tensor],
     overlap: int,
     total_frames: int | None = None,
+    relative: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Run ``sample_fn(post_step)`` (a sampler call producing (B, W, ...) windows) with window
-    consistency as its post-step projection, then stitch the windows into one sequence."""
-    windows = sample_fn(WindowConsistency(overlap))
-    return stitch_windows(windows, overlap, total_frames)
+    consistency (``relative`` channels as :class:`WindowConsistency`) as its post-step projection,
+    then stitch the windows, in window 0's frame, into one sequence."""
+    consistency = WindowConsistency(overlap, relative)
+    windows = sample_fn(consistency)
+    return stitch_windows(consistency.to_global(windows), overlap, total_frames)

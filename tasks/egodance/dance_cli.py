@@ -1,20 +1,23 @@
-"""``sm dance``: estimate a dance with a trained EMM checkpoint and write it as our motion ``.npz``.
+"""``sm dance``: estimate a dance with a trained EMM checkpoint; writes the motion (.npz, BVH) and an mp4.
 
 Examples::
 
     sm dance --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt \\
-        --sample runs/egodance_demo/data/ego/samples/<id> --out dance.npz
-    sm dance --ckpt last.ckpt --music song.wav --video ego.mp4 --out dance.npz --sampler ddpm
+        --sample runs/egodance_demo/data/ego/samples/<id> --out dance/
+    sm dance --ckpt last.ckpt --music song.wav --video ego.mp4 --out dance/ --sampler ddpm
 
 ``--sample`` reads an EgoAIST++ sample folder (music slice, egocentric frames and the camera trajectory for
-head guidance). ``--music`` (+ ``--video`` for vision models) dances a whole track: tracks longer than the
-training window are sampled as overlapping windows kept consistent during sampling (EDGE long-form).
-The output can be rendered with ``sm render`` or converted to BVH.
+head guidance). ``--music`` (+ ``--video`` for vision models: a video file or a folder of images) dances a
+whole track: tracks longer than the training window are sampled as overlapping windows whose overlaps are
+in-painted at every denoising step (EDGE long-form), so a 60 s song gives one continuous dance.
+``--out DIR`` receives ``<name>.npz`` (our motion format), ``<name>.bvh`` and ``<name>.mp4`` (the skeleton
+with the music muxed in; ``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -24,14 +27,25 @@ import torch
 __all__ = ["main", "build_parser"]
 
 
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
+    return width, height
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm dance", description=__doc__.split("\n\n")[0])
     p.add_argument("--ckpt", required=True, help="an EgoDanceModule checkpoint (.ckpt)")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sample", help="an EgoAIST++ sample folder (sm make-ego)")
     src.add_argument("--music", help="an audio file")
-    p.add_argument("--video", help="egocentric video for --music (needed by vision models)")
-    p.add_argument("--out", required=True, help="output motion .npz")
+    p.add_argument("--video", help="egocentric video file or image folder for --music (vision models)")
+    p.add_argument("--out", required=True, help="output folder (or FILE.npz: files named after FILE)")
+    p.add_argument("--name", default="dance", help="file stem inside an output folder")
+    p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
+    p.add_argument("--render-size", type=_size, default=(640, 480), help="video WxH (multiples of 16)")
     p.add_argument("--sampler", choices=("ddim", "ddpm"), default=None, help="default: the checkpoint's")
     p.add_argument("--steps", type=int, default=None, help="DDIM steps (default: the checkpoint's)")
     p.add_argument("--guidance", type=float, default=None, help="classifier-free guidance weight")
@@ -42,6 +56,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     return p
+
+
+def _read_video(path: Path) -> np.ndarray:
+    """(T, H, W, 3) uint8 frames of a video file or a folder of images (sorted by name)."""
+    import imageio.v3 as iio
+
+    if path.is_dir():
+        images = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp"))
+        if not images:
+            raise SystemExit(f"sm dance: {path} holds no .png/.jpg images")
+        frames = [np.asarray(iio.imread(p)) for p in images]
+    elif path.is_file():
+        frames = list(np.asarray(iio.imread(path)))
+    else:
+        raise SystemExit(f"sm dance: video {path} not found")
+    out = []
+    for i, f in enumerate(frames):
+        if f.ndim == 2:
+            f = np.repeat(f[..., None], 3, axis=-1)
+        if f.ndim != 3 or f.shape[-1] not in (3, 4):
+            raise SystemExit(f"sm dance: {path}: frame {i} has shape {f.shape}, expected (H, W, 3)")
+        out.append(f[..., :3])
+    return np.stack(out)
+
+
+def _music_source(args) -> tuple[str | None, float]:
+    """The audio file and start time (s) the dance is sampled for."""
+    if args.music:
+        return args.music, 0.0
+    meta = json.loads((Path(args.sample) / "meta.json").read_text(encoding="utf-8"))
+    music = meta.get("music") or {}
+    return music.get("path"), float(music.get("start_s", 0.0))
 
 
 def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
@@ -66,10 +112,9 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
     if vision:
         if not args.video:
             raise SystemExit(f"sm dance: {args.ckpt} conditions on egocentric video; pass --video")
-        import imageio.v3 as iio
         import kornia
 
-        rgb = torch.from_numpy(np.asarray(iio.imread(args.video))).permute(0, 3, 1, 2)
+        rgb = torch.from_numpy(_read_video(Path(args.video))).permute(0, 3, 1, 2)
         n = min(len(rgb), len(music))
         music = music[:n]
         frames = kornia.geometry.transform.resize(rgb[:n].float() / 255.0, (size, size), antialias=True)
@@ -78,9 +123,10 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from skeleton_mamba.tasks.egodance.export import write_dance
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
-    from skeleton_mamba.tasks.egodance.sampling import sample_long_dance, tokens_to_motion
-    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
+    from skeleton_mamba.tasks.motion.render import RenderStyle
 
     if not Path(args.ckpt).is_file():
         print(f"sm dance: checkpoint {args.ckpt} not found", file=sys.stderr)
@@ -104,6 +150,22 @@ def main(argv: list[str] | None = None) -> int:
         generator=torch.Generator().manual_seed(args.seed),
         progress=args.progress,
     )
-    path = save_motion(args.out, tokens_to_motion(tokens))
-    print(f"sm dance: {tokens.shape[0]} frames ({tokens.shape[0] / 30:.1f} s at 30 fps) -> {path}")
+    out = Path(args.out)
+    out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
+    width, height = args.render_size
+    music_file, start_s = _music_source(args)
+    files = write_dance(
+        tokens,
+        out_dir,
+        name,
+        music=music_file,
+        music_start_s=start_s,
+        render=not args.no_render,
+        style=RenderStyle(width=width, height=height),
+        title=f"EMM {Path(args.ckpt).name}",
+        progress=args.progress,
+    )
+    seconds = tokens.shape[0] / 30
+    print(f"sm dance: {tokens.shape[0]} frames ({seconds:.1f} s at 30 fps) written to", out_dir)
+    print("\n".join(files.lines()))
     return 0

@@ -9,6 +9,7 @@ Norms are squared Euclidean over every joint coordinate of a frame, averaged ove
 - ``L_contact = 1/(T-1) sum_i ||(FK(x_hat^{i+1}) - FK(x_hat^i)) * b_hat^i||^2`` (Eq. 28) over the four foot
   joints, with ``b_hat^i`` the model's own contact prediction thresholded (EDGE: > 0.95)
 - ``L_kin = lambda_pos L_pos + lambda_vel L_vel + lambda_contact L_contact`` (Eq. 29; weights unpublished)
+- ``L_align``: the music-vision alignment loss (:func:`alignment_loss`; our interpretation, see there)
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 
 from skeleton_mamba.tasks.egodance.representation import (
     CONTACT,
@@ -31,6 +33,7 @@ __all__ = [
     "position_loss",
     "velocity_loss",
     "contact_loss",
+    "alignment_loss",
     "emm_losses",
 ]
 
@@ -82,6 +85,36 @@ def contact_loss(x0_hat: torch.Tensor, threshold: float = 0.95) -> torch.Tensor:
     feet = motion_joints(x0_hat)[..., list(FOOT_JOINTS), :]
     vel = (feet[:, 1:] - feet[:, :-1]) * b[..., None]
     return _frame_sq_norm(vel).mean()
+
+
+def alignment_loss(z_a: torch.Tensor, z_v: torch.Tensor, temperature: float = 0.07) -> torch.Tensor:
+    """Music-vision alignment loss, a symmetric InfoNCE over time steps (OUR INTERPRETATION).
+
+    The seed's supplement (section 6.3) adds "an alignment loss as proposed in our method to improve the
+    consistency between the modalities" to every baseline and calls the fused embeddings "aligned", but
+    defines the loss only in the (unavailable) main paper. We read it as a contrastive (CLIP / InfoNCE)
+    alignment of the music embedding z_a and the vision embedding z_v *per time step*: the music and
+    vision tokens of the same frame of the same window are a positive pair, every other frame of the batch
+    is a negative::
+
+        a_i = z_a,i / ||z_a,i||,  v_j = z_v,j / ||z_v,j||,  s_ij = <a_i, v_j> / tau   (i, j over B*T tokens)
+        L_align = 1/2 [ -1/N sum_i log softmax_j(s_ij)[i] - 1/N sum_j log softmax_i(s_ij)[j] ]
+
+    Args:
+        z_a: (B, T, Dc) music embeddings (music encoder output).
+        z_v: (B, T, Dc) vision embeddings (vision encoder output).
+        temperature: tau (CLIP's initial value 0.07).
+
+    Returns:
+        The scalar loss.
+    """
+    if z_a.shape != z_v.shape:
+        raise ValueError(f"music {tuple(z_a.shape)} and vision {tuple(z_v.shape)} embeddings differ in shape")
+    a = F.normalize(z_a.flatten(0, -2), dim=-1)
+    v = F.normalize(z_v.flatten(0, -2), dim=-1)
+    logits = a @ v.T / temperature  # (N, N), N = B * T
+    target = torch.arange(logits.shape[0], device=logits.device)
+    return 0.5 * (F.cross_entropy(logits, target) + F.cross_entropy(logits.T, target))
 
 
 def emm_losses(

@@ -95,18 +95,28 @@ class EMM(nn.Module):
         )
         self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
 
-    def encode_condition(self, music: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
-        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] -> fused condition c (B, T, Dc)."""
+    def encode_modalities(
+        self, music: torch.Tensor, frames: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Music (B, T, L), frames (B, T, 3, H, W) in [0, 1] -> z_a (B, T, Dc), z_v (B, T, Dc) or None."""
         z_a = self.music_encoder(music)
         if self.vision_encoder is None:
-            return z_a
+            return z_a, None
         if frames is None:
             raise ValueError("this EMM encodes egocentric frames (use_vision=True) but none were given")
         if frames.shape[:2] != music.shape[:2]:
             raise ValueError(
                 f"frames {tuple(frames.shape[:2])} and music {tuple(music.shape[:2])} disagree on (B, T)"
             )
-        return self.fusion(z_a, self.vision_encoder(frames))
+        return z_a, self.vision_encoder(frames)
+
+    def fuse(self, z_a: torch.Tensor, z_v: torch.Tensor | None) -> torch.Tensor:
+        """The fusion module (music only: z_a unchanged) -> condition c (B, T, Dc)."""
+        return z_a if z_v is None else self.fusion(z_a, z_v)
+
+    def encode_condition(self, music: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
+        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] -> fused condition c (B, T, Dc)."""
+        return self.fuse(*self.encode_modalities(music, frames))
 
     def drop_condition(self, context: torch.Tensor, drop: torch.Tensor) -> torch.Tensor:
         """Replace the condition of samples where ``drop`` (B,) is True by the learned null condition."""

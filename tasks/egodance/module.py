@@ -2,7 +2,8 @@
 
 Training: x0-prediction diffusion (cosine, 1000 steps) on motion tokens, condition dropped with
 probability ``cond_drop_prob`` (EDGE: 0.25; learned null condition) for classifier-free guidance,
-loss = reconstruction + L_kin (Eq. 29), AdamW 2e-4, an exponential moving average of the weights
+loss = reconstruction + L_kin (Eq. 29) + lambda_align L_align (the music-vision alignment loss, our
+interpretation: :func:`.losses.alignment_loss`), AdamW 2e-4, an exponential moving average of the weights
 (original code: 0.995 every 10 steps) used for evaluation and prediction.
 
 Validation logs the diffusion loss at seeded timesteps. Test samples every window (DDIM
@@ -21,7 +22,7 @@ from transformers import ResNetConfig
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion
-from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, emm_losses
+from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance
@@ -52,6 +53,8 @@ class EgoDanceModule(LightningModule):
         reconstruction: ``l2`` (EDGE) or ``l1`` (original code).
         lambda_pos: weight of L_pos. lambda_vel: of L_vel. lambda_contact: of L_contact (unpublished).
         contact_threshold: predicted-contact threshold of L_contact.
+        lambda_align: weight of the music-vision alignment loss (0 disables; vision models only).
+        align_temperature: its InfoNCE temperature tau.
         lr: AdamW learning rate (2e-4). weight_decay: AdamW weight decay.
         ema_decay: EMA decay. ema_every: update the EMA every this many optimizer steps.
         sampler: ``ddim`` or ``ddpm`` at test/predict time. sampling_steps: DDIM steps.
@@ -82,6 +85,8 @@ class EgoDanceModule(LightningModule):
         lambda_vel: float = 0.1,
         lambda_contact: float = 1.0,
         contact_threshold: float = 0.95,
+        lambda_align: float = 0.01,
+        align_temperature: float = 0.07,
         lr: float = 2e-4,
         weight_decay: float = 0.02,
         ema_decay: float = 0.995,
@@ -123,20 +128,25 @@ class EgoDanceModule(LightningModule):
     # ------------------------------------------------------------------ training
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]
-        context = self.model.encode_condition(batch["music"], batch.get("frames"))
+        z_a, z_v = self.model.encode_modalities(batch["music"], batch.get("frames"))
+        context = self.model.fuse(z_a, z_v)
         b = x0.shape[0]
         u = torch.rand(b, generator=generator).to(x0.device)
         context = self.model.drop_condition(context, u < self.hparams.cond_drop_prob)
         t = torch.randint(0, self.diffusion.num_steps, (b,), generator=generator).to(x0.device)
         noise = torch.randn(x0.shape, generator=generator).to(x0.device, x0.dtype)
         x_t, t, target = self.diffusion.training_pair(x0, t, noise)
-        return emm_losses(
+        losses = emm_losses(
             self.model(x_t, t, context),
             target,
             self.weights,
             self.hparams.reconstruction,
             self.hparams.contact_threshold,
         )
+        if z_v is not None and self.hparams.lambda_align > 0:
+            losses["align"] = alignment_loss(z_a, z_v, self.hparams.align_temperature)
+            losses["loss"] = losses["loss"] + self.hparams.lambda_align * losses["align"]
+        return losses
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         losses = self._losses(batch)

@@ -11,22 +11,35 @@ import numpy as np
 import torch
 
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, WindowConsistency, ddim_sample, ddpm_sample
-from skeleton_mamba.tasks.diffusion.stitching import split_windows, stitch_windows
+from skeleton_mamba.tasks.diffusion.stitching import split_windows, stitch_windows, window_starts
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
     NUM_CHANNELS,
     NUM_JOINTS,
+    ROOT,
     decode_motion,
     motion_joints,
 )
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.rotations import matrix_to_axis_angle
 
-__all__ = ["sample_dance", "sample_long_dance", "tokens_to_motion"]
+__all__ = ["sample_dance", "sample_long_dance", "tokens_to_motion", "root_xz_mask"]
 
 
-@torch.no_grad()
+def root_xz_mask() -> torch.Tensor:
+    """(24, 10) mask of the window-relative channels: the root's horizontal position (x, z; y is up).
+
+    Training windows are canonicalised to start at x = z = 0 (:mod:`.data`), so long-form windows are
+    in-painted and stitched with these channels relative to each window's start.
+    """
+    mask = torch.zeros(NUM_JOINTS, NUM_CHANNELS)
+    mask[0, ROOT.start] = 1.0
+    mask[0, ROOT.start + 2] = 1.0
+    return mask
+
+
+@torch.inference_mode()
 def sample_dance(
     model: EMM,
     diffusion: GaussianDiffusion,
@@ -45,7 +58,8 @@ def sample_dance(
 ) -> torch.Tensor:
     """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
 
-    ``sampler`` is ``"ddim"`` (``steps`` steps) or ``"ddpm"`` (all T steps; ``steps`` is ignored).
+    ``sampler`` is ``"ddim"`` (``steps`` steps) or ``"ddpm"`` (all T steps; ``steps`` is ignored). The
+    condition (music + vision encoders + fusion) is encoded once, not per denoising step.
     """
     b, t = music.shape[:2]
     context = model.encode_condition(music, frames)
@@ -83,8 +97,11 @@ def sample_long_dance(
     """A whole track: music (T, L), frames (T, 3, S, S), head (T, 3) -> tokens (T, 24, 10).
 
     The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75), sampled as
-    one batch whose overlaps are kept equal after every step, and stitched. Other arguments as
-    :func:`sample_dance`.
+    one batch whose overlaps are in-painted after every step (:class:`WindowConsistency`; the root's
+    horizontal position relative to each window's start, as in training), and stitched into one
+    continuous dance in the first window's frame. Head targets (T, 3) are moved into each window's frame
+    by the head's own horizontal displacement since frame 0 (an approximation of the root's, which is only
+    known once sampled). Other arguments as :func:`sample_dance`.
     """
     total = music.shape[0]
     if total <= window:
@@ -96,11 +113,16 @@ def sample_long_dance(
         return out[0, : window - pad]
     music_w = split_windows(music, window, overlap)
     frames_w = None if frames is None else split_windows(frames, window, overlap)
-    head_w = None if head is None else split_windows(head, window, overlap)
-    windows = sample_dance(
-        model, diffusion, music_w, frames_w, head_w, post_step=WindowConsistency(overlap), **kwargs
-    )
-    return stitch_windows(windows, overlap, total)
+    head_w = None
+    if head is not None:
+        head_w = split_windows(head, window, overlap)
+        starts, _ = window_starts(total, window, overlap)
+        shift = head[[min(s, total - 1) for s in starts]] - head[:1]
+        shift[:, 1] = 0.0  # heights are absolute (floor at y = 0)
+        head_w = head_w - shift[:, None]
+    consistency = WindowConsistency(overlap, root_xz_mask())
+    windows = sample_dance(model, diffusion, music_w, frames_w, head_w, post_step=consistency, **kwargs)
+    return stitch_windows(consistency.to_global(windows), overlap, total)
 
 
 def tokens_to_motion(tokens: torch.Tensor, fps: float = 30.0) -> MotionData:

@@ -16,7 +16,8 @@ and 0.2 for 2 devices x 128. The value used is logged as ``lr`` and printed at f
 Evaluation follows PYSKL (``average_clips='prob'``): a sample may carry several clips
 (B, N, M, T, J, C); the softmax probabilities of its clips are averaged. Metrics are torchmetrics
 top-1 / top-5 accuracy (micro) and, at test time, mean class accuracy and the confusion matrix,
-saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir.
+saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir. ``sm predict`` writes
+``predictions.csv`` there (:mod:`.prediction_writer`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
+from skeleton_mamba.tasks.recognition.prediction_writer import PredictionCSVWriter
 
 __all__ = ["ActionRecognitionModule"]
 
@@ -129,6 +131,10 @@ class ActionRecognitionModule(LightningModule):
         """Class probabilities (B, K)."""
         keypoint = batch[0] if isinstance(batch, list | tuple) else batch
         return self(keypoint)
+
+    def configure_callbacks(self) -> list:
+        """``sm predict`` writes ``predictions.csv`` to the log dir (:class:`PredictionCSVWriter`)."""
+        return [PredictionCSVWriter(self.hparams.class_names)]
 
     def on_test_epoch_end(self) -> None:
         matrix = self.test_confusion.compute()  # synchronized over processes

@@ -89,6 +89,12 @@ class _TextMotionDataModule(LightningDataModule):
     def _statistics(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
 
+    def evaluation_clips(self, split: str = "test") -> list[MotionClip]:
+        """The clips of a set-up split (the T2M evaluation draws its own captions and crops)."""
+        if split not in self.datasets:
+            raise RuntimeError(f"{type(self).__name__}: split {split!r} is not set up (call setup first)")
+        return self.datasets[split].clips
+
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
         return DataLoader(
             self.datasets[split],

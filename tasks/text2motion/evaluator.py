@@ -26,7 +26,13 @@ from torch.nn.utils.rnn import pack_padded_sequence
 
 from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
 
-__all__ = ["TextEncoderBiGRUCo", "MovementConvEncoder", "MotionEncoderBiGRUCo", "T2MEvaluator"]
+__all__ = [
+    "TextEncoderBiGRUCo",
+    "MovementConvEncoder",
+    "MotionEncoderBiGRUCo",
+    "T2MEvaluator",
+    "load_evaluator",
+]
 
 UNIT_LENGTH = 4
 
@@ -165,6 +171,27 @@ class T2MEvaluator(nn.Module):
             getattr(model, key).load_state_dict(checkpoint[key])
         return model.eval()
 
+    @classmethod
+    def from_lightning_checkpoint(cls, path: str | PathLike[str], feature_dim: int = 263) -> T2MEvaluator:
+        """The evaluator of a ``sm fit --recipe t2m_evaluator.yaml`` checkpoint (``evaluator.*`` keys).
+
+        Not comparable with published numbers (``comparable`` is False).
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: T2M evaluator checkpoint not found")
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        state = checkpoint.get("state_dict", {}) if isinstance(checkpoint, dict) else {}
+        prefix = "evaluator."
+        weights = {k[len(prefix) :]: v for k, v in state.items() if k.startswith(prefix)}
+        if not weights:
+            raise KeyError(
+                f"{path}: no 'evaluator.*' weights in its state_dict (not a T2MEvaluatorModule file)"
+            )
+        model = cls(feature_dim, comparable=False)
+        model.load_state_dict(weights)
+        return model.eval()
+
     def embed_text(
         self, word_embs: torch.Tensor, pos_onehot: torch.Tensor, cap_lens: torch.Tensor
     ) -> torch.Tensor:
@@ -175,3 +202,22 @@ class T2MEvaluator(nn.Module):
         """Evaluator-normalised motions (B, T, 263) with lengths (B,) (multiples of 4) -> (B, 512)."""
         movements = self.movement_encoder(motions[..., :-4].float())
         return self.motion_encoder(movements, torch.div(m_lens, UNIT_LENGTH, rounding_mode="floor"))
+
+
+def load_evaluator(path: str | PathLike[str] | None, feature_dim: int = 263, seed: int = 0) -> T2MEvaluator:
+    """The evaluator for the T2M protocol.
+
+    Args:
+        path: the official ``finest.tar`` (comparable), a Lightning ``.ckpt`` of
+            :class:`~.evaluator_module.T2MEvaluatorModule` (trained here), or ``None`` for a randomly
+            initialised evaluator drawn with ``seed`` (smoke runs only). The last two are not comparable.
+        feature_dim: motion feature size (263).
+        seed: initialisation seed of the random evaluator (the global RNG is left untouched).
+    """
+    if path is None:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            return T2MEvaluator(feature_dim, comparable=False).eval()
+    if Path(path).suffix == ".ckpt":
+        return T2MEvaluator.from_lightning_checkpoint(path, feature_dim)
+    return T2MEvaluator.from_checkpoint(path, feature_dim)

@@ -14,17 +14,24 @@ import torch
 from torch.utils.data import DataLoader
 
 from skeleton_mamba.tasks.text2motion.data import HumanML3DDataModule, TextMotionDataset
-from skeleton_mamba.tasks.text2motion.glove import WordVectorizer
+from skeleton_mamba.tasks.text2motion.glove import HashedWordVectorizer, WordVectorizer
 from skeleton_mamba.tasks.text2motion.humanml3d import MAX_MOTION_LENGTH, MotionClip, crop_length, load_clips
 
 __all__ = ["EvaluatorDataset", "T2MEvaluatorDataModule"]
 
 
 class EvaluatorDataset(TextMotionDataset):
-    """Items ``{word_embs (22, 300), pos_onehot (22, 15), cap_len, motion (196, 263), length}``."""
+    """Items ``{word_embs (22, 300), pos_onehot (22, 15), cap_len, motion (196, 263), length, caption}``.
+
+    ``words`` is a :class:`~.glove.WordVectorizer` (or the :class:`~.glove.HashedWordVectorizer` stand-in).
+    """
 
     def __init__(
-        self, clips: list[MotionClip], mean: np.ndarray, std: np.ndarray, words: WordVectorizer
+        self,
+        clips: list[MotionClip],
+        mean: np.ndarray,
+        std: np.ndarray,
+        words: WordVectorizer | HashedWordVectorizer,
     ) -> None:
         super().__init__(clips, mean, std)
         self.words = words
@@ -44,6 +51,7 @@ class EvaluatorDataset(TextMotionDataset):
             "cap_len": cap_len,
             "motion": torch.from_numpy(motion),
             "length": length,
+            "caption": caption.text,
         }
 
 

@@ -11,10 +11,15 @@ A token ``word/POS`` maps to the word's vector (``unk`` when unknown, with POS `
 one-hot; words of the five "VIP" lists override the spaCy POS. Captions become ``sos`` + at most 20
 tokens + ``eos``, padded with ``unk/OTHER`` to 22 (``Text2MotionDatasetV2``). The pickles are read with
 the toolkit's restricted unpickler.
+
+Without the GloVe files, :class:`HashedWordVectorizer` gives every word a fixed random vector (seeded by
+the word's CRC-32), so a randomly initialised evaluator still runs the protocol end to end; such scores
+are not comparable with published numbers.
 """
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
@@ -23,7 +28,14 @@ import numpy as np
 
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 
-__all__ = ["POS_ENUMERATOR", "VIP_WORDS", "MAX_TEXT_LENGTH", "WordVectorizer", "pad_tokens"]
+__all__ = [
+    "POS_ENUMERATOR",
+    "VIP_WORDS",
+    "MAX_TEXT_LENGTH",
+    "WordVectorizer",
+    "HashedWordVectorizer",
+    "pad_tokens",
+]
 
 POS_ENUMERATOR = {
     "VERB": 0,
@@ -72,7 +84,38 @@ def pad_tokens(tokens: Sequence[str], max_length: int = MAX_TEXT_LENGTH) -> tupl
     return words + ["unk/OTHER"] * (max_length + 2 - length), length
 
 
-class WordVectorizer:
+class _TokenFeatures:
+    """``word/POS`` token -> (word vector, POS one-hot); subclasses provide :meth:`vector`."""
+
+    dim: int
+
+    def vector(self, word: str) -> np.ndarray | None:
+        """The (dim,) vector of ``word``, ``None`` when unknown."""
+        raise NotImplementedError
+
+    @staticmethod
+    def pos_one_hot(pos: str) -> np.ndarray:
+        """(15,) one-hot of a POS tag (unknown tags -> ``OTHER``)."""
+        vector = np.zeros(len(POS_ENUMERATOR), np.float32)
+        vector[POS_ENUMERATOR.get(pos, POS_ENUMERATOR["OTHER"])] = 1.0
+        return vector
+
+    def __getitem__(self, token: str) -> tuple[np.ndarray, np.ndarray]:
+        word, _, pos = token.partition("/")
+        vector = self.vector(word)
+        if vector is None:
+            return self.vector("unk"), self.pos_one_hot("OTHER")
+        vip = next((key for key, values in VIP_WORDS.items() if word in values), None)
+        return vector, self.pos_one_hot(vip or pos)
+
+    def encode(self, tokens: Sequence[str]) -> tuple[np.ndarray, np.ndarray, int]:
+        """Padded caption -> word vectors (22, dim), POS one-hots (22, 15) and the sentence length."""
+        padded, length = pad_tokens(tokens)
+        pairs = [self[t] for t in padded]
+        return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs]), length
+
+
+class WordVectorizer(_TokenFeatures):
     """GloVe vector and POS one-hot of ``word/POS`` tokens.
 
     Args:
@@ -97,22 +140,27 @@ class WordVectorizer:
             raise ValueError(f"{paths[1]}: the vocabulary has no 'unk' entry")
         self.dim = int(vectors.shape[1])
 
-    @staticmethod
-    def pos_one_hot(pos: str) -> np.ndarray:
-        """(15,) one-hot of a POS tag (unknown tags -> ``OTHER``)."""
-        vector = np.zeros(len(POS_ENUMERATOR), np.float32)
-        vector[POS_ENUMERATOR.get(pos, POS_ENUMERATOR["OTHER"])] = 1.0
-        return vector
+    def vector(self, word: str) -> np.ndarray | None:
+        return self.word_to_vector.get(word)
 
-    def __getitem__(self, token: str) -> tuple[np.ndarray, np.ndarray]:
-        word, _, pos = token.partition("/")
-        if word not in self.word_to_vector:
-            return self.word_to_vector["unk"], self.pos_one_hot("OTHER")
-        vip = next((key for key, values in VIP_WORDS.items() if word in values), None)
-        return self.word_to_vector[word], self.pos_one_hot(vip or pos)
 
-    def encode(self, tokens: Sequence[str]) -> tuple[np.ndarray, np.ndarray, int]:
-        """Padded caption -> word vectors (22, 300), POS one-hots (22, 15) and the sentence length."""
-        padded, length = pad_tokens(tokens)
-        pairs = [self[t] for t in padded]
-        return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs]), length
+class HashedWordVectorizer(_TokenFeatures):
+    """Stand-in for GloVe: word -> N(0, I / dim) vector drawn with seed ``crc32(word) + seed``.
+
+    Every word is known (no ``unk`` substitution), so the POS one-hots follow the tokens' tags.
+
+    Args:
+        dim: vector size (300 as GloVe).
+        seed: offset of the per-word seeds.
+    """
+
+    def __init__(self, dim: int = 300, seed: int = 0) -> None:
+        self.dim = dim
+        self.seed = seed
+        self._cache: dict[str, np.ndarray] = {}
+
+    def vector(self, word: str) -> np.ndarray:
+        if word not in self._cache:
+            rng = np.random.default_rng(zlib.crc32(word.encode("utf-8")) + self.seed)
+            self._cache[word] = (rng.standard_normal(self.dim) / np.sqrt(self.dim)).astype(np.float32)
+        return self._cache[word]

@@ -40,6 +40,7 @@ __all__ = [
     "mirror_source",
     "read_split",
     "read_statistics",
+    "read_feature_vector",
     "read_motion",
     "read_captions",
     "load_clips",
@@ -125,7 +126,9 @@ def read_split(root: str | PathLike[str], split: str) -> list[str]:
     return ids
 
 
-def _read_vector(path: Path, what: str) -> np.ndarray:
+def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
+    """A (263,) float32 vector from a ``.npy`` file (statistics); ``what`` names it in errors."""
+    path = Path(path)
     array = np.load(_require(path, what), allow_pickle=False)
     if array.shape != (FEATURE_DIM,):
         raise ValueError(f"{path}: expected {what} of shape ({FEATURE_DIM},), got {array.shape}")
@@ -135,8 +138,8 @@ def _read_vector(path: Path, what: str) -> np.ndarray:
 def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
     """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; Std must be positive."""
     root = Path(root)
-    mean = _read_vector(root / "Mean.npy", "Mean")
-    std = _read_vector(root / "Std.npy", "Std")
+    mean = read_feature_vector(root / "Mean.npy", "Mean")
+    std = read_feature_vector(root / "Std.npy", "Std")
     if not np.all(std > 0) or not np.all(np.isfinite(mean)):
         raise ValueError(f"{root / 'Std.npy'}: Std must be positive and Mean finite")
     return mean, std

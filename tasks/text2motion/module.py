@@ -9,9 +9,17 @@ classifier-free guidance, AdamW (lr 1e-4, weight decay 0). Sampling: classifier-
 The text encoder (:class:`~.text_encoder.TextEncoder`, frozen) is kept outside the module's state:
 checkpoints hold only the denoiser and the feature statistics (``feature_mean``, ``feature_std``,
 copied from the data module's ``statistics()`` at setup), so generation de-normalises on its own.
+
+``sm test`` reports the test loss and then runs the T2M evaluation protocol (:mod:`.evaluation`:
+``eval_repetitions`` replications of R-Precision, FID, MM-Dist, Diversity and, when ``eval_mm_samples``
+> 0, MultiModality, for the real test motions and for the model), prints the table with 95 % intervals
+and writes ``t2m_evaluation.json`` / ``.csv`` in the log folder. The table is labelled comparable with
+published numbers only when the official evaluator checkpoint, its statistics and GloVe were loaded.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import torch
 from lightning.pytorch import LightningModule
@@ -19,7 +27,18 @@ from lightning.pytorch import LightningModule
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.text2motion.evaluation import T2MEvaluation, T2MProtocol
+from skeleton_mamba.tasks.text2motion.evaluation_report import (
+    COMPARABLE,
+    NOT_COMPARABLE,
+    format_table,
+    summarize,
+    write_report,
+)
+from skeleton_mamba.tasks.text2motion.evaluator import load_evaluator
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
+from skeleton_mamba.tasks.text2motion.glove import HashedWordVectorizer, WordVectorizer
+from skeleton_mamba.tasks.text2motion.humanml3d import read_feature_vector
 from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 
@@ -40,6 +59,22 @@ class TextToMotionModule(LightningModule):
         sampling_steps: ``None`` = DDPM over all T steps; else DDIM with this many steps.
         lr: AdamW learning rate (1e-4).
         weight_decay: AdamW weight decay (0).
+        eval_repetitions: T2M protocol replications at ``sm test`` (20); 0 reports the test loss only.
+        eval_samples: generated motions per replication (MDM: 1000); ``None`` = the whole test split.
+        eval_batch_size: R-Precision group size (32).
+        eval_sampling_steps: DDIM steps for the evaluation; ``None`` = DDPM; -1 = ``sampling_steps``.
+        eval_diversity_times: Diversity pairs (300).
+        eval_mm_samples: captions for MultiModality (MDM mm modes: 100); 0 skips it.
+        eval_mm_repeats: generations per MultiModality caption (30).
+        eval_mm_times: MultiModality pairs per caption (10).
+        eval_seed: seed of the evaluation's draws (replication r uses ``eval_seed + r``).
+        evaluator_checkpoint: the official ``finest.tar`` (comparable), a ``sm fit --recipe
+            t2m_evaluator.yaml`` ``.ckpt`` (not comparable), or ``None``: a random evaluator (not comparable).
+        evaluator_mean: the evaluator's Mean (MDM ``dataset/t2m_mean.npy``); needed with ``finest.tar``;
+            default the data statistics.
+        evaluator_std: the evaluator's Std (MDM ``dataset/t2m_std.npy``).
+        glove_dir: folder of ``our_vab_*`` GloVe files; needed with an evaluator checkpoint; without it
+            (random evaluator only) words get hashed random vectors.
     """
 
     def __init__(
@@ -54,6 +89,19 @@ class TextToMotionModule(LightningModule):
         sampling_steps: int | None = None,
         lr: float = 1e-4,
         weight_decay: float = 0.0,
+        eval_repetitions: int = 20,
+        eval_samples: int | None = 1000,
+        eval_batch_size: int = 32,
+        eval_sampling_steps: int | None = -1,
+        eval_diversity_times: int = 300,
+        eval_mm_samples: int = 0,
+        eval_mm_repeats: int = 30,
+        eval_mm_times: int = 10,
+        eval_seed: int = 0,
+        evaluator_checkpoint: str | None = None,
+        evaluator_mean: str | None = None,
+        evaluator_std: str | None = None,
+        glove_dir: str | None = None,
     ) -> None:
         super().__init__()
         config = backbone_config(backbone)
@@ -102,6 +150,67 @@ class TextToMotionModule(LightningModule):
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
         self.log("test/loss", self.loss(batch, 0.0), batch_size=len(batch["caption"]), sync_dist=True)
+
+    def on_test_epoch_end(self) -> None:
+        """Run the T2M protocol, print its table and write it as JSON / CSV in the log folder."""
+        if self.hparams.eval_repetitions < 1:
+            return
+        evaluation, label = self._t2m_evaluation()
+        steps = self.hparams.eval_sampling_steps
+
+        def generate(captions: list[str], lengths: list[int], noise: torch.Generator) -> torch.Tensor:
+            return self.generate(captions, lengths, generator=noise, sampling_steps=steps)[0]
+
+        progress = self.trainer.progress_bar_callback is not None
+        summary = summarize(evaluation.run(generate, progress=progress))
+        folder = Path(self.trainer.log_dir or self.trainer.default_root_dir)
+        protocol = {
+            **evaluation.describe(),
+            "sampling_steps": self.hparams.sampling_steps if steps == -1 else steps,
+        }
+        protocol["evaluator_checkpoint"] = self.hparams.evaluator_checkpoint
+        json_path, csv_path = write_report(folder, summary, label, protocol)
+        self.print(format_table(summary, label))
+        self.print(f"wrote {json_path} and {csv_path}")
+        self.log_dict({f"test/{k}": v["mean"] for k, v in summary["model"].items()})
+
+    def _t2m_evaluation(self) -> tuple[T2MEvaluation, str]:
+        """The evaluation over the data module's test clips, and the comparability label."""
+        hp = self.hparams
+        datamodule = self.trainer.datamodule
+        if not hasattr(datamodule, "evaluation_clips"):
+            raise RuntimeError("the T2M evaluation needs a text2motion data module (evaluation_clips())")
+        checkpoint = hp.evaluator_checkpoint
+        official = checkpoint is not None and Path(checkpoint).suffix != ".ckpt"
+        if checkpoint is not None and hp.glove_dir is None:
+            raise ValueError(f"evaluator_checkpoint {checkpoint} needs glove_dir (its our_vab_* GloVe files)")
+        if (hp.evaluator_mean is None) != (hp.evaluator_std is None):
+            raise ValueError("set both evaluator_mean and evaluator_std, or neither")
+        if official and hp.evaluator_mean is None:
+            raise ValueError(
+                f"the official evaluator {checkpoint} needs evaluator_mean / evaluator_std "
+                "(MDM dataset/t2m_mean.npy and t2m_std.npy)"
+            )
+        evaluator = load_evaluator(checkpoint, FEATURE_DIM, hp.eval_seed).to(self.device)
+        words = WordVectorizer(hp.glove_dir) if hp.glove_dir else HashedWordVectorizer(seed=hp.eval_seed)
+        if hp.evaluator_mean is not None:
+            mean = read_feature_vector(hp.evaluator_mean, "evaluator Mean")
+            std = read_feature_vector(hp.evaluator_std, "evaluator Std")
+        else:
+            mean, std = self.feature_mean.cpu().numpy(), self.feature_std.cpu().numpy()
+        protocol = T2MProtocol(
+            repetitions=hp.eval_repetitions,
+            samples=hp.eval_samples,
+            batch_size=hp.eval_batch_size,
+            diversity_times=hp.eval_diversity_times,
+            mm_samples=hp.eval_mm_samples,
+            mm_repeats=hp.eval_mm_repeats,
+            mm_times=hp.eval_mm_times,
+            seed=hp.eval_seed,
+        )
+        clips = datamodule.evaluation_clips("test")
+        label = COMPARABLE if evaluator.comparable else NOT_COMPARABLE
+        return T2MEvaluation(evaluator, clips, words, mean, std, protocol), label
 
     @torch.no_grad()
     def generate(
