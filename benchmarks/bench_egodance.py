@@ -1,50 +1,81 @@
 """EgoDance benchmark: EMM (SkeletonMamba denoiser) vs an EDGE-style transformer denoiser of equal size.
 
-Measures, side by side in one run: one training step (forward + losses + backward + AdamW) on a batch of
-T-frame windows, and sampling one T-frame dance (T = 150 = 5 s at 30 fps) with DDIM (50 steps) and
-DDPM (1000 steps), classifier-free guidance weight 2 (two denoiser calls per step). Both models use the
-same music encoder (music-only condition, so the ResNet is not part of the timing); the transformer
-baseline is EDGE's denoiser shape (reference dance.md section 6: self-attention over frames,
-cross-attention to the condition + a time token, GELU, pre-norm) with its width chosen so that its
-denoiser has the same parameter count as EMM's.
+Both models share the same condition path (music encoder + ResNet vision encoder + fusion module, seed 000
+Table 1), which is encoded ONCE per sample before the denoising loop; only the denoisers differ. The
+transformer baseline is EDGE's denoiser shape (reference dance.md section 6: self-attention over frames,
+cross-attention to the condition + a time token, GELU, pre-norm, 8 layers, 4 heads, feed-forward 2x)
+with its width chosen so that its parameter count equals EMM's denoiser (encoders excluded).
 
-    python benchmarks/bench_egodance.py --json              # the seed's sizes (slow on a CPU)
-    python benchmarks/bench_egodance.py --preset small --json
+Measured, side by side in one run (T = 150 frames = 5 s at 30 fps, classifier-free guidance weight 2
+batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
+
+- ``train_step_ms``: forward + diffusion and kinematic losses + alignment loss + backward + AdamW on a
+  batch; the frozen ResNet's pooled frame features are precomputed (cached), as a frozen backbone allows;
+- ``condition_encode_s``: encoding one sample's music + frames + fusion (ResNet on all T frames);
+- ``sample_step_ms``: the median time of one guided DDIM/DDPM denoising step;
+- ``ddim50_wall_s``: the real wall time of a full DDIM-50 run (condition encoding included; ``null`` when
+  ``--max-run-s`` predicts it too long, ``ddim50_extrapolated_s`` = encoding + 50 x step is always given);
+- ``ddpm1000_extrapolated_s``: ``sample_step_ms`` x 1000 + condition encoding: NOT a measured run.
+
+    flock /tmp/bench.lock python benchmarks/bench_egodance.py --json              # seed sizes (slow on CPU)
+    flock /tmp/bench.lock python benchmarks/bench_egodance.py --size tiny --json  # quick
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import torch
 from torch import nn
+from transformers import ResNetConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
-from skeleton_mamba.tasks.egodance.encoders import MusicEncoder, sinusoidal_embedding  # noqa: E402
-from skeleton_mamba.tasks.egodance.losses import emm_losses  # noqa: E402
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample  # noqa: E402
+from skeleton_mamba.tasks.diffusion.samplers import guided_x0  # noqa: E402
+from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa: E402
+from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
 from skeleton_mamba.tasks.egodance.model import EMM  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
 
-PRESETS = {
-    "seed": dict(dim=128, depth=8, heads=4, mlp_dim=1024, context_dim=256, d_state=64, headdim=64, chunk=64),
-    "small": dict(dim=32, depth=2, heads=2, mlp_dim=128, context_dim=64, d_state=16, headdim=16, chunk=32),
-}
+SIZES = {
+    # seed 000 Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones
+    "seed": dict(
+        dim=128, depth=8, heads=4, mlp_dim=1024, context_dim=256, ff=512, d_state=64, headdim=64, chunk=64,
+        group_paths=None, resnet=None, image_size=224,
+    ),
+    "small": dict(
+        dim=32, depth=2, heads=2, mlp_dim=128, context_dim=64, ff=128, d_state=16, headdim=16, chunk=32,
+        group_paths=None, image_size=64,
+        resnet=dict(embedding_size=16, hidden_sizes=[16, 32], depths=[1, 1], layer_type="basic"),
+    ),
+    "tiny": dict(
+        dim=16, depth=1, heads=2, mlp_dim=32, context_dim=16, ff=32, d_state=8, headdim=8, chunk=16,
+        group_paths=[[1, 2, 0, 3, 4]], image_size=32,
+        resnet=dict(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic"),
+    ),
+}  # fmt: skip
+ENCODERS = ("music_encoder", "vision_encoder", "fusion")
 
 
 class TransformerDenoiser(nn.Module):
-    """EDGE-style denoiser over frame vectors (B, T, 240) with cross-attention; same call as EMM."""
+    """EDGE-style x0 denoiser over frame vectors (B, T, 240) with cross-attention; EMM's call signature.
 
-    def __init__(self, latent: int, depth: int, heads: int, context_dim: int, music: MusicEncoder):
+    The condition encoders are EMM's own modules (shared, not copied), so both models see the same c.
+    """
+
+    def __init__(self, latent: int, depth: int, heads: int, emm: EMM):
         super().__init__()
-        self.music_encoder = music
+        self.encoders = [emm]  # a plain list: not registered, not counted, not trained twice
+        context_dim = emm.context_dim
         self.null_context = nn.Parameter(torch.zeros(1, 1, context_dim))
         self.input_proj = nn.Linear(240, latent)
         self.time_mlp = nn.Sequential(nn.Linear(latent, 4 * latent), nn.SiLU(), nn.Linear(4 * latent, latent))
@@ -55,8 +86,17 @@ class TransformerDenoiser(nn.Module):
         self.decoder = nn.TransformerDecoder(layer, depth)
         self.output_proj = nn.Linear(latent, 240)
 
+    def encode_modalities(self, music, frames=None):
+        return self.encoders[0].encode_modalities(music, frames)
+
+    def fuse(self, z_a, z_v):
+        return self.encoders[0].fuse(z_a, z_v)
+
     def encode_condition(self, music, frames=None):
-        return self.music_encoder(music)
+        return self.fuse(*self.encode_modalities(music, frames))
+
+    def null_condition(self, context):
+        return self.null_context.to(context.dtype).expand_as(context)
 
     def forward(self, x_t, t, context=None):
         b, n = x_t.shape[:2]
@@ -70,96 +110,164 @@ class TransformerDenoiser(nn.Module):
 
 
 def denoiser_params(model: nn.Module) -> int:
-    return sum(p.numel() for n, p in model.named_parameters() if not n.startswith("music_encoder"))
+    """Parameters outside the condition encoders."""
+    return sum(p.numel() for n, p in model.named_parameters() if not n.startswith(ENCODERS))
 
 
-def build(preset: str) -> tuple[EMM, TransformerDenoiser]:
-    p = PRESETS[preset]
+def build(size: str) -> tuple[EMM, TransformerDenoiser]:
+    """EMM at ``size`` and the transformer twin whose width gives the closest parameter count."""
+    p = SIZES[size]
     cfg = SkeletonMambaConfig(
-        dim=p["dim"], depth=p["depth"], heads=p["heads"], mlp_dim=p["mlp_dim"],
+        dim=p["dim"], depth=p["depth"], heads=p["heads"], mlp_dim=p["mlp_dim"], group_paths=p["group_paths"],
         mixer=MixerConfig(d_state=p["d_state"], headdim=p["headdim"], chunk_size=p["chunk"]),
     )  # fmt: skip
-    emm = EMM(cfg, context_dim=p["context_dim"], use_vision=False, heads=p["heads"], dropout=0.0)
+    resnet = ResNetConfig(**p["resnet"]) if p["resnet"] else None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # random ResNet init: timing only
+        emm = EMM(
+            cfg,
+            context_dim=p["context_dim"],
+            use_vision=True,
+            resnet_config=resnet,
+            image_size=p["image_size"],
+            heads=p["heads"],
+            transformer_ff=p["ff"],
+            dropout=0.0,
+        )
     target = denoiser_params(emm)
-    best = None
-    for latent in range(8 * p["heads"], 4096, p["heads"]):
-        music = MusicEncoder(35, p["context_dim"], 2, p["heads"], 512, 0.0)
-        twin = TransformerDenoiser(latent, p["depth"], p["heads"], p["context_dim"], music)
-        if best is None or abs(denoiser_params(twin) - target) < abs(denoiser_params(best) - target):
-            best = twin
-        if denoiser_params(twin) > target:
-            break
-    best.music_encoder.load_state_dict(emm.music_encoder.state_dict())
+    h = p["heads"]
+
+    def twin(units: int) -> TransformerDenoiser:
+        return TransformerDenoiser(units * h, p["depth"], h, emm)
+
+    lo, hi = 2, 2
+    while denoiser_params(twin(hi)) < target:
+        lo, hi = hi, hi * 2
+    while hi - lo > 1:  # the parameter count grows with the width: bisect
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if denoiser_params(twin(mid)) < target else (lo, mid)
+    best = min((twin(lo), twin(hi)), key=lambda m: abs(denoiser_params(m) - target))
     return emm, best
 
 
-def time_train_step(model, x0, music, diffusion, repeats: int) -> float:
-    opt = torch.optim.AdamW(model.parameters(), lr=2e-4)
+def time_train_step(model, x0, music, features, diffusion, repeats: int, warmup: int = 1) -> float:
+    """One optimizer step; ``features`` (B, T, F) are the cached frozen-ResNet frame features."""
+    emm = model.encoders[0] if isinstance(model, TransformerDenoiser) else model
+    params = {id(p): p for p in model.parameters() if p.requires_grad}
+    params.update({id(p): p for n, p in emm.named_parameters() if n.startswith(ENCODERS) and p.requires_grad})
+    opt = torch.optim.AdamW(list(params.values()), lr=2e-4)
+    model.train()
 
     def step():
-        context = model.encode_condition(music)
+        z_a = emm.music_encoder(music)
+        z_v = emm.vision_encoder.mlp(features)
+        context = emm.fuse(z_a, z_v)
         x_t, t, target = diffusion.training_pair(x0)
-        loss = emm_losses(model(x_t, t, context), target)["loss"]
-        opt.zero_grad()
+        loss = emm_losses(model(x_t, t, context), target)["loss"] + 0.01 * alignment_loss(z_a, z_v)
+        opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
 
-    return median_ms(step, repeats=repeats)
+    return median_ms(step, repeats=repeats, warmup=warmup)
 
 
-def time_sampling(model, music, diffusion, sampler: str, steps: int) -> float:
+@torch.inference_mode()
+def time_sampling(
+    model, music, frames, diffusion, ddim_steps: int, step_repeats: int, max_run_s: float
+) -> dict:
+    """Condition encoding, the median guided step, and a real full DDIM run, for one sample.
+
+    The full run is skipped (``None``, with its extrapolation reported instead) when the measured steps
+    predict it to exceed ``max_run_s``.
+    """
     model.eval()
-    with torch.no_grad():
+    start = time.perf_counter()
+    context = model.encode_condition(music, frames)
+    encode_s = time.perf_counter() - start
+    shape = (1, music.shape[1], 24, 10)
+    x = torch.randn(shape)
+    times = []
+    for i in range(step_repeats + 1):  # the first call warms up
+        t = torch.full((1,), diffusion.num_steps - 1 - 37 * i, dtype=torch.long)
         start = time.perf_counter()
-        context = model.encode_condition(music)
-        shape = (1, music.shape[1], 24, 10)
-        if sampler == "ddim":
-            ddim_sample(diffusion, model, shape, cond=context, sampling_steps=steps, guidance_weight=2.0)
-        else:
-            ddpm_sample(diffusion, model, shape, cond=context, guidance_weight=2.0)
-    model.train()
-    return time.perf_counter() - start
+        guided_x0(model, x, t, context, 2.0)
+        times.append(time.perf_counter() - start)
+    step_ms = statistics.median(times[1:]) * 1e3
+    ddim_estimate = encode_s + step_ms * ddim_steps / 1e3
+    ddim_s = None
+    if ddim_estimate <= max_run_s:
+        start = time.perf_counter()
+        context = model.encode_condition(music, frames)  # a full run encodes its condition once
+        ddim_sample(diffusion, model, shape, cond=context, sampling_steps=ddim_steps, guidance_weight=2.0)
+        ddim_s = time.perf_counter() - start
+    return {
+        "condition_encode_s": encode_s,
+        "sample_step_ms": step_ms,
+        f"ddim{ddim_steps}_wall_s": ddim_s,
+        f"ddim{ddim_steps}_extrapolated_s": ddim_estimate,
+        f"ddpm{diffusion.num_steps}_extrapolated_s": encode_s + step_ms * diffusion.num_steps / 1e3,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--preset", choices=sorted(PRESETS), default="seed")
-    ap.add_argument("--batch", type=int, default=4)
+    ap.add_argument("--size", choices=sorted(SIZES), default="seed")
+    ap.add_argument("--batch", type=int, default=4, help="training batch")
     ap.add_argument("--frames", type=int, default=150)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=3, help="timed training steps (median)")
+    ap.add_argument("--warmup", type=int, default=1, help="untimed training steps first")
+    ap.add_argument("--step-repeats", type=int, default=5, help="timed sampling steps (median)")
     ap.add_argument("--ddim-steps", type=int, default=50)
-    ap.add_argument("--ddpm-steps", type=int, default=1000, help="diffusion steps T (DDPM runs all of them)")
+    ap.add_argument("--diffusion-steps", type=int, default=1000, help="T (DDPM runs all of them)")
+    ap.add_argument("--max-run-s", type=float, default=600.0, help="skip longer full DDIM runs")
+    ap.add_argument("--no-train", action="store_true", help="skip the training step")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     torch.manual_seed(0)
-    emm, twin = build(args.preset)
-    diffusion = GaussianDiffusion(args.ddpm_steps)
-    x0 = encode_motion(
-        0.3 * torch.randn(args.batch, args.frames, 24, 3), 0.1 * torch.randn(args.batch, args.frames, 3)
-    )
-    music = torch.randn(args.batch, args.frames, 35)
+    emm, twin = build(args.size)
+    size = SIZES[args.size]["image_size"]
+    diffusion = GaussianDiffusion(args.diffusion_steps)
+    b, n = args.batch, args.frames
+    x0 = encode_motion(0.3 * torch.randn(b, n, 24, 3), 0.1 * torch.randn(b, n, 3))
+    music = torch.randn(b, n, 35)
+    frames = torch.rand(1, n, 3, size, size)
+    with torch.inference_mode():  # the cached frozen-ResNet features of the training batch
+        one = emm.vision_encoder.resnet(pixel_values=torch.rand(2, 3, size, size)).pooler_output.flatten(1)
+    features = torch.randn(b, n, one.shape[-1]).abs()
     result = {
         "machine": machine_info(),
         "threads": torch.get_num_threads(),
-        "preset": args.preset,
-        "batch": args.batch,
-        "frames": args.frames,
+        "size": args.size,
+        "train_batch": b,
+        "frames": n,
+        "image_size": size,
         "guidance_weight": 2.0,
+        "guidance": "classifier-free, cond + null batched as one denoiser call",
         "models": {},
     }
     for name, model in (("emm_skeleton_mamba", emm), ("edge_transformer", twin)):
         r = {"denoiser_params": denoiser_params(model)}
-        r["train_step_ms"] = time_train_step(model, x0, music, diffusion, args.repeats)
-        r[f"ddim{args.ddim_steps}_s"] = time_sampling(model, music[:1], diffusion, "ddim", args.ddim_steps)
-        r[f"ddpm{args.ddpm_steps}_s"] = time_sampling(model, music[:1], diffusion, "ddpm", args.ddpm_steps)
+        if not args.no_train:
+            r["train_step_ms"] = time_train_step(
+                model, x0, music, features, diffusion, args.repeats, args.warmup
+            )
+        r.update(
+            time_sampling(
+                model, music[:1], frames, diffusion, args.ddim_steps, args.step_repeats, args.max_run_s
+            )
+        )
         result["models"][name] = r
         if not args.json:
             print(name, r, flush=True)
     e, t = result["models"]["emm_skeleton_mamba"], result["models"]["edge_transformer"]
-    result["ratios_emm_over_transformer"] = {k: e[k] / t[k] for k in e if k != "denoiser_params"}
+    result["ratios_emm_over_transformer"] = {
+        k: e[k] / t[k]
+        for k in e
+        if k not in ("denoiser_params", "condition_encode_s") and e[k] is not None and t.get(k) is not None
+    }
     print(json.dumps(result, indent=2) if args.json else result["ratios_emm_over_transformer"])
     return 0
 

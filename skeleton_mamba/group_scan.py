@@ -46,15 +46,23 @@ class GroupScan(nn.Module):
         self.mixer = Mamba2Mixer(dim, mixer)
 
     def forward(self, g: torch.Tensor) -> torch.Tensor:
+        """Same result as scanning ``mixer(g[:, path_index])``, at 1/n of the projection cost.
+
+        The mixer's ``in_proj`` and ``out_proj`` act per token and are linear, so the n*G-token
+        sequence's projections are computed on the G distinct group tokens and gathered, and the n
+        path outputs are averaged before ``out_proj`` (mean and a linear map commute). Only the
+        causal conv, the SSD and the gated norm see the full n*G-token sequence.
+        """
         lead = g.shape[:-2]
         g = g.reshape(-1, self.num_groups, g.shape[-1])  # (BT, G, E)
-        seq = g[:, self.path_index]  # (BT, n*G, E): the n permuted group sequences, concatenated
+        # (BT, n*G, F): the projections of the n permuted group sequences, concatenated.
+        seq = self.mixer.in_proj(g)[:, self.path_index]
         if self.shared:
-            y = self.mixer(rearrange(seq, "b (n g) e -> (b n) g e", n=self.num_paths))
-            y = rearrange(y, "(b n) g e -> b n g e", n=self.num_paths)
+            y = self.mixer.mix(rearrange(seq, "b (n g) f -> (b n) g f", n=self.num_paths))
+            y = rearrange(y, "(b n) g d -> b n g d", n=self.num_paths)
         else:
-            y = rearrange(self.mixer(seq), "b (n g) e -> b n g e", n=self.num_paths)
+            y = rearrange(self.mixer.mix(seq), "b (n g) d -> b n g d", n=self.num_paths)
         # Un-permute each path: position k of path i holds group paths[i][k].
         index = self.inverse[None, :, :, None].expand(y.shape[0], -1, -1, y.shape[-1])
-        y = torch.gather(y, 2, index).mean(dim=1)
+        y = self.mixer.out_proj(torch.gather(y, 2, index).mean(dim=1))
         return y.reshape(*lead, self.num_groups, y.shape[-1])

@@ -81,10 +81,15 @@ class Mamba2Mixer(nn.Module):
             out = out + padded[:, s : s + length] * weight[s]
         return out
 
-    def forward(self, u: torch.Tensor) -> torch.Tensor:
-        """u (B, L, d_model) -> (B, L, d_model)."""
+    def mix(self, zxbcdt: torch.Tensor) -> torch.Tensor:
+        """The mixer between its two projections: ``in_proj(u)`` (B, L, F) -> gated-normed y (B, L, d_inner).
+
+        ``forward(u) == out_proj(mix(in_proj(u)))``. Callers whose sequence repeats tokens (the Group
+        Scan reads each group token in n orders) project the distinct tokens once, gather, and average
+        outputs before ``out_proj``, which is linear.
+        """
         gn = self.ngroups * self.d_state
-        z, xbc, dt = torch.split(self.in_proj(u), [self.d_inner, self.d_inner + 2 * gn, self.nheads], dim=-1)
+        z, xbc, dt = torch.split(zxbcdt, [self.d_inner, self.d_inner + 2 * gn, self.nheads], dim=-1)
         xbc = F.silu(self.causal_conv(xbc))
         x, b, c = torch.split(xbc, [self.d_inner, gn, gn], dim=-1)
         y = ssd(
@@ -99,5 +104,8 @@ class Mamba2Mixer(nn.Module):
             chunk_size=self.chunk_size,
             impl="auto" if self.config.use_kernel else "torch",  # "torch": never the mamba-ssm kernel
         )
-        y = self.norm(rearrange(y, "b l h p -> b l (h p)"), z)
-        return self.out_proj(y)
+        return self.norm(rearrange(y, "b l h p -> b l (h p)"), z)
+
+    def forward(self, u: torch.Tensor) -> torch.Tensor:
+        """u (B, L, d_model) -> (B, L, d_model)."""
+        return self.out_proj(self.mix(self.in_proj(u)))

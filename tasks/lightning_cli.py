@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import inspect
 import sys
 from collections.abc import Sequence
 
 import lightning.pytorch as pl
 from lightning.pytorch import LightningDataModule, LightningModule
-from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
+from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _get_module_type, _InstantiatorFn
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
@@ -64,6 +65,24 @@ def import_task_modules() -> list[str]:
     return imported
 
 
+class _AcceptedLinksInstantiator(_InstantiatorFn):
+    """Lightning's model instantiator, recording only the linked values the model accepts.
+
+    Lightning stores every applied data-to-model link in the checkpoint's hyper-parameters and parses them
+    back on ``--ckpt_path``; a link the model has no argument for (``batch_size`` on a module without one)
+    would then break ``sm test/predict --ckpt_path``.
+    """
+
+    def __call__(self, class_type, *args, applied_instantiation_links: dict, **kwargs):
+        accepted = inspect.signature(class_type).parameters
+        links = {
+            key: value
+            for key, value in applied_instantiation_links.items()
+            if not key.startswith("model.") or key.rsplit(".", 1)[-1] in accepted
+        }
+        return super().__call__(class_type, *args, applied_instantiation_links=links, **kwargs)
+
+
 class SkeletonMambaCLI(LightningCLI):
     """LightningCLI with ``--recipe`` and the data-to-model links of :data:`DATA_TO_MODEL_LINKS`."""
 
@@ -86,6 +105,16 @@ class SkeletonMambaCLI(LightningCLI):
     def add_arguments_to_parser(self, parser: LightningArgumentParser) -> None:
         for source, target in DATA_TO_MODEL_LINKS:
             parser.link_arguments(f"data.{source}", f"model.init_args.{target}", apply_on="instantiate")
+
+    def _add_instantiators(self) -> None:
+        """Lightning's instantiators, with the model's filtered by :class:`_AcceptedLinksInstantiator`."""
+        super()._add_instantiators()
+        self.parser.add_instantiator(
+            _AcceptedLinksInstantiator(cli=self, key="model"),
+            _get_module_type(self._model_class),
+            subclasses=self.subclass_mode_model,
+            prepend=True,
+        )
 
     def instantiate_trainer(self, **kwargs) -> pl.Trainer:
         """The trainer, with every logger's version fixed before any of them creates its folder.

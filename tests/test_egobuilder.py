@@ -187,6 +187,71 @@ def test_depth_and_colour_of_a_plane_at_known_distance():
     assert (depth == 0).all() and (rgb == [1, 2, 3]).all()
 
 
+def test_vertex_colours_are_interpolated_at_the_hit():
+    # one big floor triangle with a red, a green and a blue corner (normal +y), seen from 1.5 m above
+    corners = np.array([[-4.0, 0.0, -4.0], [0.0, 0.0, 4.0], [4.0, 0.0, -4.0]])
+    colors = np.array([[240, 0, 0], [0, 240, 0], [0, 0, 240]], dtype=np.uint8)
+    scene = make_scene("tri", corners, np.array([[0, 1, 2]]), colors)
+    assert scene.mesh.face_normals[0] == pytest.approx([0.0, 1.0, 0.0])
+    width, height, position = 24, 20, np.array([0.3, 1.5, -0.2])
+    K = intrinsics(width, height, 60.0)
+    down = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    rgb, depth = render_view(scene, position, down, K, width, height, ambient=0.3)
+    for u, v in [(0, 0), (5, 17), (12, 10), (23, 19)]:
+        ray = down @ np.array([(u + 0.5 - width / 2) / K[0, 0], (v + 0.5 - height / 2) / K[1, 1], 1.0])
+        hit = position + ray * (position[1] / -ray[1])  # where the ray meets y = 0
+        # barycentric weights of the hit: solve hit = sum_i w_i corner_i with sum_i w_i = 1
+        w = np.linalg.solve(np.vstack([corners[:, [0, 2]].T, np.ones(3)]), [hit[0], hit[2], 1.0])
+        shade = 0.3 + 0.7 * abs(ray[1]) / np.linalg.norm(ray)
+        assert rgb[v, u] == pytest.approx(w @ colors * shade, abs=1.0)
+        assert depth[v, u] == pytest.approx(1.5, abs=1e-5)
+
+
+def _random_rays(n: int = 400):
+    rng = np.random.default_rng(0)
+    origins = rng.uniform([-1.5, 0.3, -1.5], [1.5, 2.0, 1.5], (n, 3))
+    return origins, rng.normal(size=(n, 3)) * rng.uniform(0.2, 3.0, (n, 1))  # not normalised
+
+
+def test_ray_caster_hits_lie_on_the_hit_triangles():
+    pytest.importorskip("embreex", reason="the all-hits reference below is trimesh's embree intersector")
+    scene = procedural_room(2)
+    origins, directions = _random_rays()
+    hits = scene.caster.first_hits(origins, directions)
+    assert (hits.tri >= 0).all()  # a closed room: every ray hits
+    point = origins + hits.t[:, None] * directions  # t is in units of the (unnormalised) direction
+    tri = scene.mesh.triangles[hits.tri]
+    plane = np.einsum("ij,ij->i", point - tri[:, 0], scene.mesh.face_normals[hits.tri])
+    assert np.abs(plane).max() < 1e-4
+    # (u, v) are the barycentric coordinates of corners b and c (trimesh computes them independently)
+    bary = trimesh.triangles.points_to_barycentric(tri, point)
+    assert np.stack([hits.u, hits.v], 1) == pytest.approx(bary[:, 1:], abs=1e-3)
+    # the first hit: nothing on the mesh is closer along the ray (trimesh's own ray test, all hits)
+    locations, index_ray, _ = trimesh.ray.ray_pyembree.RayMeshIntersector(scene.mesh).intersects_location(
+        origins, directions, multiple_hits=True
+    )
+    nearest = np.full(len(origins), np.inf)
+    np.minimum.at(nearest, index_ray, np.linalg.norm(locations - origins[index_ray], axis=1))
+    assert hits.t * np.linalg.norm(directions, axis=1) == pytest.approx(nearest, abs=1e-4)
+
+
+def test_embree_and_trimesh_ray_casters_agree(monkeypatch):
+    from skeleton_mamba.tasks.egodance.builder import ray_caster
+
+    pytest.importorskip("rtree", reason="trimesh's numpy ray caster (the fallback) needs rtree")
+    if not ray_caster.HAS_EMBREE:
+        pytest.skip("embreex is not installed: nothing to compare the fallback with")
+    scene = procedural_room(2)
+    origins, directions = _random_rays()
+    embree = ray_caster.RayCaster(scene.mesh.vertices, scene.mesh.faces).first_hits(origins, directions)
+    monkeypatch.setattr(ray_caster, "HAS_EMBREE", False)
+    fallback = ray_caster.RayCaster(scene.mesh.vertices, scene.mesh.faces).first_hits(origins, directions)
+    same = embree.tri == fallback.tri
+    assert same.mean() > 0.98
+    for name in ("t", "u", "v"):
+        assert getattr(embree, name)[same] == pytest.approx(getattr(fallback, name)[same], abs=2e-4)
+
+
 def test_head_camera_moves_with_head():
     offsets = smpl_rest_offsets(torch.float64)
     rot = torch.eye(3, dtype=torch.float64).repeat(2, 24, 1, 1)

@@ -208,3 +208,44 @@ def test_long_form_dance_and_decoding():
     assert motion.poses.shape == (40, 24, 3) and motion.joints.shape == (40, 24, 3)
     again = encode_motion(torch.from_numpy(motion.poses).double(), torch.from_numpy(motion.trans))
     np.testing.assert_allclose(motion_joints(again).numpy(), motion.joints, atol=1e-4)
+
+
+def test_alignment_loss_by_hand():
+    import math
+
+    from skeleton_mamba.tasks.egodance.losses import alignment_loss
+
+    z_a = torch.tensor([[[1.0, 0.0], [0.0, 3.0]]])  # (B=1, T=2, Dc=2); norms do not matter
+    z_v = torch.tensor([[[2.0, 0.0], [1.0, 1.0]]])
+    tau = 0.5
+    r = 1 / math.sqrt(2)
+    # cosine similarities / tau: s[i][j] = <music token i, vision token j> / tau
+    s = [[1 / tau, r / tau], [0.0, r / tau]]
+
+    def ce(logits, target):
+        return -(logits[target] - math.log(sum(math.exp(v) for v in logits)))
+
+    rows = (ce(s[0], 0) + ce(s[1], 1)) / 2  # music -> vision
+    cols = (ce([s[0][0], s[1][0]], 0) + ce([s[0][1], s[1][1]], 1)) / 2  # vision -> music
+    expected = 0.5 * (rows + cols)
+    assert alignment_loss(z_a, z_v, tau).item() == pytest.approx(expected, rel=1e-6)
+    # tokens of all windows and frames compete: (B=2, T=1) holding the same tokens gives the same loss
+    assert alignment_loss(z_a.transpose(0, 1), z_v.transpose(0, 1), tau).item() == pytest.approx(expected)
+    # perfectly aligned, well separated embeddings give a loss near 0
+    eye = torch.eye(4)[None]
+    assert alignment_loss(eye, eye, 0.01).item() < 1e-6
+    with pytest.raises(ValueError, match="differ in shape"):
+        alignment_loss(z_a, z_v[:, :1])
+
+
+def test_batched_classifier_free_guidance_equals_two_calls():
+    from skeleton_mamba.tasks.diffusion import guided_x0
+
+    torch.manual_seed(0)
+    model = _tiny_emm(use_vision=False).eval()
+    x_t, t = torch.randn(2, 8, 24, 10), torch.tensor([5, 17])
+    with torch.no_grad():
+        context = model.encode_condition(torch.randn(2, 8, 35))
+        cond, unc = model(x_t, t, context), model(x_t, t, None)
+        batched = guided_x0(model, x_t, t, context, 2.0)  # EMM.null_condition: one call on 2B samples
+    torch.testing.assert_close(batched, unc + 2.0 * (cond - unc), rtol=1e-4, atol=1e-5)

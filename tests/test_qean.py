@@ -12,7 +12,11 @@ from scipy.linalg import polar
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, quaternion_rotary_attention
+from skeleton_mamba.tasks.qean.attention import (
+    QuaternionRotaryAttention,
+    quaternion_rotary_attention,
+    series_rotation,
+)
 from skeleton_mamba.tasks.qean.generate import generate_fast, generate_plain
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.qean.quaternion import (
@@ -196,21 +200,11 @@ def test_motion_representation_round_trip_and_projection():
 
 
 def _tiny(backbone=None, **kw) -> QEAN:
-    config = QEANConfig(
-        hidden=32,
-        heads=2,
-        motion_layers=1,
-        audio_layers=1,
-        cross_layers=2,
-        mlp_dim=64,
-        num_periods=2,
-        seed_frames=12,
-        music_frames=24,
-        predict_frames=4,
-        dropout=0.0,
-        **kw,
-    )
-    return QEAN(config, backbone).eval()
+    sizes = dict(
+        hidden=32, heads=2, motion_layers=1, audio_layers=1, cross_layers=2, mlp_dim=64, num_periods=2,
+        seed_frames=12, music_frames=24, predict_frames=4, dropout=0.0,
+    )  # fmt: skip
+    return QEAN(QEANConfig(**(sizes | kw)), backbone).eval()
 
 
 def test_model_output_shape_and_mamba_variant():
@@ -225,9 +219,21 @@ def test_model_output_shape_and_mamba_variant():
     assert any("backbone" in name for name, _ in mamba.named_parameters())
 
 
-def test_generation_length_and_fast_equals_plain():
+@pytest.mark.parametrize(
+    "variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder"]
+)
+def test_generation_length_and_fast_equals_plain(variant):
     torch.manual_seed(0)
-    model = _tiny().double()
+    backbone = SkeletonMambaConfig(
+        dim=16, depth=1, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
+    )
+    kwargs = {
+        "one_layer": {},
+        "two_layers": {"motion_layers": 2, "audio_layers": 2},  # reused first block + a recomputed one
+        "learned_positions": {"learned_positions": True},  # per-window embeddings: no per-token reuse
+        "mamba_encoder": {"backbone": backbone},  # SkeletonMamba motion encoder runs per window
+    }[variant]
+    model = _tiny(**kwargs).double()
     seed = torch.randn(2, 20, 219, dtype=torch.float64)
     music = torch.randn(2, 30, 35, dtype=torch.float64)  # shorter than needed: zero-padded
     plain = generate_plain(model, seed, music, num_frames=25)
@@ -236,5 +242,34 @@ def test_generation_length_and_fast_equals_plain():
     torch.testing.assert_close(fast, plain, rtol=0, atol=1e-10)
     # the first step uses the last 12 seed frames and music [0, 24)
     torch.testing.assert_close(plain[:, 0], model(seed[:, -12:], music[:, :24])[:, 0])
+    # step 5 sees seed frames 13..19 and generated frames 0..4, music [5, 29); step 24 generated frames
+    # 12..23 and music [24, 48): frames 24..29 of the track and 18 zero frames
+    torch.testing.assert_close(
+        plain[:, 5], model(torch.cat([seed[:, 13:], plain[:, :5]], 1), music[:, 5:29])[:, 0]
+    )
+    padded = torch.cat([music[:, 24:], music.new_zeros(2, 18, 35)], dim=1)
+    torch.testing.assert_close(plain[:, 24], model(plain[:, 12:24], padded)[:, 0])
     with pytest.raises(ValueError, match="seed must be"):
         generate_fast(model, seed[:, :5], music, num_frames=3)
+
+
+def test_series_rotation_is_the_hamilton_product_with_the_unit():
+    gen = torch.Generator().manual_seed(5)
+    x = torch.randn(3, 7, 10, generator=gen, dtype=torch.float64)  # 2 quaternions + 2 leftover channels
+    phase = torch.randn(3, 7, 4, generator=gen, dtype=torch.float64)
+    for axis in (1, 2):
+        unit = torch.zeros(3, 7, 4, 4, dtype=torch.float64)
+        unit[..., 0], unit[..., axis] = phase.cos(), phase.sin()
+        want = hamilton_product(x[..., :8].reshape(3, 7, 1, 2, 4), unit[..., None, :])  # (3, 7, P, 2, 4)
+        torch.testing.assert_close(series_rotation(x, phase, axis), want.flatten(-2), rtol=0, atol=1e-15)
+
+
+def test_spin_position_embedding_at_an_offset_keeps_the_scores():
+    # the fast path projects tokens at absolute positions: window scores equal those at positions 0..T-1
+    rope = SpinPositionEmbedding(8)
+    gen = torch.Generator().manual_seed(6)
+    q, k = torch.randn(2, 9, 8, generator=gen, dtype=torch.float64)
+    at_zero = rope.rotate(q) @ rope.rotate(k).T
+    torch.testing.assert_close(rope.rotate(q, offset=1234) @ rope.rotate(k, offset=1234).T, at_zero)
+    cos, sin = rope.cos_sin(1243, torch.float64, q.device)
+    torch.testing.assert_close(rope.rotate(q, offset=1234), apply_rotary(q, cos[1234:], sin[1234:]))

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import pickle
-import re
-import subprocess
-import sys
+from importlib.resources import files
 
 import numpy as np
 import pytest
@@ -14,6 +12,7 @@ import torch
 from lightning.pytorch import Trainer
 
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.lightning_cli import run
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
 from skeleton_mamba.tasks.qean.module import QEANModule
@@ -92,6 +91,41 @@ def test_data_module_reports_missing_layout(tmp_path):
         AISTPPDanceDataModule(str(tmp_path))
 
 
+def test_test_splits_come_from_the_annotations_val_plus_test(aistpp, tmp_path):
+    root = tmp_path / "annotations"
+    (root / "splits").mkdir(parents=True)
+    for folder in ("motions", "music"):
+        (root / folder).symlink_to(aistpp / folder)
+    dm = AISTPPDanceDataModule(str(root), music_cache_dir=str(aistpp / "cache"), num_workers=0, **TINY_DATA)
+    assert dm.test_splits == ["val", "test"]  # default: the seed's 40 = crossmodal val + test
+    with pytest.raises(FileNotFoundError, match="crossmodal_val.txt"):
+        dm.split_names("val")
+    packaged = files("skeleton_mamba.tasks.motion") / "aistpp_splits" / "crossmodal_test.txt"
+    lines = [n for n in packaged.read_text().split() if n.startswith("g")]  # the file's own text
+    assert dm.split_names("test") == lines and len(lines) == 20 and "gLH_sBM_cAll_d17_mLH4_ch02" in lines
+    (root / "splits" / "crossmodal_val.txt").write_text(f"# val\n{NAMES[0]}\n")
+    (root / "splits" / "crossmodal_test.txt").write_text(f"{NAMES[1]}\n{NAMES[2]}\n{NAMES[0]}\n")
+    dm.setup("test")
+    assert [item["name"] for item in dm.datasets["test"]] == NAMES  # val then test, each sequence once
+    limited = AISTPPDanceDataModule(
+        str(root), music_cache_dir=str(aistpp / "cache"), test_max_sequences=2, **TINY_DATA
+    )
+    limited.setup("test")
+    assert [item["name"] for item in limited.datasets["test"]] == NAMES[:2]
+
+
+def test_results_table_says_whether_it_is_the_seed_protocol():
+    module = QEANModule(**(TINY_MODEL | {"generate_frames": 1200}))
+    values = {"FID_k": 1.0, "FID_g": 2.0, "Dist_k": 3.0, "Dist_g": 4.0, "BeatAlign": 0.25}
+    module._generated_count, module._reference_count = 40, 1363
+    table = module.results_table(values)
+    assert "seed protocol" in table and "NOT COMPARABLE" not in table
+    assert "FID_k           1.000         30.1          -" in table
+    assert "BeatAlign       0.250        0.239      0.292" in table
+    module._generated_count = 20
+    assert "NOT COMPARABLE with the seed: 20 sequences instead of 40" in module.results_table(values)
+
+
 def test_test_metrics_and_predict(aistpp, tmp_path):
     torch.manual_seed(0)
     module = QEANModule(**TINY_MODEL, output_dir=str(tmp_path / "out"), render=True)
@@ -112,19 +146,27 @@ def test_test_metrics_and_predict(aistpp, tmp_path):
     assert paths[1].suffix == ".mp4" and paths[1].stat().st_size > 0  # rendered with the music
 
 
-def test_sm_fit_one_training_step(aistpp, tmp_path):
+def test_sm_fit_one_training_step(aistpp, tmp_path, monkeypatch, caplog):
+    """``sm fit --recipe qean.yaml`` in this process (the subprocess path is tests/test_qean_sm.py's)."""
     model_args = [f"--model.init_args.{k}={v}" for k, v in TINY_MODEL.items()]
     data_args = [f"--data.init_args.{k}={v}" for k, v in TINY_DATA.items()]
-    cmd = [
-        sys.executable, "-m", "skeleton_mamba.cli", "fit", "--recipe", "qean.yaml",
+    argv = [
+        "fit", "--recipe", "qean.yaml",
         "--trainer.fast_dev_run", "1", "--trainer.accelerator", "cpu", "--trainer.logger", "false",
-        "--trainer.callbacks", "null",
+        "--trainer.callbacks", "null", "--trainer.enable_progress_bar", "false",
         f"--data.init_args.root={aistpp}", f"--data.init_args.train_split={aistpp / 'train.txt'}",
         f"--data.init_args.music_cache_dir={aistpp / 'cache'}", "--data.init_args.batch_size=2",
         "--data.init_args.num_workers=0", *model_args, *data_args,
     ]  # fmt: skip
-    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    output = proc.stdout + proc.stderr
-    assert "`max_steps=1` reached" in output, output[-3000:]  # fast_dev_run: exactly one training step
-    assert re.search(r"train/loss[:=] ?[0-9]", output), output[-3000:]  # ... which logged its L2 loss
+    monkeypatch.chdir(tmp_path)
+    caplog.set_level("INFO")
+    losses, log = [], QEANModule.log
+
+    def record(self, name, value, *args, **kwargs):
+        losses.append((name, float(value)))
+        return log(self, name, value, *args, **kwargs)
+
+    monkeypatch.setattr(QEANModule, "log", record)
+    assert run(argv) == 0
+    assert "`max_steps=1` reached" in caplog.text  # fast_dev_run: exactly one training step
+    assert len(losses) == 1 and losses[0][0] == "train/loss" and np.isfinite(losses[0][1])  # its L2 loss

@@ -106,3 +106,23 @@ def test_padding_cannot_reach_valid_frames_in_either_direction():
         alone = ts(x[b : b + 1, :n])  # the unpadded sequence on its own
         torch.testing.assert_close(out[b, :n], alone[0], rtol=1e-4, atol=1e-5)
         torch.testing.assert_close(out_garbage[b, :n], alone[0], rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("shared", [False, True])
+def test_group_scan_projection_sharing_keeps_the_gradients_of_the_direct_scan(shared):
+    """Projecting distinct group tokens once must not change any gradient of Eq. 13 / Eq. 18."""
+    gs = GroupScan(16, DEFAULT_GROUP_PATHS, shared=shared, mixer=SMALL).double()
+    g = torch.randn(3, 5, 16, dtype=torch.float64, requires_grad=True)
+    gs(g).square().sum().backward()
+    fast = [g.grad.clone()] + [p.grad.clone() for p in gs.parameters()]
+    g.grad = None
+    gs.zero_grad()
+    if shared:
+        parts = [_unpermute(gs.mixer(g[:, list(p)]), p) for p in DEFAULT_GROUP_PATHS]
+    else:
+        y = gs.mixer(torch.cat([g[:, list(p)] for p in DEFAULT_GROUP_PATHS], dim=1))
+        parts = [_unpermute(y[:, 5 * i : 5 * i + 5], p) for i, p in enumerate(DEFAULT_GROUP_PATHS)]
+    torch.stack(parts).mean(0).square().sum().backward()
+    direct = [g.grad] + [p.grad for p in gs.parameters()]
+    for a, b in zip(fast, direct, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-12)

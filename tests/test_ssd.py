@@ -291,16 +291,90 @@ def test_kernel_on_gpu_matches_recurrence():
 
 
 def test_tiled_recompute_path_matches(monkeypatch):
-    """Inputs larger than SAVE_ELEMENTS run in tiles and recompute the mask in backward."""
+    """Inputs larger than TILE_ELEMENTS run in several tiles (the last one partial) in both passes."""
     import importlib
 
     intra = importlib.import_module("skeleton_mamba.ssd.intra_chunk")
     inp = make_inputs(3, 21, 4, 3, 2, 4, seed=9, d_shape="hp")
     ref = grads(ssd_recurrence, inp)
     y_ref = ssd_recurrence(**inp)
-    monkeypatch.setattr(intra, "SAVE_ELEMENTS", 4 * 8 * 8 * 2)  # two chunks of 8 per tile
+    monkeypatch.setattr(intra, "TILE_ELEMENTS", 4 * 8 * 8 * 2)  # two chunks of 8 per tile
     assert len(intra._tiles(3 * 3, 4 * 8 * 8)) == 5
     torch.testing.assert_close(ssd_chunked(**inp, chunk_size=8), y_ref, rtol=1e-10, atol=1e-10)
     got = grads(ssd_chunked, inp, chunk_size=8)
     for k in GRAD_NAMES:
         torch.testing.assert_close(got[k], ref[k], rtol=1e-9, atol=1e-9, msg=lambda m, k=k: f"grad {k}: {m}")
+
+
+@pytest.mark.parametrize("L,block", [(1, 4), (7, 3), (16, 4), (23, 5), (40, 16), (41, 40)])
+def test_quadratic_blocks_equal_recurrence_fp64(L, block):
+    """Several blocks (the below-diagonal factorised part), lengths not multiples of the block."""
+    inp = make_inputs(2, L, 4, 3, 2, 5, seed=L + block, d_shape="hp")
+    inp["initial_state"] = None
+    ref = ssd_recurrence(**inp)
+    torch.testing.assert_close(ssd_quadratic(**inp, block_size=block), ref, rtol=1e-10, atol=1e-10)
+    leaves = [{k: v.clone().requires_grad_(True) if v is not None else None for k, v in inp.items()}
+              for _ in range(2)]
+    w = torch.randn(ref.shape, generator=torch.Generator().manual_seed(3), dtype=F64)
+    (ssd_recurrence(**leaves[0]) * w).sum().backward()
+    (ssd_quadratic(**leaves[1], block_size=block) * w).sum().backward()
+    for k in ("x", "dt", "A", "B", "C", "D", "dt_bias"):
+        torch.testing.assert_close(leaves[1][k].grad, leaves[0][k].grad, rtol=1e-9, atol=1e-9,
+                                   msg=lambda m, k=k: f"grad {k}: {m}")
+
+
+def test_auto_dispatch_uses_blocks(monkeypatch):
+    quad = importlib.import_module("skeleton_mamba.ssd.quadratic")
+    monkeypatch.setattr(quad, "BLOCK_SIZE", 8)
+    inp = make_inputs(1, 30, 2, 3, 1, 4, seed=4)
+    inp["initial_state"] = None
+    torch.testing.assert_close(ssd(**inp), ssd_recurrence(**inp), rtol=1e-10, atol=1e-10)
+    with pytest.raises(ValueError, match="block_size"):
+        ssd_quadratic(**inp, block_size=0)
+
+
+def mamba2_init_inputs(b, L, H, P, N, seed):
+    """fp32 inputs as an initialised Mamba-2 mixer sees them (as benchmarks/bench_ssd.py): A = -U(1, 16),
+    Δ₀ log-uniform in [0.001, 0.1] through the inverse-softplus dt_bias, raw dt ~ N(0, 1)."""
+    g = torch.Generator().manual_seed(seed)
+    delta0 = torch.exp(torch.rand(H, generator=g) * (math.log(0.1) - math.log(1e-3)) + math.log(1e-3))
+    delta0[0] = 0.1  # the fastest decay of the range: |cs| reaches ~10²
+    A = -torch.empty(H).uniform_(1.0, 16.0, generator=g)
+    A[0] = -16.0
+    return dict(x=torch.randn(b, L, H, P, generator=g), dt=torch.randn(b, L, H, generator=g), A=A,
+                B=torch.randn(b, L, 1, N, generator=g), C=torch.randn(b, L, 1, N, generator=g),
+                D=torch.ones(H), dt_bias=delta0 + torch.log(-torch.expm1(-delta0)))
+
+
+@pytest.mark.parametrize("L", [150, 300])
+def test_fp32_accuracy_at_fast_decay(L):
+    """fp32 within 1e-5 absolute of the float64 recurrence where |cs| is in the hundreds (the regime of
+    the issue: an fp32 cumsum of the log decays alone was off by 1e-5..3e-5 there)."""
+    inp = mamba2_init_inputs(2, L, 4, 32, 32, seed=L)
+    y_ref = ssd_recurrence(**{k: v.double() for k, v in inp.items()})
+    delta = torch.nn.functional.softplus(inp["dt"] + inp["dt_bias"]).double()
+    assert (delta * inp["A"].double()).sum(1).min() < -200  # the hard regime is really exercised
+    for y in (ssd_quadratic(**inp), ssd_quadratic(**inp, block_size=L), ssd_chunked(**inp, chunk_size=64),
+              ssd(**inp)):
+        assert y.dtype == torch.float32
+        assert (y.double() - y_ref).abs().max() <= 1e-5
+
+
+def test_split_cumsum_gives_float64_mask():
+    """exp(hi_i - hi_j)·r_i·c_j (fp32 work only) equals the float64 mask to a few fp32 ulps, where the
+    fp32 rounding of cs alone is off by u·|cs| (1e-5 and more at |cs| in the hundreds)."""
+    intra = importlib.import_module("skeleton_mamba.ssd.intra_chunk")
+    a = -torch.rand(3, 120, dtype=F64) * 4  # |cs| up to ~480
+    cs = a.cumsum(-1)
+    exact = segsum_stable(a).exp()
+    hi, r, c = intra.split_cumsum(cs, torch.float32)
+    assert hi.dtype == r.dtype == c.dtype == torch.float32
+    mask = decay_mask(hi).double() * r.double()[..., :, None] * c.double()[..., None, :]
+    # entries are ≤ 1: the absolute error is the one that reaches y; the relative error grows as
+    # u·|cs_i - cs_j| (exp of a correctly rounded difference), which is what bounds it here
+    assert (mask - exact).abs().max() < 4e-7
+    log_gap = (segsum_stable(a).clamp_min(-80.0).abs() + 2.0)
+    ok = exact > 1e-30
+    assert ((mask - exact).abs() / exact)[ok].le(2 * 2.0**-24 * log_gap[ok]).all()
+    assert (decay_mask(hi).double() - exact).abs().max() > 5e-6  # rounding cs to fp32 alone is not enough
+    assert intra.split_cumsum(cs, F64)[1] is None  # nothing is rounded in float64

@@ -217,4 +217,8 @@ def test_evaluator_trains_one_step_through_sm(tmp_path, monkeypatch):
     args += ["--data.root", str(root), "--data.glove_dir", str(glove), "--data.batch_size", "2"]
     args += ["--data.num_workers", "0", "--trainer.limit_val_batches", "0"]
     assert main(args) == 0
-    assert list((tmp_path / "checkpoints").glob("*.ckpt"))
+    (checkpoint,) = (tmp_path / "checkpoints").glob("*.ckpt")
+    from skeleton_mamba.tasks.text2motion.evaluator import load_evaluator
+
+    evaluator = load_evaluator(checkpoint)  # `sm test --model.evaluator_checkpoint best.ckpt` reads it so
+    assert not evaluator.comparable and evaluator.motion_encoder.hidden.shape == (2, 1, 1024)

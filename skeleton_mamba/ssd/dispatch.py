@@ -1,13 +1,15 @@
 """``ssd``: one entry point choosing between the SSD implementations.
 
-impl="auto": the mamba-ssm Triton kernel when installed and x is on CUDA; else the single-chunk
-quadratic form when L <= max(chunk_size, QUADRATIC_MAX_LEN) and no initial/final state is involved;
-else the chunked form. impl="torch": the same choice without the kernel.
+impl="auto": the mamba-ssm Triton kernel when installed and x is on CUDA; else the quadratic form
+(:func:`ssd_quadratic`: masked diagonal blocks of about ``quadratic.BLOCK_SIZE`` positions plus the
+factorised blocks below the diagonal, no chunk states) when L <= max(chunk_size, QUADRATIC_MAX_LEN)
+and no initial/final state is involved; else the chunked form. impl="torch": the same choice
+without the kernel.
 
 QUADRATIC_MAX_LEN comes from benchmarks/bench_ssd.py (4 heads, P = N = 64, fp32, 2 CPU threads,
 forward + backward): at L = 150 the single chunk was about 2x faster than chunks of 64, at L = 256
 one chunk of 256 and chunks of 64 or 128 were within the noise of a shared machine, and above that
-the O(L²) mask grows faster than the per-chunk state work.
+the O(L²) work grows faster than the per-chunk state work.
 """
 
 from __future__ import annotations

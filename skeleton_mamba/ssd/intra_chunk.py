@@ -7,106 +7,152 @@ For each chunk (reference §2 item 4, §3 step 1), per head h of B/C group g:
 with cs the inclusive cumulative sum of a = Δ·A inside the chunk and Y_off an optional term added
 by the caller (the inter-chunk contribution). C·Bᵀ is formed once per group and shared by its heads.
 
-Backward, with W = Lmask ∘ CB (per head), Xd = Δ ⊙ X and Y_in = W Xd:
-    dXd = Wᵀ dY,  dW = dY Xdᵀ,  dCB = Σ_{heads of g} dW ∘ Lmask,  dC = dCB B,  dB = dCBᵀ C,
-    d cs_i = Σ_j dW_ij W_ij - Σ_k dW_ki W_ki = Σ_p dY_ip Y_in,ip - Σ_p Xd_ip dXd_ip
-             (∂W_ij/∂cs_i = W_ij, ∂W_ij/∂cs_j = -W_ij; the sums over Q×Q reduce to sums over P),
-    dX = Δ ⊙ dXd + D ⊙ dY,  dΔ = Σ_p X ⊙ dXd,  dD = Σ X ⊙ dY,  dY_off = dY.
+Accuracy: ``cs`` arrives in float64. Rounding it to fp32 would put an error of u·|cs_i| (u = 2^-24)
+on every mask entry of row i — 1.5e-5 relative at |cs| = 250, more than the rest of the fp32
+computation together. So cs = hi + lo with hi = fp32(cs), and
+exp(cs_i - cs_j) = exp(hi_i - hi_j) · r_i · c_j with r = exp(lo), c = exp(-lo) (|lo| ≤ u|cs|/2):
+the Q×Q mask is formed in fp32 from hi only (an fp32 difference is correctly rounded), c is folded
+into the column weights Xd' = c ⊙ Δ ⊙ X and r into the rows of the output, both O(Q·P) work.
 
-Speed on CPU: the work is a few large operations (every operation costs a thread fork/join, which
-is expensive on a busy machine), and the Q×Q matrices Lmask and W are kept from the forward when
-they fit in ``SAVE_ELEMENTS`` (a fresh 100 MB tensor costs more in page faults than the arithmetic
-on it). Larger inputs are processed in tiles of at most ``SAVE_ELEMENTS`` mask entries, and the
-backward then recomputes Lmask and W tile by tile, so memory stays bounded.
+Backward, with W' = exp(hi_i - hi_j)·CB_ij (causal), Xd' = c ⊙ Δ ⊙ X, Y' = W' Xd' (Y_in = r ⊙ Y'),
+dY' = r ⊙ dY (so that W = diag(r) W' diag(c) never has to be formed):
+    dXd' = W'ᵀ dY',  dCB = Σ_{heads of g} (dY' Xd'ᵀ) ∘ exp(hi_i - hi_j) (causal),
+    dC = dCB B,  dB = dCBᵀ C,  u_j = Σ_p X_jp dXd'_jp,  dΔ = c ⊙ u,  dX = c ⊙ Δ ⊙ dXd' + D ⊙ dY,
+    d cs_i = Σ_j dW_ij W_ij - Σ_k dW_ki W_ki = Σ_p dY'_ip Y'_ip - Σ_p Xd'_ip dXd'_ip
+             (∂W_ij/∂cs_i = W_ij, ∂W_ij/∂cs_j = -W_ij; the sums over Q×Q reduce to sums over P),
+    dD = Σ X ⊙ dY,  dY_off = dY.
+
+Speed on CPU: the Q×Q tensors (the mask, C Bᵀ and W) are formed for at most ``TILE_ELEMENTS``
+entries at a time. When all chunks fit in one tile (every benchmark size) the mask and W are kept
+for the backward; larger inputs run tile by tile with reused buffers and the backward recomputes
+them, so memory stays bounded. Tiles are deliberately large: every operation is a thread fork/join,
+and on a busy 2-core machine cache-sized tiles (2^20 entries, 6-30 tiles at L = 150) made the
+forward + backward 2-8x slower than one tile because of the many synchronisations.
 """
 
 from __future__ import annotations
 
 import torch
 
-from skeleton_mamba.ssd.segsum import decay_mask
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask
 
-# Largest number of Q×Q mask entries (n·H·Q²) kept between forward and backward / held per tile.
-SAVE_ELEMENTS = 1 << 25
+# Most Q×Q entries (chunks · heads · Q²) per tile: 64 MB per buffer in fp32.
+TILE_ELEMENTS = 1 << 24
 
 
 def _tiles(n: int, per_item: int) -> list[tuple[int, int]]:
-    step = max(1, SAVE_ELEMENTS // max(1, per_item))
+    step = max(1, TILE_ELEMENTS // max(1, per_item))
     return [(i, min(n, i + step)) for i in range(0, n, step)]
 
 
-def _mask_and_weights(cs: torch.Tensor, CB: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Lmask (s, H, Q, Q) (zero above the diagonal) and W = Lmask ∘ CB from cs (s, H, Q), CB (s, G, Q, Q)."""
-    s, H, Q = cs.shape
-    G = CB.shape[1]
-    E = decay_mask(cs)
-    W = (E.view(s, G, H // G, Q, Q) * CB[:, :, None]).view(s, H, Q, Q)
-    return E, W
+def split_cumsum(cs: torch.Tensor, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor | None,
+                                                                  torch.Tensor | None]:
+    """hi = cs rounded to ``dtype`` and the factors r = exp(cs - hi), c = exp(hi - cs) in ``dtype``.
+
+    r and c are ``None`` when cs already has ``dtype`` (nothing was rounded).
+    """
+    hi = cs.to(dtype)
+    if cs.dtype == dtype:
+        return hi, None, None
+    lo = cs - hi.to(cs.dtype)
+    return hi, lo.exp().to(dtype), lo.neg().exp().to(dtype)
 
 
-def _cb(B: torch.Tensor, C: torch.Tensor) -> torch.Tensor:
-    """C Bᵀ per group: B, C (s, Q, G, N) -> (s, G, Q, Q)."""
-    return torch.matmul(C.transpose(1, 2), B.transpose(1, 2).transpose(-1, -2))
+def _weights(hi, B, C, bias, E, CB, W):
+    """Fill the tile buffers: CB = C Bᵀ (s, G, Q, Q), E = exp(hi_i - hi_j) causal (s, H, Q, Q) and
+    W = E ∘ CB (s, H, Q, Q); W may be E itself (then E is overwritten)."""
+    s, G, Q = CB.shape[0], CB.shape[1], CB.shape[2]
+    R = E.shape[1] // G
+    torch.matmul(C.transpose(1, 2), B.transpose(1, 2).transpose(-1, -2), out=CB)
+    decay_mask(hi, out=E, bias=bias)
+    torch.mul(E.view(s, G, R, Q, Q), CB[:, :, None], out=W.view(s, G, R, Q, Q))
+    return W
 
 
 class IntraChunk(torch.autograd.Function):
-    """See the module docstring. Layouts: x (n, Q, H, P), delta (n, Q, H), cs (n, H, Q),
-    B, C (n, Q, G, N), D (H, P) or None, y_off (n, Q, H, P) or None -> y (n, Q, H, P)."""
+    """See the module docstring. Layouts: x (n, Q, H, P), delta (n, Q, H), cs (n, H, Q) (float64 or x's
+    dtype), B, C (n, Q, G, N), D (H, P) or None, y_off (n, Q, H, P) or None -> y (n, Q, H, P)."""
 
     @staticmethod
     def forward(ctx, x, delta, cs, B, C, D, y_off):
         n, Q, H, P = x.shape
-        xd = x.new_empty(n, H, Q, P)
-        torch.mul(x.transpose(1, 2), delta.transpose(1, 2)[..., None], out=xd)
+        G = B.shape[2]
+        hi, row, col = split_cumsum(cs, x.dtype)  # (n, H, Q)
+        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col  # Δ_j c_j
+        xd, y = x.new_empty(n, H, Q, P), torch.empty_like(x)
         y_in = torch.empty_like(xd)
         tiles = _tiles(n, H * Q * Q)
-        saved = []
+        m = tiles[0][1]
+        keep = len(tiles) == 1  # one tile: keep E and W for the backward
+        E, CB = x.new_empty(m, H, Q, Q), x.new_empty(m, G, Q, Q)
+        Wbuf = torch.empty_like(E) if keep else E
+        bias = causal_bias(Q, x.dtype, x.device)
         for r0, r1 in tiles:
-            E, W = _mask_and_weights(cs[r0:r1], _cb(B[r0:r1], C[r0:r1]))
-            torch.matmul(W, xd[r0:r1], out=y_in[r0:r1])
-            if len(tiles) == 1:
-                saved = [E, W]
-        y = torch.empty_like(x)
-        if y_off is None:
-            y.copy_(y_in.transpose(1, 2))
-        else:
-            torch.add(y_in.transpose(1, 2), y_off, out=y)
-        if D is not None:
-            y.addcmul_(x, D)
-        ctx.save_for_backward(x, delta, cs, B, C, D, xd, y_in, *saved)
+            t, s = slice(r0, r1), r1 - r0
+            torch.mul(x[t].transpose(1, 2), wcol[t, :, :, None], out=xd[t])
+            W = _weights(hi[t], B[t], C[t], bias, E[:s], CB[:s], Wbuf[:s])
+            torch.matmul(W, xd[t], out=y_in[t])
+            if row is None:
+                y[t].copy_(y_in[t].transpose(1, 2))
+            else:
+                torch.mul(y_in[t].transpose(1, 2), row[t].transpose(1, 2)[..., None], out=y[t])
+            if y_off is not None:
+                y[t].add_(y_off[t])
+            if D is not None:
+                y[t].addcmul_(x[t], D)
+        ctx.cs_dtype = cs.dtype
+        ctx.save_for_backward(x, delta, hi, row, col, B, C, D, xd, y_in, *((E, Wbuf) if keep else ()))
         return y
 
     @staticmethod
     def backward(ctx, dy):
-        x, delta, cs, B, C, D, xd, y_in, *saved = ctx.saved_tensors
+        x, delta, hi, row, col, B, C, D, xd, y_in, *kept = ctx.saved_tensors
         n, Q, H, P = x.shape
         G = B.shape[2]
         R = H // G
-        dys = dy.transpose(1, 2).contiguous()  # (n, H, Q, P)
-        dxd = torch.empty_like(xd)
+        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col
+        dys, dxd = torch.empty_like(xd), torch.empty_like(xd)
+        dx = torch.empty_like(x)
+        ddelta, dcs = x.new_empty(n, H, Q), x.new_empty(n, H, Q)
         dB_t = B.new_empty(n, G, Q, B.shape[3])
         dC_t = torch.empty_like(dB_t)
-        for r0, r1 in _tiles(n, H * Q * Q):
-            s = r1 - r0
-            E, W = saved if saved else _mask_and_weights(cs[r0:r1], _cb(B[r0:r1], C[r0:r1]))
-            torch.matmul(W.transpose(-1, -2), dys[r0:r1], out=dxd[r0:r1])
+        want_dD = D is not None and ctx.needs_input_grad[5]
+        dD = torch.zeros_like(D) if want_dD else None
+        tiles = _tiles(n, H * Q * Q)
+        m = tiles[0][1]
+        if kept:
+            E, W = kept
+        else:
+            E, W, CB = x.new_empty(m, H, Q, Q), x.new_empty(m, H, Q, Q), x.new_empty(m, G, Q, Q)
+        bias = causal_bias(Q, x.dtype, x.device)
+        for r0, r1 in tiles:
+            t, s = slice(r0, r1), r1 - r0
+            if row is None:
+                dys[t].copy_(dy[t].transpose(1, 2))
+            else:
+                torch.mul(dy[t].transpose(1, 2), row[t, :, :, None], out=dys[t])
+            Wt = W if kept else _weights(hi[t], B[t], C[t], bias, E[:s], CB[:s], W[:s])
+            torch.matmul(Wt.transpose(-1, -2), dys[t], out=dxd[t])
             # W is not needed any more: dW takes its storage (a second backward through this graph
-            # would then fail loudly on the version check of the saved W instead of reading it).
-            dW = torch.matmul(dys[r0:r1], xd[r0:r1].transpose(-1, -2), out=W).mul_(E)  # dW ∘ Lmask
+            # would then fail loudly on the version check of a kept W instead of reading it).
+            dW = torch.matmul(dys[t], xd[t].transpose(-1, -2), out=Wt).mul_(E[:s])  # (dY' Xd'ᵀ) ∘ E
             dCB = dW.view(s, G, R, Q, Q).sum(2) if R > 1 else dW
-            torch.matmul(dCB, B[r0:r1].transpose(1, 2), out=dC_t[r0:r1])
-            torch.matmul(dCB.transpose(-1, -2), C[r0:r1].transpose(1, 2), out=dB_t[r0:r1])
-        ddelta = torch.linalg.vecdot(x.transpose(1, 2), dxd)  # (n, H, Q)
-        # Σ_p Xd dXd = Δ Σ_p X dXd = Δ·dΔ
-        dcs = torch.linalg.vecdot(dys, y_in).sub_(ddelta * delta.transpose(1, 2))  # (n, H, Q)
-        dx = dxd.mul_(delta.transpose(1, 2)[..., None])
-        dD = None
-        if D is not None:
-            dx.addcmul_(dys, D[:, None, :])
-            if ctx.needs_input_grad[5]:
-                dD = torch.linalg.vecdot(dy.flatten(0, 1), x.flatten(0, 1), dim=0)
+            torch.matmul(dCB, B[t].transpose(1, 2), out=dC_t[t])
+            torch.matmul(dCB.transpose(-1, -2), C[t].transpose(1, 2), out=dB_t[t])
+            u = torch.linalg.vecdot(x[t].transpose(1, 2), dxd[t])  # (s, H, Q): Σ_p X dXd'
+            if col is None:
+                ddelta[t].copy_(u)
+            else:
+                torch.mul(u, col[t], out=ddelta[t])
+            # Σ_p Xd' dXd' = Δ c Σ_p X dXd' = wcol·u
+            torch.sub(torch.linalg.vecdot(dys[t], y_in[t]), u.mul_(wcol[t]), out=dcs[t])
+            torch.mul(dxd[t].transpose(1, 2), wcol[t].transpose(1, 2)[..., None], out=dx[t])
+            if D is not None:
+                dx[t].addcmul_(dy[t], D)
+            if want_dD:
+                dD += torch.linalg.vecdot(dy[t].flatten(0, 1), x[t].flatten(0, 1), dim=0)
         dy_off = dy if ctx.needs_input_grad[6] else None
-        return (dx.transpose(1, 2), ddelta.transpose(1, 2), dcs, dB_t.transpose(1, 2), dC_t.transpose(1, 2),
+        return (dx, ddelta.transpose(1, 2), dcs.to(ctx.cs_dtype), dB_t.transpose(1, 2), dC_t.transpose(1, 2),
                 dD, dy_off)
 
 
@@ -124,7 +170,9 @@ def intra_chunk(
     Args:
         x: (n, Q, H, P) inputs of n chunks of length Q.
         delta: (n, Q, H) step sizes Δ.
-        cs: (n, H, Q) inclusive cumulative sums of a = Δ·A within each chunk.
+        cs: (n, H, Q) inclusive cumulative sums of a = Δ·A (only differences inside a chunk are used,
+            so any offset per chunk is allowed), in float64 (or in x's dtype, then the mask carries
+            the rounding error of cs, see the module docstring).
         B, C: (n, Q, G, N); head h reads group h // (H // G).
         D: (H, P) skip weights or ``None``.
         y_off: (n, Q, H, P) extra term (the contribution of the entering state) or ``None``.
@@ -133,5 +181,6 @@ def intra_chunk(
         y (n, Q, H, P) = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + y_off + D ⊙ x, all in x's dtype.
     """
     dt = x.dtype
-    args = [t.to(dt).contiguous() if t is not None else None for t in (x, delta, cs, B, C, D, y_off)]
-    return IntraChunk.apply(*args)
+    cs = cs.contiguous() if cs.dtype == torch.float64 else cs.to(dt).contiguous()
+    args = [t.to(dt).contiguous() if t is not None else None for t in (x, delta, B, C, D, y_off)]
+    return IntraChunk.apply(args[0], args[1], cs, *args[2:])

@@ -1,8 +1,21 @@
-"""The single-chunk quadratic SSD form for short sequences (reference §2 item 4, §3 "Short sequences").
+"""The quadratic SSD form for short sequences (reference §2 item 4, §3 "Short sequences").
 
-Y = (Lmask ∘ C Bᵀ)(Δ ⊙ X) + D ⊙ X over the whole sequence as one chunk: no per-chunk states are
-formed (an initial state adds exp(ā_l) h₀ C_l and the final state is one P×N matrix per head).
-Suited to the joint scan (L = 6), the group scan (L = 40) and the temporal scan (L = 150).
+Y = (Lmask ∘ C Bᵀ)(Δ ⊙ X) + D ⊙ X over the whole sequence, with no chunk states. The L×L matrix is
+evaluated in blocks of q ≈ ``block_size`` positions (the length is right-padded with Δ = 0 to K
+blocks of q, which injects nothing):
+
+- diagonal blocks: the masked quadratic form of :func:`intra_chunk` (mask, per head, q×q);
+- below the diagonal, row block I against all earlier positions j < s_I (s_I its first position):
+  with the anchor α_I = cs_{s_I - 1} (cs the fp64 cumulative sum of a = Δ·A over the sequence),
+  Lmask_ij = exp(cs_i - α_I) · exp(α_I - cs_j) for i ≥ s_I > j, both factors ≤ 1 (so nothing
+  overflows, and a factor that underflows bounds a negligible entry), hence
+  Y_I += u_I ⊙ (C_I B_{<I}ᵀ)(v_I ⊙ Δ ⊙ X_{<I}),  u_I = exp(cs_I - α_I),  v_I = exp(α_I - cs_{<I}).
+  C_I B_{<I}ᵀ is one matrix per B/C group shared by its heads, and no per-head mask is formed.
+
+Per head the work is O(L·q) mask entries instead of O(L²) and one (q × s_I)(s_I × R·P) matrix
+product per row block and group (R heads per group). Suited to the joint scan (L = 6), the group
+scan (L = 40) and the temporal scan (L = 150). With an initial or final state the whole sequence
+is one chunk of :func:`ssd_chunked`.
 """
 
 from __future__ import annotations
@@ -10,6 +23,40 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.chunked import ssd_chunked
+from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
+from skeleton_mamba.ssd.intra_chunk import intra_chunk
+
+# Target block length q (benchmarks/bench_ssd.py, L = 150, 4 heads, P = N = 64, fp32, 2 threads).
+BLOCK_SIZE = 64
+
+
+def below_diagonal(
+    xd: torch.Tensor, cs: torch.Tensor, B: torch.Tensor, C: torch.Tensor, q: int
+) -> torch.Tensor:
+    """The contribution of earlier blocks to every block (zero for the first), see the module docstring.
+
+    Args:
+        xd: (b, K·q, H, P) Δ ⊙ x.
+        cs: (b, K·q, H) float64 cumulative sums of a = Δ·A over the whole sequence.
+        B, C: (b, K·q, G, N).
+        q: block length.
+
+    Returns:
+        (b, K·q, H, P) in xd's dtype.
+    """
+    b, L, H, P = xd.shape
+    G = B.shape[2]
+    R = H // G
+    parts = [xd.new_zeros(b, q, H, P)]
+    for s in range(q, L, q):
+        alpha = cs[:, s - 1: s]  # (b, 1, H)
+        v = torch.exp(alpha - cs[:, :s]).to(xd.dtype)  # (b, s, H), ≤ 1
+        u = torch.exp(cs[:, s: s + q] - alpha).to(xd.dtype)  # (b, q, H), ≤ 1
+        rhs = (xd[:, :s] * v[..., None]).view(b, s, G, R * P).transpose(1, 2)  # (b, G, s, R·P)
+        cb = torch.matmul(C[:, s: s + q].transpose(1, 2), B[:, :s].permute(0, 2, 3, 1))  # (b, G, q, s)
+        z = torch.matmul(cb, rhs).view(b, G, q, R, P).transpose(1, 2).reshape(b, q, H, P)
+        parts.append(z * u[..., None])
+    return torch.cat(parts, dim=1)
 
 
 def ssd_quadratic(
@@ -25,9 +72,34 @@ def ssd_quadratic(
     dt_limit: tuple[float, float] = (0.0, float("inf")),
     initial_state: torch.Tensor | None = None,
     return_final_state: bool = False,
+    block_size: int | None = None,
 ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
-    """SSD as one L×L chunk; arguments and results as :func:`ssd_recurrence` (cost O(L²) per head)."""
-    return ssd_chunked(
-        x, dt, A, B, C, D=D, dt_bias=dt_bias, dt_softplus=dt_softplus, dt_limit=dt_limit,
-        initial_state=initial_state, return_final_state=return_final_state, chunk_size=max(1, x.shape[1]),
-    )
+    """SSD by the quadratic form; arguments and results as :func:`ssd_recurrence` (cost O(L²) per head).
+
+    Args:
+        block_size: target block length q (default ``BLOCK_SIZE``); blocks are balanced, so
+            L = 150 with q = 64 gives three blocks of 50.
+    """
+    if initial_state is not None or return_final_state:
+        return ssd_chunked(
+            x, dt, A, B, C, D=D, dt_bias=dt_bias, dt_softplus=dt_softplus, dt_limit=dt_limit,
+            initial_state=initial_state, return_final_state=return_final_state, chunk_size=max(1, x.shape[1]),
+        )
+    check_inputs(x, dt, A, B, C, D, dt_bias, initial_state)
+    block_size = BLOCK_SIZE if block_size is None else block_size
+    if block_size < 1:
+        raise ValueError(f"ssd_quadratic: block_size must be >= 1, got {block_size}")
+    b, L, H, P = x.shape
+    G, N = B.shape[2], B.shape[3]
+    ct = compute_dtype(x)
+    K = max(1, -(-L // block_size))
+    q = max(1, -(-L // K))
+    xc, delta, Bc, Cc = padded_inputs(x, dt, B, C, dt_bias, dt_softplus, dt_limit, K * q)
+    # float64 cumulative log decays (see intra_chunk.py for why fp32 is not enough)
+    cs = (delta.to(torch.float64) * A.to(torch.float64)).cumsum(dim=1)  # (b, K·q, H)
+    y_off = below_diagonal(xc * delta[..., None], cs, Bc, Cc, q).view(b * K, q, H, P) if K > 1 else None
+    D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
+    n = b * K
+    y = intra_chunk(xc.reshape(n, q, H, P), delta.reshape(n, q, H), cs.view(n, q, H).transpose(1, 2),
+                    Bc.reshape(n, q, G, N), Cc.reshape(n, q, G, N), D2, y_off).view(b, K * q, H, P)
+    return y[:, :L].to(x.dtype)

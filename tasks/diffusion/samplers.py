@@ -45,14 +45,21 @@ def guided_x0(
 ) -> torch.Tensor:
     """Classifier-free guidance on x0: ``unc + w (cond - unc)`` (EDGE; w = 1 is plain conditional).
 
-    w = 0 returns the unconditional prediction and never evaluates the conditional one.
+    w = 0 returns the unconditional prediction and never evaluates the conditional one. A denoiser with
+    a ``null_condition(cond) -> tensor`` method (the null condition shaped like the tensor ``cond``) is
+    called once on the doubled batch ``[x_t; x_t]`` with ``[cond; null]`` instead of twice.
     """
     if cond is None or guidance_weight == 0.0:
         return denoiser(x_t, t, None)
-    cond_x0 = denoiser(x_t, t, cond)
     if guidance_weight == 1.0:
-        return cond_x0
-    unc_x0 = denoiser(x_t, t, None)
+        return denoiser(x_t, t, cond)
+    null_condition = getattr(denoiser, "null_condition", None)
+    if null_condition is not None and torch.is_tensor(cond):
+        both = denoiser(torch.cat([x_t, x_t]), torch.cat([t, t]), torch.cat([cond, null_condition(cond)]))
+        cond_x0, unc_x0 = both.chunk(2)
+    else:
+        cond_x0 = denoiser(x_t, t, cond)
+        unc_x0 = denoiser(x_t, t, None)
     return unc_x0 + guidance_weight * (cond_x0 - unc_x0)
 
 

@@ -5,7 +5,8 @@ takes the first ``num_samples`` windows of the data module's held-out split (``t
 motion sources never seen in training), samples a dance with the EMA model for each window's music,
 egocentric frames and head-camera trajectory, and writes into ``<log dir>/demo/``:
 
-- ``synthetic_<sample id>_dance.{npz,bvh,mp4,wav}``: the sampled dance (our motion format, BVH, a
+- ``synthetic_<sample id>_dance.{npz,bvh,mp4,wav}`` (paths in ``demo.json`` are as written: relative to the
+  working directory when the log dir is): the sampled dance (our motion format, BVH, a
   rendering with the window's music muxed in, and that music slice);
 - ``synthetic_<sample id>_reference.{npz,bvh,mp4,wav}``: the ground-truth dance of the window, for
   comparison (``render_reference``);
@@ -89,11 +90,12 @@ class DanceDemo(Callback):
             music = meta.get("music") or {}
             batch = {k: v[None].to(pl_module.device) for k, v in item.items() if torch.is_tensor(v)}
             tokens = pl_module.sample(batch, index)[0]
-            name = f"synthetic_{item['sample_id']}"
+            sid = str(item["sample_id"])
+            name = sid if sid.startswith("synthetic") else f"synthetic_{sid}"
             written = {"dance": (tokens, f"{name}_dance", "EMM (synthetic demo)")}
             if self.render_reference:
                 written["reference"] = (item["motion"], f"{name}_reference", "ground truth (synthetic)")
-            record = {"sample_id": item["sample_id"], "split": split, "music": music}
+            record = {"sample_id": sid, "split": split, "music": music}
             for kind, (motion, stem, title) in written.items():
                 files = write_dance(
                     motion,

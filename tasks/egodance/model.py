@@ -118,10 +118,13 @@ class EMM(nn.Module):
         """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] -> fused condition c (B, T, Dc)."""
         return self.fuse(*self.encode_modalities(music, frames))
 
+    def null_condition(self, context: torch.Tensor) -> torch.Tensor:
+        """The learned null condition shaped like ``context`` (B, S, Dc) (for batched guidance)."""
+        return self.null_context.to(context.dtype).expand_as(context)
+
     def drop_condition(self, context: torch.Tensor, drop: torch.Tensor) -> torch.Tensor:
         """Replace the condition of samples where ``drop`` (B,) is True by the learned null condition."""
-        null = self.null_context.to(context.dtype).expand_as(context)
-        return torch.where(drop[:, None, None], null, context)
+        return torch.where(drop[:, None, None], self.null_condition(context), context)
 
     def forward(
         self,

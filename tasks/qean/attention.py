@@ -11,7 +11,7 @@ Quaternion Rotary Attention (seed 003 section 3.4, Eqs. 25-28), per head of widt
 4. ``S = softmax(1 / (P sqrt(d)) sum_p Re[Phi_p Psi_p^H])`` (Eq. 27; the trailing "H" of the printed formula
    is read as the conjugate transpose), ``H = S V`` (Eq. 28). ``Re[q r*]`` of two quaternions is their 4-d
    dot product, so ``sum_p Re[Phi_p Psi_p^H]`` is one matrix product of the P rotated copies concatenated
-   along channels, computed by ``scaled_dot_product_attention``.
+   along channels.
 
 With P = 1, omega = 0, theta = 0 the rotations are identities and QRA is canonical attention.
 Deviation: a head width that is not a multiple of 4 (800 / 16 heads = 50) leaves ``d mod 4`` channels that
@@ -28,7 +28,7 @@ import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
-from skeleton_mamba.tasks.qean.quaternion import hamilton_product, quaternion_flatten, quaternion_parameterise
+from skeleton_mamba.tasks.qean.quaternion import quaternion_flatten, quaternion_parameterise
 from skeleton_mamba.tasks.qean.rotary import SpinPositionEmbedding
 
 __all__ = [
@@ -39,8 +39,25 @@ __all__ = [
 ]
 
 
+def _times_unit(quats: torch.Tensor, axis: int) -> torch.Tensor:
+    """``q (x) i`` (axis 1) or ``q (x) j`` (axis 2) of quaternions (..., 4): a signed permutation.
+
+    ``(e + f i + g j + h k) i = -f + e i + h j - g k`` and ``(e + f i + g j + h k) j = -g - h i + e j + f k``.
+    """
+    e, f, g, h = quats.unbind(-1)
+    if axis == 1:
+        return torch.stack([-f, e, h, -g], dim=-1)
+    if axis == 2:
+        return torch.stack([-g, -h, e, f], dim=-1)
+    raise ValueError(f"axis must be 1 (i) or 2 (j), got {axis}")
+
+
 def series_rotation(x: torch.Tensor, phase: torch.Tensor, axis: int) -> torch.Tensor:
     """Rotate every quaternion of each row by ``exp(axis_unit * phase_p)`` for the P phases (Eq. 26).
+
+    The Hamilton product with the unit ``cos phi + sin phi u`` (``u`` = **i** or **j**) is evaluated as
+    ``x~ cos phi + (x~ (x) u) sin phi``: the same products and sums as :func:`hamilton_product` with the two
+    zero components of the unit left out.
 
     Args:
         x: (..., T, d) rows; the first ``4 (d // 4)`` channels are read as quaternions.
@@ -50,11 +67,9 @@ def series_rotation(x: torch.Tensor, phase: torch.Tensor, axis: int) -> torch.Te
     Returns:
         (..., T, P, 4 (d // 4)) rotated quaternion channels ``x~ (x) exp(axis phi_p)``.
     """
-    unit = torch.zeros(*phase.shape, 4, dtype=x.dtype, device=x.device)
-    unit[..., 0] = phase.cos()
-    unit[..., axis] = phase.sin()
     quats = quaternion_parameterise(x).unsqueeze(-3)  # (..., T, 1, n, 4)
-    return quaternion_flatten(hamilton_product(quats, unit.unsqueeze(-2)))
+    cos, sin = phase.cos()[..., None, None], phase.sin()[..., None, None]  # (..., T, P, 1, 1)
+    return quaternion_flatten(quats * cos + _times_unit(quats, axis) * sin)
 
 
 def quaternion_rotary_attention(
@@ -80,14 +95,19 @@ def quaternion_rotary_attention(
     if phase_k.shape[-1] != num_periods:
         raise ValueError(f"queries have {num_periods} periods but keys {phase_k.shape[-1]}")
     whole = 4 * (d // 4)
-    q_rot = series_rotation(q, phase_q, axis=1).flatten(-2)  # (..., N, P * whole)
-    k_rot = series_rotation(k, phase_k, axis=2).flatten(-2)
-    # Channels beyond whole quaternions enter every rotated copy unrotated: P times their dot product.
-    q_all = torch.cat([q_rot, num_periods * q[..., whole:]], dim=-1)
-    k_all = torch.cat([k_rot, k[..., whole:]], dim=-1)
-    return F.scaled_dot_product_attention(
-        q_all, k_all, v, dropout_p=dropout_p, scale=1.0 / (num_periods * math.sqrt(d))
-    )
+    q = q * (1.0 / (num_periods * math.sqrt(d)))  # the scale, applied once to the (small) unrotated queries
+    q_all = series_rotation(q, phase_q, axis=1).flatten(-2)  # (..., N, P * whole)
+    k_all = series_rotation(k, phase_k, axis=2).flatten(-2)
+    if whole < d:  # channels beyond whole quaternions enter each rotated copy unrotated (P times)
+        q_all = torch.cat([q_all, num_periods * q[..., whole:]], dim=-1)
+        k_all = torch.cat([k_all, k[..., whole:]], dim=-1)
+    # sum_p Re[Phi_p Psi_p^H] is one product of the P rotated copies side by side. Written out instead of
+    # scaled_dot_product_attention: the query width P * d differs from the value width, which sends SDPA
+    # to its slower reference path.
+    weights = torch.softmax(q_all @ k_all.transpose(-1, -2), dim=-1)
+    if dropout_p > 0.0:
+        weights = F.dropout(weights, dropout_p)
+    return weights @ v
 
 
 class RotarySelfAttention(nn.Module):
@@ -107,12 +127,25 @@ class RotarySelfAttention(nn.Module):
         self.out = nn.Linear(dim, dim)
         self.rotary = SpinPositionEmbedding(dim // heads, base)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, T, dim) -> (B, T, dim)."""
+    def project(
+        self, x: torch.Tensor, offset: int = 0
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Per-token part: (B, T, dim) -> rotated q, k, v, each (B, heads, T, d), at positions offset + t.
+
+        Attention scores depend on position differences only (Eq. 24), so tokens projected at absolute
+        positions once can be attended over in any window of them (fast generation reuses them).
+        """
         q, k, v = rearrange(self.qkv(x), "b t (three h d) -> three b h t d", three=3, h=self.heads)
-        q, k = self.rotary(q, k)
+        return self.rotary.rotate(q, offset), self.rotary.rotate(k, offset), v
+
+    def attend(self, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        """Attention over projected tokens (B, heads, T, d) -> (B, T, dim)."""
         y = F.scaled_dot_product_attention(q, k, v, dropout_p=self.dropout if self.training else 0.0)
         return self.out(rearrange(y, "b h t d -> b t (h d)"))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, T, dim) -> (B, T, dim)."""
+        return self.attend(*self.project(x))
 
 
 class QuaternionRotaryAttention(nn.Module):

@@ -5,8 +5,16 @@ Layout read (``root`` = the AIST++ annotations folder)::
     <root>/motions/<name>.pkl      SMPL motions (smpl_poses, smpl_trans, smpl_scaling), 60 fps
     <music_dir>/<music id>.wav     music (.mp3 also accepted), e.g. mBR0.wav; default <root>/music
 
-Splits are the toolkit's packaged crossmodal lists (``"train"``, ``"test"``; 980 / 20 names) or a path to a
-text file with one sequence name per line; the 45 sequences of the AIST++ ignore list are dropped.
+A split is a name or a path to a text file with one sequence name per line. A name ``X`` reads
+``<root>/splits/crossmodal_X.txt`` when the AIST++ annotations hold it, else the toolkit's packaged crossmodal
+list (``"train"``, ``"test"``; 980 / 20 names; no ``"val"`` ships). The 45 sequences of the AIST++ ignore
+list are dropped.
+
+Test protocol (seed 003 section 4.3: "40 generated motion sequences" of 1200 frames "from the AIST++ test
+set"). The seed's text is FACT's, and FACT's evaluation code (dance.md section 7.3) generates for the
+crossmodal **val + test** lists: 20 + 20 = 40 sequences, which share the 10 AIST++ test music pieces (each
+piece danced by 4 sequences, i.e. 4 different seed motions per music). That reading is the default
+(``test_split: [val, test]``); ``val`` comes from ``<root>/splits/crossmodal_val.txt`` of the annotations.
 
 Samples (all at 60 fps, motion frame t aligned with music frame t):
 
@@ -40,6 +48,14 @@ from skeleton_mamba.tasks.qean.representation import features_to_joints, motion_
 __all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
 
 MUSIC_SUFFIXES = (".wav", ".mp3")
+
+
+def _read_names(path: Path) -> list[str]:
+    """Sequence names of a list file, one per line (``#`` comments and extensions dropped)."""
+    if not path.is_file():
+        raise FileNotFoundError(f"split list {path} not found")
+    names = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()]
+    return [Path(n).stem for n in names if n and not n.startswith("#")]
 
 
 class DanceWindowDataset(Dataset):
@@ -98,10 +114,11 @@ class AISTPPDanceDataModule(LightningDataModule):
     Args:
         root: the AIST++ annotations folder (holding ``motions/``).
         music_dir: folder of ``<music id>.wav|.mp3`` files (default ``<root>/music``).
-        train_split: ``"train"`` (packaged crossmodal list) or a text file of names.
-        test_split: ``"test"`` (packaged crossmodal list) or a text file of names.
+        train_split: ``"train"`` (crossmodal list) or a text file of names.
+        test_split: one split or a list of splits generated at test time (default ``[val, test]``, the
+            seed's 40 sequences; see the module docstring).
         reference_splits: splits whose full motions form the real set of FID and the normalisation of
-            Dist (FACT/Bailando code: every AIST++ sequence minus the ignore list = train + test here).
+            Dist (FACT/Bailando code: every AIST++ sequence minus the ignore list = train + val + test).
         seed_frames: seed motion frames (120).
         music_frames: music frames per window (240).
         predict_frames: frames predicted per window (20).
@@ -112,6 +129,9 @@ class AISTPPDanceDataModule(LightningDataModule):
         test_batch_size: sequences generated together at test and predict time.
         num_workers: DataLoader worker processes.
         music_cache_dir: cache folder for music features (default: the toolkit's).
+        test_max_sequences: generate for only the first N test sequences (``None``: all; for quick checks).
+        synthetic: the files are generated stand-ins in the AIST++ layout, not AIST++: the test table says
+            that its figures are not comparable with the seed's.
         predict_seed: seed motion file for ``sm predict`` (AIST++ ``.pkl`` or ``.npz``).
         predict_music: music file for ``sm predict``.
     """
@@ -121,7 +141,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         root: str = "data/aistpp",
         music_dir: str | None = None,
         train_split: str = "train",
-        test_split: str = "test",
+        test_split: str | list[str] | None = None,
         reference_splits: list[str] | None = None,
         seed_frames: int = 120,
         music_frames: int = 240,
@@ -133,6 +153,8 @@ class AISTPPDanceDataModule(LightningDataModule):
         test_batch_size: int = 8,
         num_workers: int = 4,
         music_cache_dir: str | None = None,
+        test_max_sequences: int | None = None,
+        synthetic: bool = False,
         predict_seed: str | None = None,
         predict_music: str | None = None,
     ) -> None:
@@ -140,7 +162,15 @@ class AISTPPDanceDataModule(LightningDataModule):
         self.save_hyperparameters()
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
-        self.reference_splits = ["train", "test"] if reference_splits is None else list(reference_splits)
+        self.reference_splits = (
+            ["train", "val", "test"] if reference_splits is None else list(reference_splits)
+        )
+        if test_split is None:
+            test_split = ["val", "test"]
+        self.test_splits = [test_split] if isinstance(test_split, str) else list(test_split)
+        if test_max_sequences is not None and test_max_sequences < 1:
+            raise ValueError(f"test_max_sequences must be >= 1 or None, got {test_max_sequences}")
+        self.synthetic = synthetic
         self.batch_size = batch_size
         self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.datasets: dict[str, Dataset] = {}
@@ -164,13 +194,20 @@ class AISTPPDanceDataModule(LightningDataModule):
             )
 
     def split_names(self, split: str) -> list[str]:
-        """Sequence names of a packaged split or a name-list file, minus the ignore list."""
+        """Names of a split (a name-list file, else the annotations' or the packaged crossmodal list), minus
+        the ignore list."""
         path = Path(split).expanduser()
+        annotated = self.root / "splits" / f"crossmodal_{split}.txt"  # the AIST++ annotations' own lists
         if path.suffix == ".txt" or path.is_file():
-            if not path.is_file():
-                raise FileNotFoundError(f"split list {path} not found")
-            names = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()]
-            names = [Path(n).stem for n in names if n and not n.startswith("#")]
+            names = _read_names(path)
+        elif annotated.is_file():
+            names = _read_names(annotated)
+        elif split == "val":
+            raise DatasetNotFoundError(
+                f"AIST++ crossmodal val list not found: {annotated} (the annotations download ships it; "
+                "skeleton_mamba does not). The seed's 40 test sequences are val + test; for the 20 test "
+                "sequences only pass --data.init_args.test_split test"
+            )
         else:
             names = load_split(split)
         if self.hparams.exclude_ignored:
@@ -250,7 +287,8 @@ class AISTPPDanceDataModule(LightningDataModule):
             )
         elif stage == "test" and "test" not in self.datasets:
             self.check_layout()
-            names = self.split_names(h.test_split)
+            names = list(dict.fromkeys(n for split in self.test_splits for n in self.split_names(split)))
+            names = names[: h.test_max_sequences]
             items = []
             for name, (motion, music) in self._load(names, "test").items():
                 items.append(self._generation_item(name, motion, music, self.music_file(name)))

@@ -85,6 +85,11 @@ class _Block(nn.Module):
             x = x[:, :num_queries] + self.drop(self.attention(self.norm1(x), num_queries=num_queries))
         return x + self.mlp(self.norm2(x))
 
+    def forward_projected(self, x: torch.Tensor, qkv: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """:meth:`forward` of a self-attention block whose ``attention.project(norm1(x))`` is given."""
+        x = x + self.drop(self.attention.attend(*qkv))
+        return x + self.mlp(self.norm2(x))
+
 
 class RotaryTransformer(nn.Module):
     """Encoder of pre-LN blocks with Spin Position Embedding self-attention: (B, T, dim) -> (B, T, dim)."""
@@ -99,6 +104,20 @@ class RotaryTransformer(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         for block in self.blocks:
+            x = block(x)
+        return self.norm(x)
+
+    def first_projections(self, x: torch.Tensor, offset: int = 0) -> tuple[torch.Tensor, ...]:
+        """The first block's per-token work: (B, T, dim) -> rotated q, k, v (B, heads, T, d), from ``offset``.
+
+        Needs at least one block and an input without learned positions to be reusable across windows.
+        """
+        return self.blocks[0].attention.project(self.blocks[0].norm1(x), offset)
+
+    def forward_projected(self, x: torch.Tensor, qkv: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """:meth:`forward` given ``first_projections`` of ``x`` (at any offset: scores are relative)."""
+        x = self.blocks[0].forward_projected(x, qkv)
+        for block in self.blocks[1:]:
             x = block(x)
         return self.norm(x)
 

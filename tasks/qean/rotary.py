@@ -58,6 +58,11 @@ class SpinPositionEmbedding(nn.Module):
             self._table = table
         return table[3][offset:need], table[4][offset:need]
 
+    def rotate(self, x: torch.Tensor, offset: int = 0) -> torch.Tensor:
+        """Rotate ``x`` (..., T, d) at positions ``offset .. offset + T - 1``."""
+        cos, sin = self.cos_sin(x.shape[-2], x.dtype, x.device, offset)
+        return apply_rotary(x, cos, sin)
+
     def forward(self, q: torch.Tensor, k: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Rotate ``q`` (..., N, d) and ``k`` (..., M, d) at positions 0..N-1 and 0..M-1."""
         cos, sin = self.cos_sin(max(q.shape[-2], k.shape[-2]), q.dtype, q.device)

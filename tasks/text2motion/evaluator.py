@@ -172,7 +172,9 @@ class T2MEvaluator(nn.Module):
         return model.eval()
 
     @classmethod
-    def from_lightning_checkpoint(cls, path: str | PathLike[str], feature_dim: int = 263) -> T2MEvaluator:
+    def from_lightning_checkpoint(
+        cls, path: str | PathLike[str], feature_dim: int = 263, **sizes: int
+    ) -> T2MEvaluator:
         """The evaluator of a ``sm fit --recipe t2m_evaluator.yaml`` checkpoint (``evaluator.*`` keys).
 
         Not comparable with published numbers (``comparable`` is False).
@@ -188,7 +190,7 @@ class T2MEvaluator(nn.Module):
             raise KeyError(
                 f"{path}: no 'evaluator.*' weights in its state_dict (not a T2MEvaluatorModule file)"
             )
-        model = cls(feature_dim, comparable=False)
+        model = cls(feature_dim, comparable=False, **sizes)
         model.load_state_dict(weights)
         return model.eval()
 

@@ -25,7 +25,7 @@ import torch
 
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 
-__all__ = ["parse_length", "main"]
+__all__ = ["parse_length", "slug", "save_generated", "main"]
 
 
 def parse_length(text: str) -> int:
@@ -40,8 +40,47 @@ def parse_length(text: str) -> int:
     return frames
 
 
-def _slug(caption: str) -> str:
+def slug(caption: str) -> str:
+    """Up to six lower-case words of a caption joined by ``_`` (file names)."""
     return "_".join(re.findall(r"[a-z0-9]+", caption.lower())[:6]) or "motion"
+
+
+def save_generated(
+    features: torch.Tensor, caption: str, stem: str | Path, render: str | None = None
+) -> dict[str, Path]:
+    """Write one generated motion: ``STEM.npy`` joints (T, 22, 3), ``STEM_features.npy`` (T, 263), and
+    ``STEM.gif`` / ``STEM.mp4`` when ``render`` is ``"gif"`` / ``"mp4"``.
+
+    Args:
+        features: de-normalised features (T, 263) (only the valid frames).
+        caption: the prompt (the video title).
+        stem: output path without suffix; its folder is created.
+        render: ``None``, ``"gif"`` or ``"mp4"``.
+
+    Returns:
+        ``{"joints": ..., "features": ..., "video": ...}`` paths (``video`` only when rendered).
+    """
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    features = features.detach().cpu()
+    joints = recover_from_ric(features.double()).float().numpy()
+    paths = {"joints": stem.with_suffix(".npy"), "features": stem.with_name(stem.name + "_features.npy")}
+    np.save(paths["features"], features.float().numpy())
+    np.save(paths["joints"], joints)
+    if render:
+        from skeleton_mamba.skeletons import HUMANML3D22
+        from skeleton_mamba.tasks.motion.render import render_motion
+
+        paths["video"] = render_motion(
+            joints,
+            HUMANML3D22.parents,
+            stem.with_suffix(f".{render}"),
+            FPS,
+            names=HUMANML3D22.joint_names,
+            title=caption,
+            progress=False,
+        )
+    return paths
 
 
 def _steps(value: str) -> int | None:
@@ -85,25 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sampling_steps=args.steps,
         progress=True,
     )
-    joints = recover_from_ric(features.double()).float().numpy()
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     for i, caption in enumerate(captions):
-        stem = out / f"{i:03d}_{_slug(caption)}"
-        np.save(stem.with_name(stem.name + "_features.npy"), features[i].numpy())
-        np.save(stem.with_suffix(".npy"), joints[i])
-        if args.render:
-            from skeleton_mamba.skeletons import HUMANML3D22
-            from skeleton_mamba.tasks.motion.render import render_motion
-
-            render_motion(
-                joints[i],
-                HUMANML3D22.parents,
-                stem.with_suffix(f".{args.render}"),
-                FPS,
-                names=HUMANML3D22.joint_names,
-                title=caption,
-                progress=False,
-            )
-        print(f"wrote {stem.with_suffix('.npy')}  ({frames} frames: {caption!r})")
+        paths = save_generated(features[i], caption, out / f"{i:03d}_{slug(caption)}", args.render)
+        print(f"wrote {paths['joints']}  ({frames} frames: {caption!r})")
     return 0

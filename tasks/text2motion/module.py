@@ -15,11 +15,14 @@ copied from the data module's ``statistics()`` at setup), so generation de-norma
 > 0, MultiModality, for the real test motions and for the model), prints the table with 95 % intervals
 and writes ``t2m_evaluation.json`` / ``.csv`` in the log folder. The table is labelled comparable with
 published numbers only when the official evaluator checkpoint, its statistics and GloVe were loaded.
+The ``eval_*`` / ``evaluator_*`` / ``glove_dir`` settings are not saved in checkpoints, so
+``sm test --ckpt_path CKPT --model.eval_repetitions 2`` takes them from the recipe and command line.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import torch
 from lightning.pytorch import LightningModule
@@ -43,6 +46,22 @@ from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDe
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 
 __all__ = ["TextToMotionModule"]
+
+_EVAL_ARGS = (
+    "eval_repetitions",
+    "eval_samples",
+    "eval_batch_size",
+    "eval_sampling_steps",
+    "eval_diversity_times",
+    "eval_mm_samples",
+    "eval_mm_repeats",
+    "eval_mm_times",
+    "eval_seed",
+    "evaluator_checkpoint",
+    "evaluator_mean",
+    "evaluator_std",
+    "glove_dir",
+)
 
 
 class TextToMotionModule(LightningModule):
@@ -105,7 +124,11 @@ class TextToMotionModule(LightningModule):
     ) -> None:
         super().__init__()
         config = backbone_config(backbone)
-        self.save_hyperparameters(ignore=["backbone"])
+        # Evaluation settings are test-time options kept out of the checkpoint's hyperparameters: LightningCLI
+        # lets a checkpoint's hyperparameters override the command line, which would freeze them at training
+        # time. ``batch_size`` is the CLI's data-to-model link target, which this module does not take.
+        self.eval_options = SimpleNamespace(**{k: v for k, v in locals().items() if k in _EVAL_ARGS})
+        self.save_hyperparameters(ignore=["backbone", "batch_size", *_EVAL_ARGS])
         self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
@@ -153,10 +176,10 @@ class TextToMotionModule(LightningModule):
 
     def on_test_epoch_end(self) -> None:
         """Run the T2M protocol, print its table and write it as JSON / CSV in the log folder."""
-        if self.hparams.eval_repetitions < 1:
+        if self.eval_options.eval_repetitions < 1:
             return
         evaluation, label = self._t2m_evaluation()
-        steps = self.hparams.eval_sampling_steps
+        steps = self.eval_options.eval_sampling_steps
 
         def generate(captions: list[str], lengths: list[int], noise: torch.Generator) -> torch.Tensor:
             return self.generate(captions, lengths, generator=noise, sampling_steps=steps)[0]
@@ -168,7 +191,7 @@ class TextToMotionModule(LightningModule):
             **evaluation.describe(),
             "sampling_steps": self.hparams.sampling_steps if steps == -1 else steps,
         }
-        protocol["evaluator_checkpoint"] = self.hparams.evaluator_checkpoint
+        protocol["evaluator_checkpoint"] = self.eval_options.evaluator_checkpoint
         json_path, csv_path = write_report(folder, summary, label, protocol)
         self.print(format_table(summary, label))
         self.print(f"wrote {json_path} and {csv_path}")
@@ -176,7 +199,7 @@ class TextToMotionModule(LightningModule):
 
     def _t2m_evaluation(self) -> tuple[T2MEvaluation, str]:
         """The evaluation over the data module's test clips, and the comparability label."""
-        hp = self.hparams
+        hp = self.eval_options
         datamodule = self.trainer.datamodule
         if not hasattr(datamodule, "evaluation_clips"):
             raise RuntimeError("the T2M evaluation needs a text2motion data module (evaluation_clips())")

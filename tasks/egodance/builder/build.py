@@ -5,6 +5,9 @@ non-overlapping by default: "we divide the motion sequences into multiple 5-seco
 window gets a scene (scene files round-robin, or procedural rooms) and up to ``max_attempts`` random
 placements (:mod:`.placement`); the first whose penetration score ``S_p`` (:mod:`.penetration`) is at
 most ``threshold`` (2, the seed's value) is kept, the window is skipped with a logged reason otherwise.
+The body scored is the capsule body, or the SMPL mesh when ``smpl_model`` names a model file
+(:mod:`.body_mesh`; its lowest vertex then touches the floor, and the mesh score stops at the first
+frames above the threshold, so the scores of rejected placements are lower bounds).
 The kept window is rendered from the head camera (:mod:`.camera`, :mod:`.raycast`) and written in the
 layout of :mod:`.layout`. Each window's random numbers come from ``(seed, crc32(sample_id))``, so a
 build is reproducible whatever the worker count and order, and an interrupted build resumes: complete
@@ -29,8 +32,9 @@ import torch
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
+from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
-from skeleton_mamba.tasks.egodance.builder.penetration import penetration_score
+from skeleton_mamba.tasks.egodance.builder.penetration import mesh_penetration_score, penetration_score
 from skeleton_mamba.tasks.egodance.builder.placement import place_points, random_placement
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
@@ -63,6 +67,7 @@ _FIXED_SETTINGS = (
     "num_rooms",
     "camera_forward",
     "camera_up",
+    "smpl_model",
 )
 
 
@@ -88,6 +93,7 @@ class BuildConfig:
     frame_format: str = "mp4"
     camera_forward: float = 0.10
     camera_up: float = 0.06
+    smpl_model: str | None = None  # SMPL model file (.pkl official / .npz): score the mesh, not capsules
     music_dir: str | None = None
     keep_ignored: bool = False
     workers: int = 1
@@ -256,12 +262,25 @@ def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
     joints, world = joints_t.numpy(), world_t.numpy()
     scene = get_scene(task.scene_key, cfg.up_axis)
     rng = np.random.default_rng([cfg.seed, zlib.crc32(task.sample_id.encode())])
+    body = pose_body(get_body_model(cfg.smpl_model), poses, root) if cfg.smpl_model else None
     scores: list[float] = []
     placement = None
     for _ in range(cfg.max_attempts):
-        candidate = random_placement(joints, scene, rng)
-        scores.append(penetration_score(scene, place_points(joints, candidate), cfg.penetration_stride))
-        if scores[-1] <= cfg.threshold:
+        if body is None:
+            candidate = random_placement(joints, scene, rng)
+            score = penetration_score(scene, place_points(joints, candidate), cfg.penetration_stride)
+        else:
+            candidate = random_placement(joints, scene, rng, 0.0, float(body.vertices[..., 1].min()))
+            score = mesh_penetration_score(
+                scene,
+                place_points(body.vertices, candidate),
+                place_points(body.joints, candidate),
+                body.anchor,
+                cfg.penetration_stride,
+                stop_above=cfg.threshold,
+            )
+        scores.append(score)
+        if score <= cfg.threshold:
             placement = candidate
             break
     if placement is None:
@@ -316,6 +335,7 @@ def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
             "floor_height": scene.floor_height,
         },
         "placement": placement.to_dict(),
+        "body": {"model": "capsules"} if body is None else {"model": "smpl", "file": cfg.smpl_model},
         "penetration_score": scores[-1],
         "threshold": cfg.threshold,
         "attempts": len(scores),
@@ -358,6 +378,9 @@ def _check_settings(cfg: BuildConfig) -> None:
 def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
     """Build (or resume) a dataset; returns the counts also written to ``summary.json``."""
     out = Path(cfg.out)
+    if cfg.smpl_model is not None:  # fail early on a bad model file, and record it by absolute path
+        cfg.smpl_model = str(Path(cfg.smpl_model).resolve())
+        get_body_model(cfg.smpl_model)
     out.mkdir(parents=True, exist_ok=True)
     _check_settings(cfg)
     removed = layout.clean_incomplete(out)

@@ -6,6 +6,7 @@ Examples::
         --out ego_aistpp --music-dir aistpp/music
     sm make-ego --motion synthetic/ --scenes procedural --out ego_demo --workers 2
     sm make-ego --motion one.npz --scenes simple_room.glb --up-axis z --out tiny --width 32 --height 32
+    sm make-ego --motion aistpp/motions --scenes procedural --out ego_mesh --smpl-model SMPL_NEUTRAL.pkl
 
 Re-running the same command resumes an interrupted build. The output layout is documented in
 ``skeleton_mamba/tasks/egodance/builder/layout.py``.
@@ -76,6 +77,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="eye offset forward of the head joint (m)",
     )
     p.add_argument("--camera-up", type=float, default=d.camera_up, help="eye offset above the head joint (m)")
+    p.add_argument(
+        "--smpl-model",
+        default=None,
+        help="SMPL model file (official SMPL_NEUTRAL.pkl / basicModel_*.pkl, or an .npz conversion): "
+        "score penetration with the posed SMPL mesh instead of capsules along the bones",
+    )
     p.add_argument("--music-dir", default=None, help="folder of AIST++ music (<music id>.wav) for meta.json")
     p.add_argument("--keep-ignored", action="store_true", help="keep AIST++ ignore-list sequences")
     p.add_argument("--workers", type=int, default=default_workers(), help="worker processes")

@@ -9,11 +9,17 @@ i.e. the deepest intrusion of the body into the scene over the whole subsequence
 seed's threshold 2 means "no body part goes more than 2 cm into the scene in any frame". It does not
 depend on how densely the body is sampled.
 
-* The body: capsules along the 23 SMPL-24 bones (:data:`BONE_RADII`, rough adult proportions, metres) plus
-  a head sphere, each capsule approximated by spheres of its radius spaced at most one radius apart
-  (the union of spheres lies within ``0.14 r`` of the capsule surface). A user-supplied SMPL body mesh
-  is NOT supported: the official SMPL ``.pkl`` needs chumpy (unsafe to unpickle here), and skinning the
-  ``.npz`` variant would need the model's own joint regressor and blend weights; capsules are used.
+* The body, by default: capsules along the 23 SMPL-24 bones (:data:`BONE_RADII`, rough adult
+  proportions, metres) plus a head sphere, each capsule approximated by spheres of its radius spaced at
+  most one radius apart (the union of spheres lies within ``0.14 r`` of the capsule surface).
+* With a user-supplied SMPL model (``--smpl-model``, :mod:`.body_mesh`): the mesh vertices, spheres of
+  radius 0, so the same definition reads ``S_p = 100 * max_t,v max(0, -sdf(v(t)))``
+  (:func:`mesh_penetration_score`). Evaluating ``sdf`` at every vertex of every frame would cost
+  26 rays x 6890 vertices per frame, so vertices are screened first, exactly: ``sdf`` is 1-Lipschitz,
+  so a vertex at distance ``d`` from its anchor joint (largest skinning weight) with ``sdf(joint) > d``
+  is outside; of the others, a vertex whose anchor joint is outside and whose segment joint -> vertex
+  crosses no scene triangle (one ray) is on the joint's side, outside too. Only the remaining vertices
+  get the full ``sdf``. A free-standing body leaves a few foot vertices near the floor.
 * ``sdf``: the signed distance to the scene surface (:func:`signed_distance`), its magnitude from the
   closest point on candidate triangles found by ray casting and its sign from the normal of the
   closest triangle (negative = behind the surface = inside an object or behind a wall). This works for
@@ -31,7 +37,16 @@ import trimesh
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh
 
-__all__ = ["BONE_RADII", "HEAD_RADIUS", "FOOT_RADIUS", "body_spheres", "signed_distance", "penetration_score"]
+__all__ = [
+    "BONE_RADII",
+    "HEAD_RADIUS",
+    "FOOT_RADIUS",
+    "body_spheres",
+    "signed_distance",
+    "penetration_score",
+    "mesh_penetration_depths",
+    "mesh_penetration_score",
+]
 
 # Capsule radius (metres) of the bone ending at each child joint (index = child joint; 0 has no bone).
 BONE_RADII: tuple[float, ...] = (
@@ -117,7 +132,7 @@ def signed_distance(scene: SceneMesh, points: np.ndarray) -> np.ndarray:
     n, d = len(points), len(_DIRECTIONS)
     mesh = scene.mesh
     origins = np.repeat(points, d, axis=0)
-    tri = scene.intersector.intersects_first(origins, np.tile(_DIRECTIONS, (n, 1)))
+    tri = scene.caster.first_hits(origins, np.tile(_DIRECTIONS, (n, 1))).tri.astype(np.int64)
     hit = np.flatnonzero(tri >= 0)
     result = np.full(n, np.inf)
     if len(hit) == 0:
@@ -179,3 +194,65 @@ def penetration_score(scene: SceneMesh, joints: np.ndarray, frame_stride: int = 
         raise ValueError(f"joints must be (T, 24, 3), got {joints.shape}")
     subset = joints[::frame_stride]
     return 100.0 * float(penetration_depths(scene, subset, body_spheres(joints)).max())
+
+
+def mesh_penetration_depths(
+    scene: SceneMesh, vertices: np.ndarray, joints: np.ndarray, anchor: np.ndarray
+) -> np.ndarray:
+    """Per-frame deepest intrusion (T,) in metres of mesh vertices into the scene (module docstring).
+
+    Args:
+        scene: the y-up scene.
+        vertices: (T, V, 3) placed mesh vertices.
+        joints: (T, J, 3) placed joints the vertices are skinned to.
+        anchor: (V,) joint index of each vertex (largest skinning weight).
+    """
+    t, v = vertices.shape[:2]
+    joint_sdf = signed_distance(scene, joints.reshape(-1, 3)).reshape(t, -1)[:, anchor]  # (T, V)
+    anchor_pos = joints[:, anchor]  # (T, V, 3)
+    reach = vertices - anchor_pos
+    reach_len = np.linalg.norm(reach, axis=-1)
+    candidate = (joint_sdf - reach_len <= 0.0).reshape(-1)  # others are outside (1-Lipschitz bound)
+    outside_joint = (joint_sdf > 0.0).reshape(-1)
+    exact = candidate & ~outside_joint
+    seg = np.flatnonzero(candidate & outside_joint & (reach_len.reshape(-1) > 1e-9))
+    if len(seg):
+        hits = scene.caster.first_hits(anchor_pos.reshape(-1, 3)[seg], reach.reshape(-1, 3)[seg])
+        exact[seg[(hits.tri >= 0) & (hits.t <= 1.0)]] = True  # the segment joint -> vertex is crossed
+    depth = np.zeros(t * v)
+    if exact.any():
+        depth[exact] = np.maximum(0.0, -signed_distance(scene, vertices.reshape(-1, 3)[exact]))
+    return depth.reshape(t, v).max(axis=1)
+
+
+def mesh_penetration_score(
+    scene: SceneMesh,
+    vertices: np.ndarray,
+    joints: np.ndarray,
+    anchor: np.ndarray,
+    frame_stride: int = 1,
+    stop_above: float | None = None,
+    chunk: int = 16,
+) -> float:
+    """``S_p`` in centimetres of a placed SMPL mesh sequence (module docstring).
+
+    Args:
+        scene: the y-up scene.
+        vertices: (T, V, 3) placed mesh vertices; joints: (T, 24, 3) placed model joints.
+        anchor: (V,) joint index of each vertex (largest skinning weight).
+        frame_stride: score every ``frame_stride``-th frame only.
+        stop_above: stop at the first chunk of ``chunk`` frames whose score exceeds this value (cm);
+            the result is then a lower bound of ``S_p``, still above ``stop_above`` (a body deep in a
+            wall would otherwise need the full ``sdf`` of every vertex of every frame).
+    """
+    if vertices.ndim != 3 or joints.ndim != 3 or joints.shape[:1] != vertices.shape[:1]:
+        raise ValueError(f"vertices (T, V, 3) and joints (T, J, 3) expected: {vertices.shape} {joints.shape}")
+    vertices, joints = vertices[::frame_stride], joints[::frame_stride]
+    score = 0.0
+    for start in range(0, len(vertices), chunk):
+        part = slice(start, start + chunk)
+        depths = mesh_penetration_depths(scene, vertices[part], joints[part], anchor)
+        score = max(score, 100.0 * float(depths.max()))
+        if stop_above is not None and score > stop_above:
+            break
+    return score

@@ -4,8 +4,10 @@ A placement is a rigid motion of the whole window: a heading ``yaw`` about the y
 translation. The window's mean root position (x, z) goes to a point drawn uniformly over the floor
 triangles, and the height is chosen so that the lowest foot joint of the window (ankles and toes, all
 frames) is :data:`~penetration.FOOT_RADIUS` above the floor, i.e. the bottom of the lowest foot capsule
-touches the floor. Placed positions are ``p' = R_y(yaw) p + translation``; the placed SMPL motion has
-root orientation ``R_y(yaw) R_0`` and root translation ``R_y(yaw) trans + translation``.
+touches the floor. With an SMPL mesh (``--smpl-model``) the lowest mesh vertex of the window touches
+the floor instead (``lowest`` = its height, ``foot_radius`` = 0). Placed positions are
+``p' = R_y(yaw) p + translation``; the placed SMPL motion has root orientation ``R_y(yaw) R_0`` and
+root translation ``R_y(yaw) trans + translation``.
 """
 
 from __future__ import annotations
@@ -47,17 +49,29 @@ def place_points(points: np.ndarray, placement: Placement) -> np.ndarray:
 
 
 def random_placement(
-    joints: np.ndarray, scene: SceneMesh, rng: np.random.Generator, foot_radius: float = FOOT_RADIUS
+    joints: np.ndarray,
+    scene: SceneMesh,
+    rng: np.random.Generator,
+    foot_radius: float = FOOT_RADIUS,
+    lowest: float | None = None,
 ) -> Placement:
-    """A random floor location and heading for a window with joints (T, 24, 3) (module docstring)."""
+    """A random floor location and heading for a window with joints (T, 24, 3) (module docstring).
+
+    Args:
+        joints: (T, 24, 3) joints of the window (motion frame, y-up).
+        scene: the scene; rng: the random generator.
+        foot_radius: height of the lowest point above the floor.
+        lowest: the window's lowest height (y) to put on the floor; default: its lowest foot joint.
+            A yaw rotation keeps heights, so this is the same before and after the rotation.
+    """
     yaw = float(rng.uniform(-np.pi, np.pi))
     rotated = joints @ yaw_matrix(yaw).T
     target = scene.sample_floor(1, rng)[0]
     centre = rotated[:, 0].mean(axis=0)
-    lowest_foot = rotated[:, FOOT_JOINTS, 1].min()
+    lowest = rotated[:, FOOT_JOINTS, 1].min() if lowest is None else lowest
     translation = (
         float(target[0] - centre[0]),
-        float(scene.floor_height + foot_radius - lowest_foot),
+        float(scene.floor_height + foot_radius - lowest),
         float(target[2] - centre[2]),
     )
     return Placement(yaw=yaw, translation=translation)

@@ -38,6 +38,12 @@ def _color(rng: np.random.Generator, sat: tuple[float, float] = (0.2, 0.8), val=
     return (np.array(rgb) * 255).astype(np.uint8)
 
 
+# trimesh's unit box (outward normals), built once: creating a Trimesh per box dominated room creation
+_UNIT_BOX = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+_UNIT_BOX_VERTICES = np.asarray(_UNIT_BOX.vertices, dtype=np.float64)
+_UNIT_BOX_FACES = np.asarray(_UNIT_BOX.faces, dtype=np.int64)
+
+
 class _Builder:
     """Accumulates coloured boxes."""
 
@@ -49,12 +55,11 @@ class _Builder:
 
     def box(self, lo: np.ndarray, hi: np.ndarray, color: np.ndarray) -> None:
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-        box = trimesh.creation.box(extents=hi - lo)
-        box.apply_translation((lo + hi) / 2)
-        self.vertices.append(np.asarray(box.vertices))
-        self.faces.append(np.asarray(box.faces) + self.count)
-        self.colors.append(np.tile(color, (len(box.vertices), 1)))
-        self.count += len(box.vertices)
+        vertices = _UNIT_BOX_VERTICES * (hi - lo) + (lo + hi) / 2  # trimesh's box, scaled and moved
+        self.vertices.append(vertices)
+        self.faces.append(_UNIT_BOX_FACES + self.count)
+        self.colors.append(np.tile(color, (len(vertices), 1)))
+        self.count += len(vertices)
 
 
 def _floor_tiles(b: _Builder, w: float, d: float, tile: float, colors: tuple[np.ndarray, np.ndarray]) -> None:

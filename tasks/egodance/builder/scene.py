@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from skeleton_mamba.tasks.egodance.builder.ray_caster import RayCaster
+
 __all__ = ["SceneMesh", "load_scene", "to_y_up", "UP_AXES"]
 
 # Rotation taking a scene with the given up axis to y-up (right-handed, det = +1).
@@ -55,7 +57,7 @@ class SceneMesh:
     floor_height: float
     floor_faces: np.ndarray
     source: str = ""
-    _intersector: object | None = field(default=None, repr=False, compare=False)
+    _caster: RayCaster | None = field(default=None, repr=False, compare=False)
 
     @property
     def vertex_colors(self) -> np.ndarray:
@@ -63,15 +65,11 @@ class SceneMesh:
         return np.asarray(self.mesh.visual.vertex_colors[:, :3], dtype=np.float64) / 255.0
 
     @property
-    def intersector(self):
-        """A cached ray intersector (embree through ``trimesh.ray.ray_pyembree`` when available)."""
-        if self._intersector is None:
-            try:
-                from trimesh.ray.ray_pyembree import RayMeshIntersector
-            except ImportError:  # embreex missing: trimesh's pure-numpy intersector (slow)
-                from trimesh.ray.ray_triangle import RayMeshIntersector
-            self._intersector = RayMeshIntersector(self.mesh)
-        return self._intersector
+    def caster(self) -> RayCaster:
+        """The scene's cached :class:`~.ray_caster.RayCaster` (embree when ``embreex`` is installed)."""
+        if self._caster is None:
+            self._caster = RayCaster(self.mesh.vertices, self.mesh.faces)
+        return self._caster
 
     def sample_floor(self, count: int, rng: np.random.Generator) -> np.ndarray:
         """``count`` points uniformly distributed (by area) over the floor triangles, shape (count, 3)."""
@@ -86,7 +84,7 @@ class SceneMesh:
 
     def __getstate__(self) -> dict:  # the embree handle is not picklable: workers rebuild it
         state = self.__dict__.copy()
-        state["_intersector"] = None
+        state["_caster"] = None
         return state
 
 

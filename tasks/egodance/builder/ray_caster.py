@@ -1,0 +1,110 @@
+"""First hits of many rays against a triangle mesh: embree (``embreex``) when installed, trimesh otherwise.
+
+Embree is called directly (``EmbreeScene.run(..., output=1)``), which returns, per ray, the triangle,
+the ray parameter and the barycentric coordinates of the first hit in one pass. Measured on the project's
+shared 2-core machine for one 224 x 224 frame (rotation of the rays included): 14 ms, against 41 ms for
+trimesh's ``intersects_id(..., multiple_hits=False, return_locations=True)`` (which normalises the
+directions and recomputes the hit points in float64) and 20 ms for ``intersects_first`` (triangle only).
+The directions are NOT normalised: the ray parameter ``t`` of a hit is in units of the direction, so
+camera rays with unit z give the z-depth directly, and a segment ``a -> b`` cast as ``(a, b - a)`` is
+crossed when ``t <= 1``.
+
+Embree works in float32; the vertices are shifted to the mesh's lower bounding-box corner first (as
+trimesh does), so room-sized scenes keep sub-millimetre precision.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FirstHits", "RayCaster", "HAS_EMBREE"]
+
+try:
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    HAS_EMBREE = True
+except ImportError:  # pragma: no cover - embreex is a recommended, optional dependency
+    HAS_EMBREE = False
+
+
+@dataclass
+class FirstHits:
+    """The first hit of every ray (N rays).
+
+    Attributes:
+        tri: (N,) int triangle index, -1 where the ray hits nothing.
+        t: (N,) float32 ray parameter of the hit (``hit = origin + t * direction``), undefined on misses.
+        u, v: (N,) float32 barycentric coordinates: ``hit = (1 - u - v) a + u b + v c`` for the
+            triangle's corners (a, b, c) in face order; undefined on misses.
+    """
+
+    tri: np.ndarray
+    t: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+class RayCaster:
+    """Casts rays against one mesh, built once (the BVH) and reused for every query.
+
+    Args:
+        vertices: (V, 3) float mesh vertices.
+        faces: (F, 3) int triangle vertex indices.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        vertices = np.asarray(vertices, dtype=np.float64)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.origin = vertices.min(axis=0)
+        if HAS_EMBREE:
+            self._scene = rtcore_scene.EmbreeScene()
+            TriangleMesh(
+                scene=self._scene,
+                vertices=np.ascontiguousarray(vertices - self.origin, dtype=np.float32),
+                indices=np.ascontiguousarray(self.faces, dtype=np.int32),
+            )
+        else:
+            import trimesh
+            from trimesh.ray.ray_triangle import RayMeshIntersector
+
+            try:
+                import rtree  # noqa: F401 - trimesh's numpy ray caster needs it
+            except ImportError as err:
+                raise ImportError(
+                    "ray casting needs embreex (pip install 'skeleton-mamba[render]', recommended) or rtree"
+                ) from err
+            self._mesh = trimesh.Trimesh(vertices=vertices, faces=self.faces, process=False)
+            self._trimesh = RayMeshIntersector(self._mesh)
+
+    def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> FirstHits:
+        """First hits of rays ``origins + t * directions`` (both (N, 3); origins may be broadcast (3,))."""
+        directions = np.asarray(directions)
+        origins = np.asarray(origins, dtype=np.float64)
+        if not HAS_EMBREE:
+            return self._first_hits_trimesh(np.broadcast_to(origins, directions.shape), directions)
+        origins = origins - self.origin
+        start = np.empty(directions.shape, dtype=np.float32)  # embree wants contiguous float32 rows
+        start[...] = origins
+        out = self._scene.run(start, np.ascontiguousarray(directions, dtype=np.float32), output=1)
+        return FirstHits(out["primID"], out["tfar"], out["u"], out["v"])
+
+    def _first_hits_trimesh(self, origins: np.ndarray, directions: np.ndarray) -> FirstHits:
+        import trimesh
+
+        n = len(directions)
+        tri = np.full(n, -1, dtype=np.int64)
+        t, u, v = (np.zeros(n, dtype=np.float32) for _ in range(3))
+        index_tri, index_ray, locations = self._trimesh.intersects_id(
+            origins, directions, multiple_hits=False, return_locations=True
+        )
+        if len(index_ray):
+            d = directions[index_ray]
+            tri[index_ray] = index_tri
+            along = np.einsum("ij,ij->i", locations - origins[index_ray], d)
+            t[index_ray] = along / np.einsum("ij,ij->i", d, d)
+            bary = trimesh.triangles.points_to_barycentric(self._mesh.triangles[index_tri], locations)
+            u[index_ray], v[index_ray] = bary[:, 1], bary[:, 2]
+        return FirstHits(tri, t, u, v)

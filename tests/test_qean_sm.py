@@ -1,0 +1,133 @@
+"""QEAN through the real ``sm`` entry point on tiny SYNTHETIC data written in the AIST++ layout.
+
+``sm fit --recipe qean_mamba.yaml`` (one step, tiny SkeletonMamba backbone) -> a checkpoint ->
+``sm predict`` from it writes the dance (.npz) and its video with the music (.mp4); ``sm test --recipe
+qean.yaml`` prints our figures beside the seed's Table 1, labelled not comparable. The data are the toolkit's
+beat-synchronised synthetic dances and drum tracks, saved as AIST++ motion pickles and ``<music id>.wav``;
+the val / test lists sit in ``<root>/splits/`` as in the AIST++ annotations.
+"""
+
+from __future__ import annotations
+
+import pickle
+import re
+import subprocess
+import sys
+from importlib.resources import files
+
+import imageio_ffmpeg
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from skeleton_mamba.tasks.lightning_cli import run
+from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
+
+TRAIN = ["gBR_sBM_cAll_d04_mBR0_ch01", "gPO_sBM_cAll_d10_mPO1_ch02"]
+VAL = ["gBR_sBM_cAll_d05_mBR0_ch05"]
+TEST = ["gPO_sBM_cAll_d11_mPO1_ch02", "gBR_sBM_cAll_d06_mBR0_ch02"]
+SCALING = 93.0  # AIST++ stores smpl_trans in units of smpl_scaling
+MODEL = {
+    "hidden": 32, "heads": 2, "motion_layers": 1, "audio_layers": 1, "cross_layers": 1, "mlp_dim": 64,
+    "num_periods": 2, "dropout": 0.0, "output_dir": "predictions",
+}  # fmt: skip
+LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
+SEED_TABLE1 = {"FID_k": 30.1, "FID_g": 11.5, "Dist_k": 7.82, "Dist_g": 9.37, "BeatAlign": 0.239}  # seed text
+
+
+@pytest.fixture(scope="module")
+def aistpp(tmp_path_factory):
+    """``motions/*.pkl`` (60 fps, 1 s), ``music/mBR0.wav`` and ``mPO1.wav``, ``splits/crossmodal_*.txt``."""
+    root = tmp_path_factory.mktemp("aistpp")
+    for folder in ("motions", "music", "splits"):
+        (root / folder).mkdir()
+    for k, name in enumerate(TRAIN + VAL + TEST):
+        motion = synthesize_dance(120.0, 1.0, fps=60.0, style=["bounce", "sway"][k % 2], seed=k)
+        data = {
+            "smpl_poses": motion.poses.reshape(-1, 72).astype(np.float32),
+            "smpl_trans": (motion.root_position() * SCALING).astype(np.float32),
+            "smpl_scaling": np.array([SCALING], dtype=np.float32),
+        }
+        with open(root / "motions" / f"{name}.pkl", "wb") as f:
+            pickle.dump(data, f)
+    for k, mid in enumerate(("mBR0", "mPO1")):
+        wav = write_music(root / "music" / f"{mid}.wav", synthesize_music(100.0 + 20 * k, 1.0, seed=k))
+        extract_music_features(wav, fps=60, cache_dir=root / "cache")  # cached once for every sm call
+    for split, names in (("train", TRAIN), ("val", VAL), ("test", TEST)):
+        (root / "splits" / f"crossmodal_{split}.txt").write_text("\n".join(names) + "\n")
+    return root
+
+
+def _overrides(root, backbone: bool) -> list[str]:
+    args = [f"--model.init_args.{k}={v}" for k, v in (MODEL | LENGTHS).items()]
+    args += [f"--data.init_args.{k}={v}" for k, v in LENGTHS.items()]
+    args += [
+        "--trainer.accelerator=cpu", "--trainer.logger=false", "--trainer.callbacks=null",
+        "--trainer.enable_progress_bar=false", f"--data.init_args.root={root}",
+        f"--data.init_args.music_cache_dir={root / 'cache'}", "--data.init_args.batch_size=2",
+        "--data.init_args.num_workers=0", "--data.init_args.synthetic=true",
+    ]  # fmt: skip
+    if backbone:
+        tiny = files("skeleton_mamba.recipes") / "backbones" / "skeleton_mamba_tiny.yaml"
+        args.append(f"--model.init_args.backbone={tiny}")
+    return args
+
+
+def _sm(args: list[str], cwd) -> subprocess.CompletedProcess:
+    command = [sys.executable, "-m", "skeleton_mamba.cli", *args]
+    proc = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    return proc
+
+
+def test_sm_fit_qean_mamba_then_predict_from_the_checkpoint(aistpp, tmp_path):
+    common = _overrides(aistpp, backbone=True)
+    fit = _sm(
+        ["fit", "--recipe", "qean_mamba.yaml", *common, "--trainer.max_steps=1", "--trainer.max_epochs=1",
+         "--trainer.limit_train_batches=1", "--trainer.enable_checkpointing=true",
+         f"--trainer.default_root_dir={tmp_path}"],
+        tmp_path,
+    )  # fmt: skip
+    assert "`max_steps=1` reached" in fit.stdout + fit.stderr
+    (ckpt,) = (tmp_path / "checkpoints").glob("*.ckpt")
+    seed_file, music_file = aistpp / "motions" / f"{TEST[0]}.pkl", aistpp / "music" / "mPO1.wav"
+    _sm(
+        ["predict", "--recipe", "qean_mamba.yaml", *common, f"--ckpt_path={ckpt}",
+         f"--data.init_args.predict_seed={seed_file}", f"--data.init_args.predict_music={music_file}"],
+        tmp_path,
+    )  # fmt: skip
+    stem = f"mPO1_{TEST[0]}"
+    npz, mp4 = tmp_path / "predictions" / f"{stem}.npz", tmp_path / "predictions" / f"{stem}.mp4"
+    with np.load(npz, allow_pickle=False) as saved:
+        assert saved["smpl_poses"].shape == (12 + 20, 72) and saved["joints"].shape == (32, 24, 3)
+        assert float(saved["fps"]) == 60.0 and str(saved["skeleton"]) == "smpl24"
+        poses, trans, scaling = saved["smpl_poses"], saved["smpl_trans"], saved["smpl_scaling"]
+        root_position = trans / scaling
+    raw = safe_load_pickle(seed_file)
+    # the first 12 frames are the seed motion: same rotations (scipy), same root position in metres
+    got = Rotation.from_rotvec(poses[:12].reshape(-1, 3).astype(np.float64)).as_matrix()
+    want = Rotation.from_rotvec(raw["smpl_poses"][:12].reshape(-1, 3).astype(np.float64)).as_matrix()
+    np.testing.assert_allclose(got, want, atol=1e-4)
+    np.testing.assert_allclose(root_position[:12], raw["smpl_trans"][:12] / SCALING, atol=1e-5)
+    assert np.isfinite(poses).all()
+    probe = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-i", str(mp4)], capture_output=True, text=True)
+    assert re.search(r"Stream .*Video:", probe.stderr), probe.stderr[-2000:]
+    assert re.search(r"Stream .*Audio:", probe.stderr), probe.stderr[-2000:]  # the music is muxed
+
+
+def test_sm_test_prints_our_figures_beside_the_seed_table(aistpp, tmp_path, monkeypatch, caplog):
+    monkeypatch.chdir(tmp_path)
+    caplog.set_level("INFO")
+    assert run(["test", "--recipe", "qean.yaml", *_overrides(aistpp, backbone=False)]) == 0
+    text = caplog.text
+    # default test_split [val, test]: the val list of <root>/splits plus the test list = 3 sequences
+    assert "protocol: 3 generated sequences x 20 frames (seed: 40 x 1200); real set: 5 sequences" in text
+    assert "NOT COMPARABLE with the seed: synthetic data in the AIST++ layout" in text
+    for name, seed in SEED_TABLE1.items():
+        match = re.search(rf"^{name}\s+(\S+)\s+(\S+)\s+(\S+)$", text, re.MULTILINE)
+        assert match, f"{name} row missing:\n{text[-2000:]}"
+        ours, seed_value = float(match.group(1)), float(match.group(2))
+        assert np.isfinite(ours) and seed_value == seed
+    assert 0.0 <= float(re.search(r"^BeatAlign\s+(\S+)", text, re.MULTILINE).group(1)) <= 1.0
