@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
+from skeleton_mamba.tasks.motion.jit_lock import first_librosa_call_lock
 
 __all__ = [
     "BEAT",
@@ -185,18 +186,21 @@ def compute_music_features(
 
     sr = int(fps) * HOP_LENGTH
     y = np.asarray(y, dtype=np.float32)
-    envelope = librosa.onset.onset_strength(y=y, sr=sr)  # (T,)
-    mfcc = librosa.feature.mfcc(y=y, sr=sr, n_mfcc=20).T  # (T, 20)
-    chroma = librosa.feature.chroma_cens(y=y, sr=sr, hop_length=HOP_LENGTH, n_chroma=12).T  # (T, 12)
-    peak_idxs = librosa.onset.onset_detect(onset_envelope=envelope.flatten(), sr=sr, hop_length=HOP_LENGTH)
-    peak_onehot = np.zeros_like(envelope, dtype=np.float32)
-    peak_onehot[peak_idxs] = 1.0
-    if start_bpm is None:
-        estimate = librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0]
-        start_bpm = float(estimate) if bpm_range is None else fold_tempo(float(estimate), bpm_range)
-    _, beat_idxs = librosa.beat.beat_track(
-        onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH, start_bpm=start_bpm, tightness=tightness
-    )
+    with first_librosa_call_lock():  # fresh installs compile librosa's numba kernels here
+        envelope = librosa.onset.onset_strength(y=y, sr=sr)  # (T,)
+        mfcc = librosa.feature.mfcc(y=y, sr=sr, n_mfcc=20).T  # (T, 20)
+        chroma = librosa.feature.chroma_cens(y=y, sr=sr, hop_length=HOP_LENGTH, n_chroma=12).T  # (T, 12)
+        peak_idxs = librosa.onset.onset_detect(
+            onset_envelope=envelope.flatten(), sr=sr, hop_length=HOP_LENGTH
+        )
+        peak_onehot = np.zeros_like(envelope, dtype=np.float32)
+        peak_onehot[peak_idxs] = 1.0
+        if start_bpm is None:
+            estimate = librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0]
+            start_bpm = float(estimate) if bpm_range is None else fold_tempo(float(estimate), bpm_range)
+        _, beat_idxs = librosa.beat.beat_track(
+            onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH, start_bpm=start_bpm, tightness=tightness
+        )
     beat_onehot = np.zeros_like(envelope, dtype=np.float32)
     beat_onehot[beat_idxs] = 1.0
     t = min(len(envelope), len(mfcc), len(chroma))  # equal for centred frames; guard anyway
