@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
-from skeleton_mamba.tasks.motion.jit_lock import first_librosa_call_lock
+from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
 
 __all__ = [
     "BEAT",
@@ -186,7 +186,7 @@ def compute_music_features(
 
     sr = int(fps) * HOP_LENGTH
     y = np.asarray(y, dtype=np.float32)
-    with first_librosa_call_lock():  # fresh installs compile librosa's numba kernels here
+    with librosa_lock():  # numba compiles on first use: see jit_lock.py
         envelope = librosa.onset.onset_strength(y=y, sr=sr)  # (T,)
         mfcc = librosa.feature.mfcc(y=y, sr=sr, n_mfcc=20).T  # (T, 20)
         chroma = librosa.feature.chroma_cens(y=y, sr=sr, hop_length=HOP_LENGTH, n_chroma=12).T  # (T, 12)
