@@ -29,3 +29,20 @@ def shared_file(relative: str) -> Path:
     if not path.exists():
         pytest.skip(f"real sample {relative} not found under {SHARED_DATA}")
     return path
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _librosa_kernels_compiled() -> None:
+    """Compile librosa's numba kernels once, under the inter-process lock, before any test runs.
+
+    Tests also call librosa directly (outside our lock); without this, two xdist workers compiling the
+    same kernels at once on a fresh install can crash (see ``tasks/motion/jit_lock.py``).
+    """
+    import numpy as np
+
+    from skeleton_mamba.tasks.motion.music import compute_music_features
+
+    noise = np.random.default_rng(0).standard_normal(4 * 30 * 512).astype(np.float32)
+    for fps in (60, 30):
+        compute_music_features(noise[: 4 * fps * 512], fps=fps)  # tempo estimate path
+        compute_music_features(noise[: 4 * fps * 512], fps=fps, start_bpm=120.0)
