@@ -126,9 +126,9 @@ class TextToMotionModule(LightningModule):
         config = backbone_config(backbone)
         # Evaluation settings are test-time options kept out of the checkpoint's hyperparameters: LightningCLI
         # lets a checkpoint's hyperparameters override the command line, which would freeze them at training
-        # time. ``batch_size`` is the CLI's data-to-model link target, which this module does not take.
+        # time.
         self.eval_options = SimpleNamespace(**{k: v for k, v in locals().items() if k in _EVAL_ARGS})
-        self.save_hyperparameters(ignore=["backbone", "batch_size", *_EVAL_ARGS])
+        self.save_hyperparameters(ignore=["backbone", *_EVAL_ARGS])
         self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
