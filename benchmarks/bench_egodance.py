@@ -13,6 +13,8 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
   batch; the frozen ResNet's pooled frame features are precomputed (cached), as a frozen backbone allows;
 - ``condition_encode_s``: encoding one sample's music + frames + fusion (ResNet on all T frames);
 - ``sample_step_ms``: the median time of one guided DDIM/DDPM denoising step;
+- ``sample_step_gflop``: the matrix-product work of that step (``torch.utils.flop_counter``: mm, bmm,
+  attention, convolutions; elementwise work is not counted), and the rate it ran at;
 - ``ddim50_wall_s``: the real wall time of a full DDIM-50 run (condition encoding included; ``null`` when
   ``--max-run-s`` predicts it too long, ``ddim50_extrapolated_s`` = encoding + 50 x step is always given);
 - ``ddpm1000_extrapolated_s``: ``sample_step_ms`` x 1000 + condition encoding: NOT a measured run.
@@ -33,6 +35,7 @@ from pathlib import Path
 
 import torch
 from torch import nn
+from torch.utils.flop_counter import FlopCounterMode
 from transformers import ResNetConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -193,6 +196,9 @@ def time_sampling(
         guided_x0(model, x, t, context, 2.0)
         times.append(time.perf_counter() - start)
     step_ms = statistics.median(times[1:]) * 1e3
+    with FlopCounterMode(display=False) as counter:  # matrix products (mm, bmm, attention, conv)
+        guided_x0(model, x, t, context, 2.0)
+    step_gflop = counter.get_total_flops() / 1e9
     ddim_estimate = encode_s + step_ms * ddim_steps / 1e3
     ddim_s = None
     if ddim_estimate <= max_run_s:
@@ -203,6 +209,8 @@ def time_sampling(
     return {
         "condition_encode_s": encode_s,
         "sample_step_ms": step_ms,
+        "sample_step_gflop": step_gflop,
+        "sample_step_gflop_per_s": step_gflop / (step_ms / 1e3),
         f"ddim{ddim_steps}_wall_s": ddim_s,
         f"ddim{ddim_steps}_extrapolated_s": ddim_estimate,
         f"ddpm{diffusion.num_steps}_extrapolated_s": encode_s + step_ms * diffusion.num_steps / 1e3,

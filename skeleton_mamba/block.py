@@ -9,7 +9,9 @@
     x = x + MLP(LN(x))
 
 Pre-norm residual sublayers; the paper fixes the order of the scans but not the residual layout,
-which is this project's (and the authors' released code's) reconstruction.
+which is this project's (and the authors' released code's) reconstruction. The frame-wise part (up
+to the Joint Scan) and the token-wise part (cross-attention, MLP) run on slices of frames on a CPU,
+the Temporal Scan on slices of joint sequences (``skeleton_mamba.slicing``; exact).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.cross_attention import CrossAttention
 from skeleton_mamba.group_scan import GroupScan
 from skeleton_mamba.joint_scan import JointScan
+from skeleton_mamba.slicing import map_slices, slice_length
 from skeleton_mamba.temporal_scan import TemporalScan
 from skeleton_mamba.tokenizer import HumanTokenizer, InverseHumanTokenizer
 
@@ -42,8 +45,10 @@ class SkeletonMambaBlock(nn.Module):
         context_dim: int | None = None,
         dropout: float = 0.0,
         mixer: MixerConfig | None = None,
+        slice_elements: int | None = None,
     ):
         super().__init__()
+        self.slice_elements = slice_elements
         group_size = len(groups[0])
         width = group_size * dim  # E = P * D
         self.tokenizer = HumanTokenizer(groups)
@@ -53,11 +58,13 @@ class SkeletonMambaBlock(nn.Module):
         self.norm_joint = nn.LayerNorm(width)
         self.joint_scan = JointScan(dim, group_size, mixer=mixer)
         self.norm_time = nn.LayerNorm(dim)
-        self.temporal_scan = TemporalScan(dim, mixer=mixer)
+        self.temporal_scan = TemporalScan(dim, mixer=mixer, slice_elements=slice_elements)
         self.cross_attention = None
         if context_dim is not None:
             self.norm_context = nn.LayerNorm(dim)
             self.cross_attention = CrossAttention(dim, context_dim, heads=heads, dropout=dropout)
+        self.heads = heads
+        self.mlp_dim = mlp_dim
         self.norm_mlp = nn.LayerNorm(dim)
         self.mlp = nn.Sequential(
             nn.Linear(dim, mlp_dim),
@@ -74,12 +81,28 @@ class SkeletonMambaBlock(nn.Module):
         context: torch.Tensor | None = None,
         context_mask: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        if self.cross_attention is not None and context is None:
+            raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
+        b, j = x.shape[0], x.shape[2]
+        # Widest intermediate per frame: the Group Scan's projected path sequence.
+        per_frame = b * self.group_scan.path_elements
+        x = map_slices(self.spatial, 1, slice_length(x, 1, per_frame, self.slice_elements), x)
+        x = x + self.temporal_scan(self.norm_time(x), mask)
+        # Per frame: the MLP's hidden layer, or the attention scores over the condition.
+        width = max(self.mlp_dim, 0 if context is None else self.heads * context.shape[1])
+        frames = slice_length(x, 1, b * j * width, self.slice_elements)
+        return map_slices(lambda h: self.pointwise(h, context, context_mask), 1, frames, x)
+
+    def spatial(self, x: torch.Tensor) -> torch.Tensor:
+        """The frame-wise sublayers: Group Scan, then Joint Scan back to joints. (B, T, J, D)."""
         g = self.tokenizer(self.norm_group(x))
         g = g + self.group_scan(g)
-        x = x + self.inverse_tokenizer(self.joint_scan(self.norm_joint(g)))
-        x = x + self.temporal_scan(self.norm_time(x), mask)
+        return x + self.inverse_tokenizer(self.joint_scan(self.norm_joint(g)))
+
+    def pointwise(
+        self, x: torch.Tensor, context: torch.Tensor | None, context_mask: torch.Tensor | None
+    ) -> torch.Tensor:
+        """The token-wise sublayers: cross-attention (when built with a context) and MLP. (B, T, J, D)."""
         if self.cross_attention is not None:
-            if context is None:
-                raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
             x = x + self.cross_attention(self.norm_context(x), context, context_mask)
         return x + self.mlp(self.norm_mlp(x))

@@ -48,6 +48,11 @@ class SkeletonMambaConfig:
         gradient_checkpointing: recompute each block in the backward pass instead of storing its
             activations (the seed size at batch 4 x 150 frames needs about 30 GB in fp32 without it).
         mixer: settings of every Mamba-2 mixer.
+        cpu_slice_elements: on a CPU, frame-wise sublayers run on slices of frames and the Temporal
+            Scan on slices of joint sequences, each slice holding at most about this many elements
+            of its widest intermediate (4 Mi elements: 16 MB in fp32), so intermediates stay in
+            cache and off fresh page-faulting mappings; exact, as frames and sequences are
+            independent. ``None``: one call over everything. Not used on CUDA.
     """
 
     skeleton: str = "smpl24"
@@ -64,3 +69,4 @@ class SkeletonMambaConfig:
     dropout: float = 0.0
     gradient_checkpointing: bool = False
     mixer: MixerConfig | None = None
+    cpu_slice_elements: int | None = 4_194_304

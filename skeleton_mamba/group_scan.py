@@ -40,10 +40,19 @@ class GroupScan(nn.Module):
                 raise ValueError(f"group path {p} is not a permutation of 0..{num_groups - 1}")
         self.num_paths, self.num_groups = paths_t.shape
         self.shared = shared
-        # Gather index of the concatenated permuted sequence, and per path the inverse permutation.
+        # Gather index of the concatenated permuted sequence, and the (G, n*G) matrix that
+        # un-permutes every path and averages the n results: position k of path i holds group
+        # paths[i][k].
         self.register_buffer("path_index", paths_t.flatten(), persistent=False)
-        self.register_buffer("inverse", torch.argsort(paths_t, dim=1), persistent=False)
+        unpermute = torch.zeros(self.num_groups, self.num_paths * self.num_groups)
+        unpermute[paths_t.flatten(), torch.arange(unpermute.shape[1])] = 1.0 / self.num_paths
+        self.register_buffer("unpermute_mean", unpermute, persistent=False)
         self.mixer = Mamba2Mixer(dim, mixer)
+
+    @property
+    def path_elements(self) -> int:
+        """Elements per frame of the widest intermediate, the projected n*G-token path sequence."""
+        return self.num_paths * self.num_groups * self.mixer.in_proj.out_features
 
     def forward(self, g: torch.Tensor) -> torch.Tensor:
         """Same result as scanning ``mixer(g[:, path_index])``, at 1/n of the projection cost.
@@ -56,13 +65,12 @@ class GroupScan(nn.Module):
         lead = g.shape[:-2]
         g = g.reshape(-1, self.num_groups, g.shape[-1])  # (BT, G, E)
         # (BT, n*G, F): the projections of the n permuted group sequences, concatenated.
-        seq = self.mixer.in_proj(g)[:, self.path_index]
+        seq = torch.index_select(self.mixer.in_proj(g), 1, self.path_index)
         if self.shared:
             y = self.mixer.mix(rearrange(seq, "b (n g) f -> (b n) g f", n=self.num_paths))
-            y = rearrange(y, "(b n) g d -> b n g d", n=self.num_paths)
+            y = rearrange(y, "(b n) g d -> b (n g) d", n=self.num_paths)
         else:
-            y = rearrange(self.mixer.mix(seq), "b (n g) d -> b n g d", n=self.num_paths)
-        # Un-permute each path: position k of path i holds group paths[i][k].
-        index = self.inverse[None, :, :, None].expand(y.shape[0], -1, -1, y.shape[-1])
-        y = self.mixer.out_proj(torch.gather(y, 2, index).mean(dim=1))
+            y = self.mixer.mix(seq)
+        # (G, n*G) @ (BT, n*G, d): un-permute each path and average over paths.
+        y = self.mixer.out_proj(torch.matmul(self.unpermute_mean.to(y.dtype), y))
         return y.reshape(*lead, self.num_groups, y.shape[-1])

@@ -15,6 +15,7 @@ import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
+from skeleton_mamba.causal_conv import causal_depthwise_conv
 from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.norm import RMSNormGated, upcast
 from skeleton_mamba.ssd import ssd
@@ -68,18 +69,12 @@ class Mamba2Mixer(nn.Module):
     def causal_conv(self, xbc: torch.Tensor) -> torch.Tensor:
         """Causal depthwise convolution over time, (B, L, C) -> (B, L, C).
 
-        On CUDA, ``conv1d`` (cuDNN); on CPU a sum of ``d_conv`` shifted products, which avoids the
-        slow depthwise ``convolution_backward`` of CPU builds. Both read ``self.conv1d``'s weights.
+        On CUDA, ``conv1d`` (cuDNN); on CPU :func:`causal_depthwise_conv`, which avoids the slow
+        depthwise ``convolution_backward`` of CPU builds. Both read ``self.conv1d``'s weights.
         """
         if xbc.is_cuda:
             return self.conv1d(xbc.transpose(1, 2))[..., : xbc.shape[1]].transpose(1, 2)
-        k, length = self.conv1d.kernel_size[0], xbc.shape[1]
-        padded = F.pad(xbc, (0, 0, k - 1, 0))
-        weight = self.conv1d.weight[:, 0].t()  # (k, C): tap s multiplies input t - (k - 1) + s
-        out = self.conv1d.bias + padded[:, k - 1 :] * weight[k - 1]
-        for s in range(k - 1):
-            out = out + padded[:, s : s + length] * weight[s]
-        return out
+        return causal_depthwise_conv(xbc, self.conv1d.weight[:, 0], self.conv1d.bias)
 
     def mix(self, zxbcdt: torch.Tensor) -> torch.Tensor:
         """The mixer between its two projections: ``in_proj(u)`` (B, L, F) -> gated-normed y (B, L, d_inner).

@@ -58,6 +58,7 @@ class SkeletonMamba(nn.Module):
                 context_dim=config.context_dim,
                 dropout=config.dropout,
                 mixer=config.mixer,
+                slice_elements=config.cpu_slice_elements,
             )
             for _ in range(config.depth)
         )

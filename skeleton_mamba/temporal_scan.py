@@ -3,7 +3,8 @@
 Independent forward and backward mixers, summed and projected by a Linear. Variable-length batches
 are right-padded; the backward direction reverses only the valid prefix of each sequence, so it
 starts at the last valid frame and padded frames (which stay at the end in both directions) can
-never reach a valid frame through the causal scans.
+never reach a valid frame through the causal scans. On a CPU the joint sequences go through in
+slices of at most ``slice_elements`` projected elements (``skeleton_mamba.slicing``).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from torch import nn
 
 from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.mixer import Mamba2Mixer
+from skeleton_mamba.slicing import map_slices, slice_length
 
 
 def valid_prefix_reversal(mask: torch.Tensor) -> torch.Tensor:
@@ -42,20 +44,28 @@ def check_prefix_mask(mask: torch.Tensor) -> None:
 class TemporalScan(nn.Module):
     """(B, T, J, D) -> (B, T, J, D), each joint scanned along T in both directions."""
 
-    def __init__(self, dim: int, mixer: MixerConfig | None = None):
+    def __init__(self, dim: int, mixer: MixerConfig | None = None, slice_elements: int | None = None):
         super().__init__()
         self.forward_mixer = Mamba2Mixer(dim, mixer)
         self.backward_mixer = Mamba2Mixer(dim, mixer)
         self.proj = nn.Linear(dim, dim)
+        self.slice_elements = slice_elements
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         num_joints = x.shape[2]
         seq = rearrange(x, "b t j d -> (b j) t d")
-        fwd = self.forward_mixer(seq)
         if mask is None:
-            bwd = self.backward_mixer(seq.flip(1)).flip(1)
+            index = torch.arange(seq.shape[1], device=x.device).flip(0).expand(seq.shape[0], -1)
         else:
             index = valid_prefix_reversal(mask).repeat_interleave(num_joints, dim=0)
-            index = index[..., None].expand_as(seq)
-            bwd = torch.gather(self.backward_mixer(torch.gather(seq, 1, index)), 1, index)
-        return rearrange(self.proj(fwd + bwd), "(b j) t d -> b t j d", j=num_joints)
+        per_sequence = seq.shape[1] * self.forward_mixer.in_proj.out_features
+        length = slice_length(seq, 0, per_sequence, self.slice_elements)
+        y = map_slices(self.scan, 0, length, seq, index)
+        return rearrange(y, "(b j) t d -> b t j d", j=num_joints)
+
+    def scan(self, seq: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        """Both directions over sequences (L, T, D); ``index`` (L, T) reverses each valid prefix."""
+        index = index[..., None].expand_as(seq)
+        fwd = self.forward_mixer(seq)
+        bwd = torch.gather(self.backward_mixer(torch.gather(seq, 1, index)), 1, index)
+        return self.proj(fwd + bwd)

@@ -6,6 +6,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from skeleton_mamba.causal_conv import causal_depthwise_conv
 from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.mixer import Mamba2Mixer
 from skeleton_mamba.norm import RMSNormGated
@@ -123,3 +124,24 @@ def test_gated_rmsnorm_per_group_against_hand_formula():
     before = RMSNormGated(8, norm_before_gate=True)
     expected_before = y / (y.pow(2).mean(-1, keepdim=True) + 1e-5).sqrt() * F.silu(z)
     torch.testing.assert_close(before(y, z), expected_before)
+
+
+@pytest.mark.parametrize("k,length", [(4, 1), (4, 9), (2, 5), (1, 3)])
+def test_causal_conv_and_its_gradients_match_conv1d(k, length):
+    """The CPU causal depthwise convolution against torch's conv1d (padding k - 1, first L outputs)."""
+    torch.manual_seed(4)
+    channels = 5
+    x = torch.randn(3, length, channels, dtype=torch.float64, requires_grad=True)
+    weight = torch.randn(channels, k, dtype=torch.float64, requires_grad=True)
+    bias = torch.randn(channels, dtype=torch.float64, requires_grad=True)
+    upstream = torch.randn(3, length, channels, dtype=torch.float64)
+    ours = causal_depthwise_conv(x, weight, bias)
+    reference = F.conv1d(x.transpose(1, 2), weight[:, None], bias, padding=k - 1, groups=channels)
+    reference = reference[..., :length].transpose(1, 2)
+    torch.testing.assert_close(ours, reference, rtol=1e-12, atol=1e-12)
+    g_ours = torch.autograd.grad((ours * upstream).sum(), (x, weight, bias))
+    g_ref = torch.autograd.grad((reference * upstream).sum(), (x, weight, bias))
+    for a, b in zip(g_ours, g_ref):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
+    small = (x[:1, :, :2], weight[:2], bias[:2])
+    assert torch.autograd.gradcheck(causal_depthwise_conv, [t.detach().requires_grad_() for t in small])
