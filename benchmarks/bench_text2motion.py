@@ -39,7 +39,11 @@ from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_
 from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser, width_for_parameters  # noqa: E402
 from skeleton_mamba.tasks.text2motion.features import recover_from_ric  # noqa: E402
 from skeleton_mamba.tasks.text2motion.metrics import RPrecision, embedding_fid  # noqa: E402
-from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser  # noqa: E402
+from skeleton_mamba.tasks.text2motion.model import (  # noqa: E402
+    LengthMaskedDenoiser,
+    TextCondition,
+    TextToMotionDenoiser,
+)
 
 TEXT_DIM = 384
 GUIDANCE = 2.5
@@ -81,9 +85,7 @@ def time_denoiser(model: torch.nn.Module, args: argparse.Namespace, diffusion: G
     model.eval()
     one_mask, one_cond = torch.ones(1, frames, dtype=torch.bool), _condition(1)
 
-    def denoiser(x: torch.Tensor, t: torch.Tensor, c: TextCondition | None) -> torch.Tensor:
-        return model(x, t, c, one_mask)
-
+    denoiser = LengthMaskedDenoiser(model, one_mask)  # guidance: one call on a doubled batch
     x_one = torch.randn(1, frames, 263)
 
     def guided_step() -> None:

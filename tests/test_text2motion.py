@@ -7,11 +7,14 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.tasks.diffusion import guided_x0
+from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser
 from skeleton_mamba.tasks.text2motion.data import TextMotionDataset, collate_text_motion
 from skeleton_mamba.tasks.text2motion.features import group_statistics
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length
 from skeleton_mamba.tasks.text2motion.humanml3d import Caption, MotionClip
 from skeleton_mamba.tasks.text2motion.model import (
+    LengthMaskedDenoiser,
     TextCondition,
     TextToMotionDenoiser,
     features_to_tokens,
@@ -57,6 +60,26 @@ def test_denoiser_masks_padding_and_text():
     torch.testing.assert_close(out2, out, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(unc2, unc, atol=1e-5, rtol=1e-5)  # no text token = unconditional
     assert (out - unc).abs().max() > 1e-4  # the caption matters
+
+
+@pytest.mark.parametrize("kind", ["skeleton_mamba", "mdm_transformer"])
+def test_guidance_is_one_call_on_the_doubled_batch_and_equals_two_calls(kind):
+    """unc + w (cond - unc), with cond and unc from separate calls of the model, against one batched call."""
+    torch.manual_seed(0)
+    if kind == "skeleton_mamba":
+        model = TextToMotionDenoiser(TINY, text_dim=12).eval()
+    else:
+        model = TransformerDenoiser(text_dim=12, latent=16, layers=2, heads=4).eval()
+    x, t = torch.randn(2, 16, 263), torch.tensor([10, 900])
+    mask = torch.arange(16)[None] < torch.tensor([[9], [16]])
+    cond = TextCondition(torch.randn(2, 4, 12), torch.tensor([[1, 1, 0, 0], [1, 1, 1, 1]], dtype=torch.bool))
+    calls = []
+    model.register_forward_hook(lambda m, args, out: calls.append(args[0].shape[0]))
+    with torch.no_grad():
+        guided = guided_x0(LengthMaskedDenoiser(model, mask), x, t, cond, 2.5)
+        assert calls == [4]  # one call on 2 x 2 samples
+        unc, con = model(x, t, None, mask), model(x, t, cond, mask)
+    torch.testing.assert_close(guided, unc + 2.5 * (con - unc), atol=1e-5, rtol=1e-5)
 
 
 def test_group_statistics_by_hand():

@@ -45,22 +45,34 @@ def guided_x0(
 ) -> torch.Tensor:
     """Classifier-free guidance on x0: ``unc + w (cond - unc)`` (EDGE; w = 1 is plain conditional).
 
-    w = 0 returns the unconditional prediction and never evaluates the conditional one. A denoiser with
-    a ``null_condition(cond) -> tensor`` method (the null condition shaped like the tensor ``cond``) is
-    called once on the doubled batch ``[x_t; x_t]`` with ``[cond; null]`` instead of twice.
+    w = 0 returns the unconditional prediction and never evaluates the conditional one. A denoiser that
+    can express both predictions in one batch is called once on the doubled batch ``[x_t; x_t]``
+    instead of twice: it has either ``batch_with_null(cond)`` (any condition type: the condition of the
+    doubled batch, ``cond`` then its null) or ``null_condition(cond) -> tensor`` (a tensor ``cond``;
+    the null condition shaped like it).
     """
     if cond is None or guidance_weight == 0.0:
         return denoiser(x_t, t, None)
     if guidance_weight == 1.0:
         return denoiser(x_t, t, cond)
-    null_condition = getattr(denoiser, "null_condition", None)
-    if null_condition is not None and torch.is_tensor(cond):
-        both = denoiser(torch.cat([x_t, x_t]), torch.cat([t, t]), torch.cat([cond, null_condition(cond)]))
-        cond_x0, unc_x0 = both.chunk(2)
+    doubled = _condition_with_null(denoiser, cond)
+    if doubled is not None:
+        cond_x0, unc_x0 = denoiser(torch.cat([x_t, x_t]), torch.cat([t, t]), doubled).chunk(2)
     else:
         cond_x0 = denoiser(x_t, t, cond)
         unc_x0 = denoiser(x_t, t, None)
     return unc_x0 + guidance_weight * (cond_x0 - unc_x0)
+
+
+def _condition_with_null(denoiser: Denoiser, cond: Any) -> Any:
+    """The condition of the doubled batch ``[cond; null]``; ``None`` if the denoiser cannot say it."""
+    batch_with_null = getattr(denoiser, "batch_with_null", None)
+    if batch_with_null is not None:
+        return batch_with_null(cond)
+    null_condition = getattr(denoiser, "null_condition", None)
+    if null_condition is not None and torch.is_tensor(cond):
+        return torch.cat([cond, null_condition(cond)])
+    return None
 
 
 def _predict_x0(

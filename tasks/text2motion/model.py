@@ -94,6 +94,39 @@ class TextCondition:
     tokens: torch.Tensor
     mask: torch.Tensor
 
+    def with_null(self) -> TextCondition:
+        """``[self; null]`` for a doubled batch: the null half is all padding (no caption token).
+
+        Both text-to-motion denoisers read an all-padding caption exactly as no caption (the
+        cross-attention sees only the time token; the transformer's pooled text is zero), so one call
+        on the doubled batch gives the conditional and the unconditional prediction.
+        """
+        return TextCondition(
+            torch.cat([self.tokens, torch.zeros_like(self.tokens)]),
+            torch.cat([self.mask, torch.zeros_like(self.mask)]),
+        )
+
+
+class LengthMaskedDenoiser:
+    """A text-to-motion denoiser at fixed frame masks, as the samplers call it: ``(x_t, t, cond) -> x0``.
+
+    ``model(x_t, t, cond, mask)`` is either denoiser of this package; ``mask`` (B, T) bool marks valid
+    frames. On the doubled batch of classifier-free guidance (``batch_with_null``) the mask repeats.
+    """
+
+    def __init__(self, model: nn.Module, mask: torch.Tensor) -> None:
+        self.model = model
+        self.mask = mask
+
+    def __call__(self, x_t: torch.Tensor, t: torch.Tensor, cond: TextCondition | None) -> torch.Tensor:
+        repeats = x_t.shape[0] // self.mask.shape[0]
+        mask = self.mask if repeats == 1 else self.mask.repeat(repeats, 1)
+        return self.model(x_t, t, cond, mask)
+
+    @staticmethod
+    def batch_with_null(cond: TextCondition) -> TextCondition:
+        return cond.with_null()
+
 
 class TextToMotionDenoiser(nn.Module):
     """x0 prediction ``(x_t (B, T, 263), t (B,), cond, mask (B, T)) -> x0_hat (B, T, 263)``.

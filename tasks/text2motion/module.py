@@ -42,7 +42,7 @@ from skeleton_mamba.tasks.text2motion.evaluator import load_evaluator
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.glove import HashedWordVectorizer, WordVectorizer
 from skeleton_mamba.tasks.text2motion.humanml3d import read_feature_vector
-from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser
+from skeleton_mamba.tasks.text2motion.model import LengthMaskedDenoiser, TextCondition, TextToMotionDenoiser
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 
 __all__ = ["TextToMotionModule"]
@@ -264,9 +264,7 @@ class TextToMotionModule(LightningModule):
         mask = torch.arange(int(lengths_t.max()), device=self.device)[None] < lengths_t[:, None]
         cond = self.encode_text(captions)
 
-        def denoiser(x_t: torch.Tensor, t: torch.Tensor, c: TextCondition | None) -> torch.Tensor:
-            return self.denoiser(x_t, t, c, mask)
-
+        denoiser = LengthMaskedDenoiser(self.denoiser, mask)  # guidance: one call on a doubled batch
         shape = (len(captions), mask.shape[1], FEATURE_DIM)
         common = dict(cond=cond, guidance_weight=weight, generator=generator, device=self.device)
         common["progress"] = progress
