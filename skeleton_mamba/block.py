@@ -63,8 +63,6 @@ class SkeletonMambaBlock(nn.Module):
         if context_dim is not None:
             self.norm_context = nn.LayerNorm(dim)
             self.cross_attention = CrossAttention(dim, context_dim, heads=heads, dropout=dropout)
-        self.heads = heads
-        self.mlp_dim = mlp_dim
         self.norm_mlp = nn.LayerNorm(dim)
         self.mlp = nn.Sequential(
             nn.Linear(dim, mlp_dim),
@@ -89,7 +87,9 @@ class SkeletonMambaBlock(nn.Module):
         x = map_slices(self.spatial, 1, slice_length(x, 1, per_frame, self.slice_elements), x)
         x = x + self.temporal_scan(self.norm_time(x), mask)
         # Per frame: the MLP's hidden layer, or the attention scores over the condition.
-        width = max(self.mlp_dim, 0 if context is None else self.heads * context.shape[1])
+        width = self.mlp[0].out_features
+        if self.cross_attention is not None:
+            width = max(width, self.cross_attention.heads * context.shape[1])
         frames = slice_length(x, 1, b * j * width, self.slice_elements)
         return map_slices(lambda h: self.pointwise(h, context, context_mask), 1, frames, x)
 

@@ -55,9 +55,8 @@ class TemporalScan(nn.Module):
         num_joints = x.shape[2]
         seq = rearrange(x, "b t j d -> (b j) t d")
         if mask is None:
-            index = torch.arange(seq.shape[1], device=x.device).flip(0).expand(seq.shape[0], -1)
-        else:
-            index = valid_prefix_reversal(mask).repeat_interleave(num_joints, dim=0)
+            mask = torch.ones(x.shape[:2], dtype=torch.bool, device=x.device)
+        index = valid_prefix_reversal(mask).repeat_interleave(num_joints, dim=0)
         per_sequence = seq.shape[1] * self.forward_mixer.in_proj.out_features
         length = slice_length(seq, 0, per_sequence, self.slice_elements)
         y = map_slices(self.scan, 0, length, seq, index)
