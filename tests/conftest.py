@@ -31,6 +31,38 @@ def shared_file(relative: str) -> Path:
     return path
 
 
+@pytest.fixture(scope="session")
+def tiny_egodance_module():
+    """A builder of tiny EgoDance modules (random weights, seconds per step on a CPU).
+
+    ``tiny_egodance_module(**overrides)``: keyword arguments replace the tiny defaults.
+    """
+    from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+
+    tiny = {
+        "backbone": {
+            "dim": 16,
+            "depth": 1,
+            "heads": 2,
+            "mlp_dim": 32,
+            "mixer": {"d_state": 8, "headdim": 8, "chunk_size": 16},
+        },
+        "context_dim": 16,
+        "resnet_layers": {
+            "embedding_size": 8,
+            "hidden_sizes": [8, 16],
+            "depths": [1, 1],
+            "layer_type": "basic",
+        },
+        "image_size": 32,
+        "heads": 2,
+        "transformer_ff": 32,
+        "diffusion_steps": 20,
+        "sampling_steps": 2,
+    }
+    return lambda **overrides: EgoDanceModule(**{**tiny, **overrides})
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _librosa_kernels_compiled() -> None:
     """Compile librosa's numba kernels once, under the inter-process lock, before any test runs.

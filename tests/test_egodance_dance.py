@@ -9,16 +9,7 @@ import torch
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.model import EMM
-from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 
-TINY_BACKBONE = {
-    "dim": 16,
-    "depth": 1,
-    "heads": 2,
-    "mlp_dim": 32,
-    "mixer": {"d_state": 8, "headdim": 8, "chunk_size": 16},
-}
-TINY_RESNET = {"embedding_size": 8, "hidden_sizes": [8, 16], "depths": [1, 1], "layer_type": "basic"}
 IDENTITY_6D = torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0])
 STEP_X, STEP_Z = 0.01, 0.004  # metres per frame of the oracle's walk
 
@@ -36,7 +27,7 @@ def _walking_forward(self, x_t, t, context=None, mask=None):
 
 
 @pytest.fixture(scope="module")
-def inputs(tmp_path_factory):
+def inputs(tmp_path_factory, tiny_egodance_module):
     """A tiny EMM checkpoint, a 12 s synthetic track and a 12 s egocentric video."""
     import imageio.v3 as iio
 
@@ -44,16 +35,7 @@ def inputs(tmp_path_factory):
 
     tmp = tmp_path_factory.mktemp("dance")
     torch.manual_seed(0)
-    module = EgoDanceModule(
-        backbone=TINY_BACKBONE,
-        context_dim=16,
-        resnet_layers=TINY_RESNET,
-        image_size=32,
-        heads=2,
-        transformer_ff=32,
-        diffusion_steps=20,
-        sampling_steps=2,
-    )
+    module = tiny_egodance_module()
     ckpt = tmp / "emm.ckpt"
     torch.save(
         {

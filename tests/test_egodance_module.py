@@ -14,18 +14,8 @@ from lightning.pytorch import Trainer
 from torch.utils.data import DataLoader
 
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
-from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
-
-TINY_BACKBONE = {
-    "dim": 16,
-    "depth": 1,
-    "heads": 2,
-    "mlp_dim": 32,
-    "mixer": {"d_state": 8, "headdim": 8, "chunk_size": 16},
-}
-TINY_RESNET = {"embedding_size": 8, "hidden_sizes": [8, 16], "depths": [1, 1], "layer_type": "basic"}
 
 
 def test_data_module_explains_what_is_missing(tmp_path):
@@ -62,19 +52,9 @@ def _batches(n: int = 2, t: int = 16) -> list[dict]:
     ]
 
 
-def test_module_trains_tests_and_predicts(tmp_path):
+def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module):
     torch.manual_seed(0)
-    module = EgoDanceModule(
-        backbone=TINY_BACKBONE,
-        context_dim=16,
-        resnet_layers=TINY_RESNET,
-        image_size=32,
-        heads=2,
-        transformer_ff=32,
-        diffusion_steps=20,
-        sampling_steps=3,
-        ema_every=1,
-    )
+    module = tiny_egodance_module(sampling_steps=3, ema_every=1)
     loader = DataLoader(_batches(), batch_size=2)
     trainer = Trainer(
         accelerator="cpu",
