@@ -3,7 +3,10 @@
     python benchmarks/bench_backbone.py --json
 
 Each measurement runs in a fresh subprocess so its peak memory (resident set high-water mark on
-CPU, ``max_memory_allocated`` on CUDA) is its own. Prints one JSON object with ``--json``.
+CPU, ``max_memory_allocated`` on CUDA) is its own. Each row also gives its matrix-product work per
+forward + backward (``torch.utils.flop_counter``, recomputation under checkpointing included) and the rate
+it ran at as a fraction of this machine's fp32 GEMM rate, timed in the parent process before and after the
+rows (``gemm``). Prints one JSON object with ``--json``.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from attention_twin import AttentionTwin  # noqa: E402
-from common import machine_info, median_ms  # noqa: E402
+from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms  # noqa: E402
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig  # noqa: E402
 
@@ -57,6 +60,7 @@ def measure(
     else:  # ru_maxrss is in KiB on Linux; the increase over the state before the first step
         peak_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base_rss) / 1024
     params = sum(p.numel() for p in model.parameters())
+    gflop = matmul_gflop(step)
     return {
         "model": kind,
         "batch": batch,
@@ -64,6 +68,8 @@ def measure(
         "ms": round(ms, 1),
         "peak_mb": round(peak_mb, 1),
         "params": params,
+        "gflop": round(gflop, 2),
+        "gflop_per_s": round(gflop / (ms / 1e3), 1),
     }
 
 
@@ -104,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(measure(**json.loads(args.one))))
         return 0
 
+    torch.set_num_threads(args.threads)
+    gemm_before = gemm_gflop_per_s()
     common = {
         "dim": args.dim,
         "depth": args.depth,
@@ -122,6 +130,9 @@ def main(argv: list[str] | None = None) -> int:
         for t in args.lengths
         for k in ("skeleton_mamba", "attention_twin")
     ]
+    gemm = {"before": gemm_before, "after": gemm_gflop_per_s()}
+    for row in seed + scaling:
+        row["fraction_of_gemm"] = round(row["gflop_per_s"] / gemm_before["gflop_per_s"], 3)
     growth = {}
     for kind in ("skeleton_mamba", "attention_twin"):
         times = {r["T"]: r["ms"] for r in scaling if r["model"] == kind}
@@ -130,6 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "machine": machine_info(),
         "threads": args.threads,
+        "gemm": gemm,
         "config": common,
         "scaling_config": scaling_common,
         "seed_config": seed,
@@ -142,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         for row in seed + scaling:
             print(row)
         print("growth:", growth)
+        print("gemm GFLOP/s before / after:", gemm_before["gflop_per_s"], gemm["after"]["gflop_per_s"])
     return 0
 
 

@@ -17,7 +17,11 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
   attention, convolutions; elementwise work is not counted), and the rate it ran at;
 - ``ddim50_wall_s``: the real wall time of a full DDIM-50 run (condition encoding included; ``null`` when
   ``--max-run-s`` predicts it too long, ``ddim50_extrapolated_s`` = encoding + 50 x step is always given);
-- ``ddpm1000_extrapolated_s``: ``sample_step_ms`` x 1000 + condition encoding: NOT a measured run.
+- ``ddpm1000_extrapolated_s``: ``sample_step_ms`` x 1000 + condition encoding: NOT a measured run;
+- ``ddpm1000_wall_s`` (with ``--ddpm-run``): a real 1000-step DDPM run of one 150-frame sample as [EgoMusic]
+  samples at test time (no classifier-free guidance), condition encoding included;
+- ``gemm``: this machine's fp32 matrix-product rate timed in the same process (before and after the
+  models), and ``*_fraction_of_gemm``: each model's achieved matrix-product rate as a fraction of it.
 
     flock /tmp/bench.lock python benchmarks/bench_egodance.py --json              # seed sizes (slow on CPU)
     flock /tmp/bench.lock python benchmarks/bench_egodance.py --size tiny --json  # quick
@@ -39,10 +43,10 @@ from torch.utils.flop_counter import FlopCounterMode
 from transformers import ResNetConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine_info, median_ms  # noqa: E402
+from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample  # noqa: E402
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
 from skeleton_mamba.tasks.diffusion.samplers import guided_x0  # noqa: E402
 from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa: E402
 from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
@@ -153,8 +157,11 @@ def build(size: str) -> tuple[EMM, TransformerDenoiser]:
     return emm, best
 
 
-def time_train_step(model, x0, music, features, diffusion, repeats: int, warmup: int = 1) -> float:
-    """One optimizer step; ``features`` (B, T, F) are the cached frozen-ResNet frame features."""
+def time_train_step(
+    model, x0, music, features, diffusion, repeats: int, warmup: int = 1
+) -> tuple[float, float]:
+    """One optimizer step's median ms and its matrix-product GFLOP; ``features`` (B, T, F) are the cached
+    frozen-ResNet frame features."""
     emm = model.encoders[0] if isinstance(model, TransformerDenoiser) else model
     params = {id(p): p for p in model.parameters() if p.requires_grad}
     params.update({id(p): p for n, p in emm.named_parameters() if n.startswith(ENCODERS) and p.requires_grad})
@@ -171,12 +178,12 @@ def time_train_step(model, x0, music, features, diffusion, repeats: int, warmup:
         loss.backward()
         opt.step()
 
-    return median_ms(step, repeats=repeats, warmup=warmup)
+    return median_ms(step, repeats=repeats, warmup=warmup), matmul_gflop(step)
 
 
 @torch.inference_mode()
 def time_sampling(
-    model, music, frames, diffusion, ddim_steps: int, step_repeats: int, max_run_s: float
+    model, music, frames, diffusion, ddim_steps: int, step_repeats: int, max_run_s: float, ddpm_run: bool
 ) -> dict:
     """Condition encoding, the median guided step, and a real full DDIM run, for one sample.
 
@@ -188,12 +195,13 @@ def time_sampling(
     context = model.encode_condition(music, frames)
     encode_s = time.perf_counter() - start
     shape = (1, music.shape[1], 24, 10)
-    x = torch.randn(shape)
+    x = torch.randn(shape, device=music.device)
     times = []
     for i in range(step_repeats + 1):  # the first call warms up
-        t = torch.full((1,), diffusion.num_steps - 1 - 37 * i, dtype=torch.long)
+        t = torch.full((1,), diffusion.num_steps - 1 - 37 * i, dtype=torch.long, device=music.device)
         start = time.perf_counter()
         guided_x0(model, x, t, context, 2.0)
+        synchronize()
         times.append(time.perf_counter() - start)
     step_ms = statistics.median(times[1:]) * 1e3
     with FlopCounterMode(display=False) as counter:  # matrix products (mm, bmm, attention, conv)
@@ -204,8 +212,17 @@ def time_sampling(
     if ddim_estimate <= max_run_s:
         start = time.perf_counter()
         context = model.encode_condition(music, frames)  # a full run encodes its condition once
-        ddim_sample(diffusion, model, shape, cond=context, sampling_steps=ddim_steps, guidance_weight=2.0)
+        ddim_sample(diffusion, model, shape, cond=context, sampling_steps=ddim_steps, guidance_weight=2.0,
+                    device=music.device)
+        synchronize()
         ddim_s = time.perf_counter() - start
+    ddpm_s = None
+    if ddpm_run:  # [EgoMusic] at test time: all T steps, no classifier-free guidance
+        start = time.perf_counter()
+        context = model.encode_condition(music, frames)
+        ddpm_sample(diffusion, model, shape, cond=context, device=music.device)
+        synchronize()
+        ddpm_s = time.perf_counter() - start
     return {
         "condition_encode_s": encode_s,
         "sample_step_ms": step_ms,
@@ -214,7 +231,13 @@ def time_sampling(
         f"ddim{ddim_steps}_wall_s": ddim_s,
         f"ddim{ddim_steps}_extrapolated_s": ddim_estimate,
         f"ddpm{diffusion.num_steps}_extrapolated_s": encode_s + step_ms * diffusion.num_steps / 1e3,
+        f"ddpm{diffusion.num_steps}_wall_s": ddpm_s,
     }
+
+
+def synchronize() -> None:
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -229,25 +252,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--diffusion-steps", type=int, default=1000, help="T (DDPM runs all of them)")
     ap.add_argument("--max-run-s", type=float, default=600.0, help="skip longer full DDIM runs")
     ap.add_argument("--no-train", action="store_true", help="skip the training step")
+    ap.add_argument("--ddpm-run", action="store_true", help="also time a real full DDPM run (no CFG)")
+    ap.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     torch.manual_seed(0)
+    device = torch.device(args.device)
     emm, twin = build(args.size)
+    emm.to(device), twin.to(device)
     size = SIZES[args.size]["image_size"]
-    diffusion = GaussianDiffusion(args.diffusion_steps)
+    diffusion = GaussianDiffusion(args.diffusion_steps).to(device)
     b, n = args.batch, args.frames
-    x0 = encode_motion(0.3 * torch.randn(b, n, 24, 3), 0.1 * torch.randn(b, n, 3))
-    music = torch.randn(b, n, 35)
-    frames = torch.rand(1, n, 3, size, size)
+    x0 = encode_motion(0.3 * torch.randn(b, n, 24, 3), 0.1 * torch.randn(b, n, 3)).to(device)
+    music = torch.randn(b, n, 35, device=device)
+    frames = torch.rand(1, n, 3, size, size, device=device)
     with torch.inference_mode():  # the cached frozen-ResNet features of the training batch
-        one = emm.vision_encoder.resnet(pixel_values=torch.rand(2, 3, size, size)).pooler_output.flatten(1)
-    features = torch.randn(b, n, one.shape[-1]).abs()
+        one = emm.vision_encoder.resnet(pixel_values=frames[0, :2]).pooler_output.flatten(1)
+    features = torch.randn(b, n, one.shape[-1], device=device).abs()
+    gemm_before = gemm_gflop_per_s()
     result = {
         "machine": machine_info(),
         "threads": torch.get_num_threads(),
+        "device": str(device),
         "size": args.size,
         "train_batch": b,
         "frames": n,
@@ -259,17 +288,24 @@ def main(argv: list[str] | None = None) -> int:
     for name, model in (("emm_skeleton_mamba", emm), ("edge_transformer", twin)):
         r = {"denoiser_params": denoiser_params(model)}
         if not args.no_train:
-            r["train_step_ms"] = time_train_step(
+            r["train_step_ms"], r["train_step_gflop"] = time_train_step(
                 model, x0, music, features, diffusion, args.repeats, args.warmup
             )
+            r["train_step_gflop_per_s"] = r["train_step_gflop"] / (r["train_step_ms"] / 1e3)
         r.update(
             time_sampling(
-                model, music[:1], frames, diffusion, args.ddim_steps, args.step_repeats, args.max_run_s
+                model, music[:1], frames, diffusion, args.ddim_steps, args.step_repeats, args.max_run_s,
+                args.ddpm_run,
             )
         )
         result["models"][name] = r
         if not args.json:
             print(name, r, flush=True)
+    result["gemm"] = {"before": gemm_before, "after": gemm_gflop_per_s()}
+    for r in result["models"].values():
+        for key in ("sample_step", "train_step"):
+            if f"{key}_gflop_per_s" in r:
+                r[f"{key}_fraction_of_gemm"] = r[f"{key}_gflop_per_s"] / gemm_before["gflop_per_s"]
     e, t = result["models"]["emm_skeleton_mamba"], result["models"]["edge_transformer"]
     result["ratios_emm_over_transformer"] = {
         k: e[k] / t[k]

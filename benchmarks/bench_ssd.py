@@ -5,7 +5,10 @@ batch 192 at T = 150 and batch * T kept at 28,800 tokens for the other lengths (
 ``sdpa_ms`` is ``torch.nn.functional.scaled_dot_product_attention(is_causal=True)`` with the same
 heads, width and batch. ``max_abs_err`` compares ``ssd`` in fp32 with the float64 recurrence on
 ``--err-batch`` sequences of the same length (``max_rel_err`` divides it by max |y|, and
-``fp32_recurrence_abs_err`` is the error of the fp32 recurrence itself, for scale). The recurrence
+``fp32_recurrence_abs_err`` is the error of the fp32 recurrence itself, for scale). ``gemm`` is this
+machine's fp32 matrix-product rate timed in the same process (before and after the rows), and each row
+gives ``ssd_rate`` / ``sdpa_rate``: the matrix-product work of one forward + backward, the rate it ran at
+and its fraction of the GEMM rate. The recurrence
 (one Python step per time step) is timed at the first length, and at later lengths only when the
 per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
 
@@ -23,9 +26,10 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from torch.utils.flop_counter import sdpa_backward_flop_count, sdpa_flop_count
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine_info, median_ms  # noqa: E402
+from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, rate  # noqa: E402
 
 from skeleton_mamba.ssd import ssd, ssd_recurrence  # noqa: E402
 
@@ -74,12 +78,21 @@ def sdpa_fwd_bwd(batch: int, T: int):
     return run
 
 
+def sdpa_gflop(batch: int, T: int) -> float:
+    """Forward + backward work of the SDPA row by torch's own formulas (``torch.utils.flop_counter``;
+    its CPU kernel is not intercepted by the counter). Full T x T products, as the counter counts them."""
+    shape = (batch, HEADS, T, HEADDIM)
+    return (sdpa_flop_count(shape, shape, shape) + sdpa_backward_flop_count(shape, shape, shape, shape)) / 1e9
+
+
 def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step_s: float | None,
-              err_batch: int, chunk_size: int, impl: str) -> tuple[dict, float | None]:
+              err_batch: int, chunk_size: int, impl: str, gemm: dict) -> tuple[dict, float | None]:
     """One row; ``step_s`` is the recurrence time per time step measured on an earlier row."""
     inp = make_inputs(batch, T)
-    ssd_ms = median_ms(fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl), repeats=repeats)
-    sdpa_ms = median_ms(sdpa_fwd_bwd(batch, T), repeats=repeats)
+    ssd_run = fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl)
+    sdpa_run = sdpa_fwd_bwd(batch, T)
+    ssd_ms = median_ms(ssd_run, repeats=repeats)
+    sdpa_ms = median_ms(sdpa_run, repeats=repeats)
     recurrence_ms = None
     # The recurrence is one Python step per time step; run it only when the cost measured on an
     # earlier row says it fits in the budget (it is never extrapolated into a reported number).
@@ -99,7 +112,9 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
                max_rel_err=err / y_ref.abs().max().item(),
                fp32_recurrence_abs_err=(y_rec32.double() - y_ref).abs().max().item(),
                sdpa_over_ssd=round(sdpa_ms / ssd_ms, 2),
-               recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1))
+               recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1),
+               ssd_rate=rate(matmul_gflop(ssd_run), ssd_ms, gemm),
+               sdpa_rate=rate(sdpa_gflop(batch, T), sdpa_ms, gemm))
     return row, step_s
 
 
@@ -127,15 +142,19 @@ def main(argv: list[str] | None = None) -> int:
         batches = batches * len(args.lengths)
     if len(batches) != len(args.lengths):
         parser.error("--batch takes one value or one per length")
+    gemm_before = gemm_gflop_per_s()
     rows, step_s = [], None
     for T, batch in zip(args.lengths, batches):
         row, step_s = bench_row(T, batch, args.repeats, args.recurrence_budget_s, step_s, args.err_batch,
-                                args.chunk_size, args.impl)
+                                args.chunk_size, args.impl, gemm_before)
         rows.append(row)
         if not args.json:
             print(row, flush=True)
+    gemm = {"before": gemm_before, "after": gemm_gflop_per_s()}
     if args.json:
-        print(json.dumps({"machine": machine_info(), "threads": args.threads, "rows": rows}))
+        print(json.dumps({"machine": machine_info(), "threads": args.threads, "gemm": gemm, "rows": rows}))
+    else:
+        print("gemm GFLOP/s before / after:", gemm_before["gflop_per_s"], gemm["after"]["gflop_per_s"])
     return 0
 
 

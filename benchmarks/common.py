@@ -1,4 +1,4 @@
-"""Helpers shared by the benchmark scripts: machine description and median timing."""
+"""Helpers shared by the benchmark scripts: machine description, median timing, the machine's GEMM rate."""
 
 from __future__ import annotations
 
@@ -40,3 +40,39 @@ def median_ms(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> fl
             torch.cuda.synchronize()
         times.append((time.perf_counter() - start) * 1e3)
     return statistics.median(times)
+
+
+def gemm_gflop_per_s(sizes: tuple[int, ...] = (1024, 2048, 4096), repeats: int = 3) -> dict:
+    """The machine's fp32 matrix-product rate, timed in this process: the best median over square sizes.
+
+    ``2 n^3`` floating-point operations per ``n x n @ n x n`` product (on the current device, with the
+    current torch thread count). Report a model's rate as a fraction of ``gflop_per_s`` to see how far it
+    is from what the machine can do.
+    """
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    by_size = {}
+    for n in sizes:
+        a = torch.randn(n, n, device=device)
+        b = torch.randn(n, n, device=device)
+        ms = median_ms(lambda a=a, b=b: a @ b, repeats=repeats, warmup=1)
+        by_size[str(n)] = round(2 * n**3 / (ms / 1e3) / 1e9, 1)
+    best = max(by_size, key=by_size.get)
+    return {"gflop_per_s": by_size[best], "size": int(best), "by_size": by_size,
+            "threads": torch.get_num_threads(), "device": device}
+
+
+def matmul_gflop(fn: Callable[[], object]) -> float:
+    """Matrix-product work of one call of ``fn`` in GFLOP (``torch.utils.flop_counter``: mm, bmm, einsum,
+    attention and convolutions, forward and backward; elementwise work is not counted)."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    with FlopCounterMode(display=False) as counter:
+        fn()
+    return counter.get_total_flops() / 1e9
+
+
+def rate(gflop: float, ms: float, gemm: dict) -> dict:
+    """Achieved GFLOP/s of ``gflop`` done in ``ms`` milliseconds, and its fraction of the GEMM rate."""
+    achieved = gflop / (ms / 1e3)
+    return {"gflop": round(gflop, 3), "gflop_per_s": round(achieved, 1),
+            "fraction_of_gemm": round(achieved / gemm["gflop_per_s"], 3)}

@@ -1,13 +1,18 @@
-"""Optional GPU backend: mamba-ssm's fused Triton chunk scan (reference §6).
+"""Optional GPU backend: mamba-ssm's fused Triton chunk scan ([Mamba-2], ``mamba_chunk_scan_combined``).
 
 ``mamba_ssm`` imports Triton at import time and its kernels run on CUDA only, so it is imported
 lazily, inside :func:`ssd_kernel`, and :func:`kernel_available` checks both conditions first.
+The Triton path needs none of mamba-ssm's compiled CUDA extensions, so it also works from an install
+without them (``MAMBA_SKIP_CUDA_BUILD=TRUE``): :func:`import_triton_ssd` then loads the Triton modules
+without running the package ``__init__``, which imports the Mamba-1 extension eagerly.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import sys
+import types
 
 import torch
 
@@ -25,6 +30,27 @@ def mamba_ssm_installed() -> bool:
         return importlib.util.find_spec("mamba_ssm") is not None
     except (ImportError, ValueError):
         return False
+
+
+def import_triton_ssd() -> types.ModuleType:
+    """``mamba_ssm.ops.triton.ssd_combined``, also from an install without the compiled extensions.
+
+    mamba-ssm's ``__init__`` imports ``selective_scan_cuda`` (Mamba-1's CUDA extension) unconditionally;
+    when that extension was not built, the package is registered as a bare namespace over its
+    installed folder so that its pure-Triton submodules import on their own.
+    """
+    try:
+        return importlib.import_module(KERNEL_MODULE)
+    except ImportError as err:
+        if "selective_scan_cuda" not in str(err):
+            raise
+    spec = importlib.util.find_spec("mamba_ssm")
+    package = types.ModuleType("mamba_ssm")
+    package.__path__ = list(spec.submodule_search_locations)
+    for name in [m for m in sys.modules if m == "mamba_ssm" or m.startswith("mamba_ssm.")]:
+        del sys.modules[name]  # partial modules left by the failed import
+    sys.modules["mamba_ssm"] = package
+    return importlib.import_module(KERNEL_MODULE)
 
 
 def kernel_available(x: torch.Tensor) -> bool:
@@ -60,7 +86,7 @@ def ssd_kernel(
         raise RuntimeError("ssd(impl='kernel'): the mamba-ssm Triton kernel needs CUDA tensors, x is on "
                            f"{x.device}; use impl='chunked' or 'auto' on CPU")
     try:
-        module = importlib.import_module(KERNEL_MODULE)
+        module = import_triton_ssd()
     except ImportError as err:
         raise RuntimeError("ssd(impl='kernel') needs mamba-ssm (pip install mamba-ssm --no-build-isolation): "
                            f"importing {KERNEL_MODULE} failed: {err}") from err
