@@ -201,7 +201,7 @@ def random_rotate_scale(
     max_angle: float | None = 0.3,
     scale_range: float = 0.0,
 ) -> np.ndarray:
-    """Random per-axis scaling then a random rotation, draw for draw as [PYSKL] ``RandomScale`` + ``RandomRot``.
+    """Per-axis scaling then a rotation, draw for draw as [PYSKL] ``RandomScale`` + ``RandomRot``.
 
     PYSKL pyskl/datasets/pipelines/pose_related.py: the scale draws ``uniform(-1, 1, size=C)``; the
     rotation draws nothing when every joint is (close to) zero, else for C = 3 ``theta = uniform(-max_angle,
