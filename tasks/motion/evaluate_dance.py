@@ -123,8 +123,8 @@ def format_table(result: dict) -> str:
         if name not in result:
             continue
         real = result.get(f"{name}_real")
-        real_text = f"{real:>12.4f}" if real is not None else f"{'-':>12}"
-        lines.append(f"{name:<10} {result[name]:>12.4f} {real_text}")
+        real_text = f"{real:>12.6g}" if real is not None else f"{'-':>12}"
+        lines.append(f"{name:<10} {result[name]:>12.6g} {real_text}")
     return "\n".join(lines)
 
 
