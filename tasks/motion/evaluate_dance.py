@@ -104,10 +104,12 @@ def evaluate_folders(
             except ValueError as err:
                 raise EvaluateDanceError(f"{path}: {err}") from err
     counts = {"generated_files": len(sets[0][1]), "real_files": len(sets[1][1])}
-    try:
-        values = evaluation.compute()
-    except (RuntimeError, ValueError) as err:  # fewer than 2 clips on a side
-        raise EvaluateDanceError(f"{generated} / {real}: {err}") from err
+    values = evaluation.compute()
+    if "FID_k" not in values:
+        raise EvaluateDanceError(
+            f"{generated} / {real}: FID and Div need at least 2 clips in each set, got "
+            f"{values['generated_clips']} generated and {values['real_clips']} real"
+        )
     return {"protocol": protocol, **counts, **values}
 
 

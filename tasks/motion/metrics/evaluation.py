@@ -34,7 +34,8 @@ class DanceEvaluation(nn.Module):
     Args:
         protocol: ``"fact"``, ``"bailando"``, ``"edge"`` or a :class:`.protocols.DanceProtocol`.
 
-    ``compute()`` returns ``FID_k, FID_g, Div_k, Div_g`` (generated set normalised by the real statistics),
+    ``compute()`` returns ``FID_k, FID_g, Div_k, Div_g`` (generated set normalised by the real statistics;
+    present when each set has at least 2 clips),
     ``Div_k_real, Div_g_real`` (the real set's own diversity, the ground-truth row), ``BeatAlign`` and
     ``BeatAlign_real`` (when beats were given), ``PFC`` (EDGE), and the clip counts.
     """
@@ -74,16 +75,17 @@ class DanceEvaluation(nn.Module):
         self.counts["real"] += len(kinetic)
 
     def compute(self) -> dict[str, float]:
-        out = {
-            "FID_k": self.fid["kinetic"].compute().item(),
-            "FID_g": self.fid["geometric"].compute().item(),
-            "Div_k": self.div["kinetic"].compute().item(),
-            "Div_g": self.div["geometric"].compute().item(),
-        }
-        real_k, _ = self.div["kinetic"]._normalised_sets()
-        real_g, _ = self.div["geometric"]._normalised_sets()
-        out["Div_k_real"] = average_pairwise_distance(real_k).item()
-        out["Div_g_real"] = average_pairwise_distance(real_g).item()
+        """The metrics; FID and Div only when each set holds at least 2 clips (in this process)."""
+        out: dict[str, float] = {}
+        if min(self.counts.values()) >= 2:
+            out["FID_k"] = self.fid["kinetic"].compute().item()
+            out["FID_g"] = self.fid["geometric"].compute().item()
+            out["Div_k"] = self.div["kinetic"].compute().item()
+            out["Div_g"] = self.div["geometric"].compute().item()
+            real_k, _ = self.div["kinetic"]._normalised_sets()
+            real_g, _ = self.div["geometric"]._normalised_sets()
+            out["Div_k_real"] = average_pairwise_distance(real_k).item()
+            out["Div_g_real"] = average_pairwise_distance(real_g).item()
         for side, key in (("generated", "BeatAlign"), ("real", "BeatAlign_real")):
             if self.beat_align[side].update_count:
                 out[key] = self.beat_align[side].compute().item()
