@@ -17,12 +17,13 @@ import json
 import os
 import tempfile
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
-__all__ = ["FeatureCache", "default_cache_root", "file_sha256", "save_npy_atomic"]
+__all__ = ["FeatureCache", "default_cache_root", "file_sha256", "save_npy_atomic", "write_atomic"]
 
 _CHUNK = 1 << 20
 
@@ -45,14 +46,14 @@ def file_sha256(path: str | os.PathLike) -> str:
     return digest.hexdigest()
 
 
-def save_npy_atomic(path: str | os.PathLike, array: np.ndarray) -> Path:
-    """``np.save`` to exactly ``path`` (no ``.npy`` appended) through a temporary file in the same folder,
-    flushed and renamed over ``path``, so an interruption leaves the old file intact."""
+def write_atomic(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -> Path:
+    """Call ``write(file)`` on a temporary file in ``path``'s folder, flush it to disk and rename it over
+    ``path``, so an interruption or an error leaves the old file intact. Returns ``path``."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            np.save(f, np.ascontiguousarray(array), allow_pickle=False)
+            write(f)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -60,6 +61,11 @@ def save_npy_atomic(path: str | os.PathLike, array: np.ndarray) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def save_npy_atomic(path: str | os.PathLike, array: np.ndarray) -> Path:
+    """``np.save`` to exactly ``path`` (no ``.npy`` appended), atomically (:func:`write_atomic`)."""
+    return write_atomic(path, lambda f: np.save(f, np.ascontiguousarray(array), allow_pickle=False))
 
 
 class FeatureCache:

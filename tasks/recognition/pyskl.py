@@ -9,15 +9,14 @@ restricted unpickler of :mod:`skeleton_mamba.tasks.motion.safe_pickle`, never pl
 
 from __future__ import annotations
 
-import os
 import pickle
-import tempfile
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.motion.cache import write_atomic
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 
 __all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
@@ -167,14 +166,4 @@ def save_annotations(data: dict, path: str | PathLike[str], keypoint_dtype: str 
     if keypoint_dtype != "float32":
         data["annotations"] = [_cast(a, keypoint_dtype, str(path)) for a in data["annotations"]]
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            pickle.dump(data, f, protocol=4)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_atomic(path, lambda f: pickle.dump(data, f, protocol=4))
