@@ -138,7 +138,8 @@ def _cast(anno: dict, dtype: str, source: str) -> dict:
     out = dict(anno)
     for key in ("keypoint", "keypoint_score"):
         if key in out:
-            cast = out[key].astype(dtype)
+            with np.errstate(over="ignore"):  # overflow is reported below, naming the sample
+                cast = out[key].astype(dtype)
             if not np.isfinite(cast).all():
                 raise AnnotationFileError(f"{source}: {anno['frame_dir']}: {key} exceeds the {dtype} range")
             out[key] = cast
