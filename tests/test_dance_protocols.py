@@ -17,6 +17,7 @@ from scipy import linalg
 from test_dance_metrics import published_kinetic, rest_pose
 from test_music import click_track
 
+from skeleton_mamba.tasks.motion.metrics import BeatAlign
 from skeleton_mamba.tasks.motion.metrics.beat_align import kinematic_beats
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import get_protocol
@@ -64,6 +65,17 @@ def test_fact_protocol_generated_scores_from_frame_120_and_keeps_beats_past_the_
     assert real.joints.shape[0] == 200
     expected_real = np.mean([gauss(2, 3), gauss(2, 3), gauss(5, 3), gauss(21, 3)])  # 40-42, 130-128, ...
     assert real.beat_align == pytest.approx(expected_real, rel=1e-12)
+
+
+def test_beat_align_metric_fact_from_frame_120_keeps_the_tracks_beats_by_default():
+    motion_minima = [40, 130, 170, 196]
+    joints = torch.as_tensor(v_motion(speeds_with_minima(199, [m - 1 for m in motion_minima])))
+    music = np.array([42, 128, 150, 175, 201, 260])
+    kept, cut = BeatAlign("fact", start_frame=120), BeatAlign("fact", start_frame=120, truncate_music=True)
+    kept.update([joints], [music])
+    cut.update([joints], [music])
+    assert kept.compute().item() == pytest.approx(np.mean([gauss(2, 3), gauss(5, 3), gauss(5, 3)]), rel=1e-12)
+    assert cut.compute().item() == pytest.approx(np.mean([gauss(2, 3), gauss(5, 3), gauss(21, 3)]), rel=1e-12)
 
 
 def test_fact_protocol_resamples_30_fps_motion_to_60():
