@@ -172,8 +172,8 @@ class EDGEProtocol(DanceProtocol):
     clip ``i`` is paired with audio slice ``i``, whose 35-d features are computed on the slice alone
     (:func:`.protocol_music.edge_slice_features`). Per clip: FID / Div features, PFC (eval_pfc.py, y-up here)
     and BeatAlign in Bailando's form against the slice's beats. EDGE ships no FID, Div or BeatAlign code
-    (Stanford-TML/EDGE#27, #46); the paper reports Bailando's BeatAlign, whose 60 fps constants are kept
-    in seconds here (sigma 1.5 frames, smoothing 2.5 frames at 30 fps), an assumption.
+    (Stanford-TML/EDGE#27, #46): BeatAlign here is Bailando's form (as LODGE and [EgoMusic]'s MM term use)
+    with its 60 fps constants kept in seconds (sigma 1.5 frames, smoothing 2.5 frames at 30 fps), our choice.
     """
 
     name = "edge"
