@@ -5,18 +5,17 @@ and live beside this file; what differs is how their inputs are formed, and a nu
 table only when it was computed the paper's way. Each protocol turns one ``(T, 24, 3)`` y-up SMPL-24 joint
 sequence (and its music beats) into the clips the paper scores:
 
-==========  ====  =====================================  =================================  ===============
-protocol    fps   FID / Div frames                       BeatAlign                          music beats
-==========  ====  =====================================  =================================  ===============
-``fact``    60    generated: frames 120.. (after the     FACT form (mean over motion        35-d column 34
-                  seed); real: full length               beats), generated scored from      (AIST tempo
-                                                         frame 120 against every beat of    prior)
-                                                         the track; real: beats cut to T
-``bailando`` 60   first 1200 frames (real: full          Bailando form (mean over music     percussive HPSS
-                  length), frame-0 root subtracted       beats), whole sequence             beat_track
-``edge``    30    5 s clips every 2.5 s (150 frames)     Bailando form per clip, against    per-slice 35-d
-                                                         that slice's own beats; plus PFC   features
-==========  ====  =====================================  =================================  ===============
+============  ===  ======================================  ==================================  ===============
+protocol      fps  FID / Div frames                        BeatAlign                           music beats
+============  ===  ======================================  ==================================  ===============
+``fact``      60   generated: frames 120.. (after the      FACT form (mean over motion beats)  35-d column 34
+                   seed); real: full length                from frame 120 against every beat   (AIST tempo
+                                                           of the track; real: beats cut to T  prior)
+``bailando``  60   first 1200 frames (real: full length),  Bailando form (mean over music      percussive HPSS
+                   frame-0 root subtracted                 beats), whole sequence              beat_track
+``edge``      30   5 s clips every 2.5 s (150 frames)      Bailando form per clip, against     per-slice 35-d
+                                                           that slice's own beats; plus PFC    features
+============  ===  ======================================  ==================================  ===============
 
 Motion at another frame rate is resampled linearly to the protocol's (60 -> 30 takes every second frame;
 30 -> 60 interpolates, as LODGE does for Bailando's metrics). The real set (FID reference and
