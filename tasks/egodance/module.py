@@ -39,6 +39,12 @@ __all__ = ["EgoDanceModule"]
 MOTION_FPS = 30.0  # EMM's motion and music rate ([EgoMusic] supp. Table 2)
 
 
+def _music_cache_dir(module: LightningModule) -> str | None:
+    """The data module's ``music_cache_dir`` when the module runs in a Trainer with one, else ``None``."""
+    datamodule = getattr(module._trainer, "datamodule", None) if module._trainer is not None else None
+    return getattr(datamodule, "hparams", {}).get("music_cache_dir")
+
+
 class EgoDanceModule(LightningModule):
     """EMM trained as a conditional diffusion model.
 
@@ -208,11 +214,10 @@ class EgoDanceModule(LightningModule):
         self.test_head.update(err[..., HEAD_JOINT].mean(dim=1))
         if "music_path" not in batch:
             raise KeyError("EMM test: the batch needs music_path and music_start_s (protocol music beats)")
-        protocol = self.test_evaluation.protocol
+        protocol, cache = self.test_evaluation.protocol, _music_cache_dir(self)
         for i in range(b):
-            beats = protocol.music_beats(
-                batch["music_path"][i], float(batch["music_start_s"][i]), pred.shape[1] / MOTION_FPS
-            )
+            start, duration = float(batch["music_start_s"][i]), pred.shape[1] / MOTION_FPS
+            beats = protocol.music_beats(batch["music_path"][i], start, duration, cache)
             self.test_evaluation.add(true[i].cpu(), MOTION_FPS, beats, real=True)
             self.test_evaluation.add(pred[i].cpu(), MOTION_FPS, beats)
         metrics = {

@@ -186,7 +186,8 @@ class QEANModule(LightningModule):
             if protocol.name == "fact":  # the data module's features are FACT's: beats of the whole window
                 beats = np.flatnonzero(batch["music"][i, :, BEAT].cpu().numpy() > 0.5)
             else:
-                beats = protocol.music_beats(batch["music_path"][i])
+                cache = getattr(self.trainer.datamodule, "hparams", {}).get("music_cache_dir")
+                beats = protocol.music_beats(batch["music_path"][i], cache_dir=cache)
             self.test_evaluation.add(joints[i].cpu(), FPS, beats)
         self._generated_count += full.shape[0]
 
