@@ -11,7 +11,9 @@ named protocol (:mod:`.metrics.protocols`: frames, root handling, music beats an
 [FACT], [Bailando] or [EDGE]); REAL_DIR is the reference set of FID and of the normalisation of Div (the
 published codes use every AIST++ sequence minus the ignore list, full length). With ``--music-dir``, each
 motion's music is ``<music id>.wav`` from an AIST++ name in its file name, else the audio file with the
-same stem; BeatAlign is then reported for both sets. Prints a table, or one JSON object with ``--json``.
+same stem, and every motion starts with its music; BeatAlign is then reported for both sets. Prints a
+table, or one JSON object with ``--json``. (EDGE's own output pickles, z-up at 30 fps without
+``smpl_scaling``, are not AIST++ files: convert them to our ``.npz`` first.)
 """
 
 from __future__ import annotations
