@@ -15,14 +15,14 @@ import torch.nn.functional as F
 
 
 class CausalDepthwiseConv(torch.autograd.Function):
-    """x (B, L, C), weight (C, k), bias (C) -> (B, L, C)."""
+    """x (B, L, C), weight (C, k), bias (C) or ``None`` -> (B, L, C)."""
 
     @staticmethod
-    def forward(ctx, x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    def forward(ctx, x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> torch.Tensor:
         k, length = weight.shape[1], x.shape[1]
         taps = weight.t()  # (k, C): tap s multiplies input t - (k - 1) + s
         padded = F.pad(x, (0, 0, k - 1, 0))
-        out = torch.addcmul(bias, x, taps[k - 1])
+        out = x * taps[k - 1] if bias is None else torch.addcmul(bias, x, taps[k - 1])
         for s in range(k - 1):
             out.addcmul_(padded[:, s : s + length], taps[s])
         ctx.save_for_backward(padded, taps)
@@ -49,6 +49,6 @@ class CausalDepthwiseConv(torch.autograd.Function):
         return grad_x, grad_w, grad_b
 
 
-def causal_depthwise_conv(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
-    """Causal depthwise convolution along dim 1: x (B, L, C), weight (C, k), bias (C) -> (B, L, C)."""
+def causal_depthwise_conv(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> torch.Tensor:
+    """Causal depthwise convolution along dim 1: x (B, L, C), weight (C, k), bias (C) or None -> (B, L, C)."""
     return CausalDepthwiseConv.apply(x, weight, bias)

@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "skeleton_mamba.tasks.motion.analyze_music:main",
         "tempo, beats and features of a track",
     ),
+    "evaluate-dance": ("skeleton_mamba.tasks.motion.evaluate_dance:main", "dance metrics, paper protocols"),
     "render": ("skeleton_mamba.tasks.motion.render_cli:main", "render a motion file to mp4 / gif"),
     "make-ego": ("skeleton_mamba.tasks.egodance.builder.cli:main", "build EgoAIST++-style egocentric data"),
     "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),

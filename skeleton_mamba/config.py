@@ -7,10 +7,19 @@ from dataclasses import dataclass
 
 @dataclass
 class MixerConfig:
-    """Mamba-2 mixer settings (names as in ``mamba_ssm.modules.mamba2.Mamba2``).
+    """Mamba-2 mixer settings (names and meanings as in ``mamba_ssm.modules.mamba2.Mamba2``).
 
     The defaults suit small widths (D = 128 per joint): d_inner = expand * width, heads of
     ``headdim`` channels, state size ``d_state``.
+
+    Options of ``mamba_ssm`` with its meaning (defaults are its defaults, which give [Mamba-2]'s block):
+    ``d_ssm``: the SSM runs on this many of the ``d_inner`` channels, the remaining ``d_inner - d_ssm``
+    are a gated MLP ``silu(z0) * x0`` concatenated in front of the SSM output (``None``: all of them);
+    ``D_has_hdim``: one skip weight D per channel ``(d_ssm,)`` instead of per head; ``rmsnorm``:
+    gated RMSNorm after the SSM (``False``: ``y * silu(z)`` and no ``norm.weight``); ``norm_before_gate``:
+    ``RMSNorm(y) * silu(z)`` instead of ``RMSNorm(y * silu(z))``; ``dt_limit``: clamp of
+    ``softplus(dt + dt_bias)`` to ``(min, max)``; ``bias``: biases of ``in_proj`` and ``out_proj``;
+    ``conv_bias``: bias of the causal convolution.
     """
 
     d_state: int = 64
@@ -23,6 +32,13 @@ class MixerConfig:
     dt_max: float = 0.1
     dt_init_floor: float = 1e-4
     A_init_range: tuple[float, float] = (1.0, 16.0)
+    d_ssm: int | None = None
+    D_has_hdim: bool = False
+    rmsnorm: bool = True
+    norm_before_gate: bool = False
+    dt_limit: tuple[float, float] = (0.0, float("inf"))
+    bias: bool = False
+    conv_bias: bool = True
     use_kernel: bool = True  # use mamba-ssm's Triton kernel on CUDA when installed
 
 

@@ -1,9 +1,11 @@
 """The Mamba-2 mixer block in pure PyTorch, state_dict-compatible with ``mamba_ssm.Mamba2``.
 
-in_proj -> (z, x, B, C, dt) -> causal depthwise conv over (x, B, C) + SiLU -> SSD (with D skip)
--> gated RMSNorm with z -> out_proj. Parameter names (``in_proj``, ``conv1d``, ``dt_bias``, ``A_log``,
-``D``, ``norm.weight``, ``out_proj``) and the initialisation of ``A_log``, ``dt_bias`` and ``D``
-follow ``mamba_ssm/modules/mamba2.py`` so weights move between the two.
+in_proj -> (z0, x0, z, x, B, C, dt) -> causal depthwise conv over (x, B, C) + SiLU -> SSD (with D skip)
+-> gated RMSNorm with z -> [silu(z0) * x0 | y] -> out_proj ([Mamba-2]; z0, x0 are empty unless
+``d_ssm < d_inner``). Parameter names (``in_proj``, ``conv1d``, ``dt_bias``, ``A_log``, ``D``,
+``norm.weight``, ``out_proj``), the options of :class:`~skeleton_mamba.config.MixerConfig` and the
+initialisation of ``A_log``, ``dt_bias`` and ``D`` follow ``mamba_ssm/modules/mamba2.py`` so weights move
+between the two.
 """
 
 from __future__ import annotations
@@ -30,25 +32,22 @@ class Mamba2Mixer(nn.Module):
         self.config = cfg
         self.d_model = d_model
         self.d_inner = cfg.expand * d_model
-        if self.d_inner % cfg.headdim:
-            raise ValueError(
-                f"d_inner {self.d_inner} (expand x d_model) must be a multiple of headdim {cfg.headdim}"
-            )
+        self.d_ssm = self.d_inner if cfg.d_ssm is None else cfg.d_ssm
+        self.d_mlp = self.d_inner - self.d_ssm  # gated-MLP channels beside the SSM
         self.headdim = cfg.headdim
-        self.nheads = self.d_inner // cfg.headdim
         self.ngroups = cfg.ngroups
-        if self.nheads % self.ngroups:
-            raise ValueError(f"{self.nheads} heads are not divisible into {self.ngroups} B/C groups")
+        self.dt_limit = _check_options(cfg, self.d_inner, self.d_ssm)
+        self.nheads = self.d_ssm // cfg.headdim
         self.d_state = cfg.d_state
         self.chunk_size = cfg.chunk_size
-        conv_dim = self.d_inner + 2 * cfg.ngroups * cfg.d_state
+        conv_dim = self.d_ssm + 2 * cfg.ngroups * cfg.d_state
 
-        # Order of the projection: [z, x, B, C, dt] (as mamba_ssm).
+        # Order of the projection: [z0, x0, z, x, B, C, dt] (as mamba_ssm; z0, x0 only when d_ssm < d_inner).
         self.in_proj = nn.Linear(
-            d_model, 2 * self.d_inner + 2 * cfg.ngroups * cfg.d_state + self.nheads, bias=False
+            d_model, 2 * self.d_inner + 2 * cfg.ngroups * cfg.d_state + self.nheads, bias=cfg.bias
         )
         self.conv1d = nn.Conv1d(
-            conv_dim, conv_dim, cfg.d_conv, groups=conv_dim, padding=cfg.d_conv - 1, bias=True
+            conv_dim, conv_dim, cfg.d_conv, groups=conv_dim, padding=cfg.d_conv - 1, bias=cfg.conv_bias
         )
 
         # dt initialisation: dt ~ exp(U(log dt_min, log dt_max)), floored; dt_bias = softplus^-1(dt).
@@ -59,12 +58,15 @@ class Mamba2Mixer(nn.Module):
         self.dt_bias = nn.Parameter(dt + torch.log(-torch.expm1(-dt)))
         lo, hi = cfg.A_init_range
         self.A_log = nn.Parameter(torch.log(torch.empty(self.nheads).uniform_(lo, hi)))
-        self.D = nn.Parameter(torch.ones(self.nheads))
+        self.D = nn.Parameter(torch.ones(self.d_ssm if cfg.D_has_hdim else self.nheads))
         for p in (self.dt_bias, self.A_log, self.D):
             p._no_weight_decay = True
 
-        self.norm = RMSNormGated(self.d_inner, group_size=self.d_inner // cfg.ngroups, norm_before_gate=False)
-        self.out_proj = nn.Linear(self.d_inner, d_model, bias=False)
+        if cfg.rmsnorm:
+            self.norm = RMSNormGated(
+                self.d_ssm, group_size=self.d_ssm // cfg.ngroups, norm_before_gate=cfg.norm_before_gate
+            )
+        self.out_proj = nn.Linear(self.d_inner, d_model, bias=cfg.bias)
 
     def causal_conv(self, xbc: torch.Tensor) -> torch.Tensor:
         """Causal depthwise convolution over time, (B, L, C) -> (B, L, C).
@@ -76,31 +78,68 @@ class Mamba2Mixer(nn.Module):
             return self.conv1d(xbc.transpose(1, 2))[..., : xbc.shape[1]].transpose(1, 2)
         return causal_depthwise_conv(xbc, self.conv1d.weight[:, 0], self.conv1d.bias)
 
+    def skip_weight(self) -> torch.Tensor:
+        """D as the SSD takes it: (H,) per head, or (H, P) per channel with ``D_has_hdim``."""
+        if self.config.D_has_hdim:
+            return rearrange(self.D, "(h p) -> h p", p=self.headdim)
+        return self.D
+
+    def gate(self, y: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """The SSM output gated by z, (B, L, d_ssm): gated RMSNorm, or ``y * silu(z)`` without ``rmsnorm``."""
+        if self.config.rmsnorm:
+            return self.norm(y, z)
+        return y * F.silu(z)
+
     def mix(self, zxbcdt: torch.Tensor) -> torch.Tensor:
-        """The mixer between its two projections: ``in_proj(u)`` (B, L, F) -> gated-normed y (B, L, d_inner).
+        """The mixer between its two projections: ``in_proj(u)`` (B, L, F) -> gated y (B, L, d_inner).
 
         ``forward(u) == out_proj(mix(in_proj(u)))``. Callers whose sequence repeats tokens (the Group
         Scan reads each group token in n orders) project the distinct tokens once, gather, and average
         outputs before ``out_proj``, which is linear.
         """
         gn = self.ngroups * self.d_state
-        z, xbc, dt = torch.split(zxbcdt, [self.d_inner, self.d_inner + 2 * gn, self.nheads], dim=-1)
+        z0, x0, z, xbc, dt = torch.split(
+            zxbcdt, [self.d_mlp, self.d_mlp, self.d_ssm, self.d_ssm + 2 * gn, self.nheads], dim=-1
+        )
         xbc = F.silu(self.causal_conv(xbc))
-        x, b, c = torch.split(xbc, [self.d_inner, gn, gn], dim=-1)
+        x, b, c = torch.split(xbc, [self.d_ssm, gn, gn], dim=-1)
         y = ssd(
             rearrange(x, "b l (h p) -> b l h p", p=self.headdim),
             dt,
             -torch.exp(upcast(self.A_log)),  # fp32 (fp64 stays fp64): in fp16 A could be -inf
             rearrange(b, "b l (g n) -> b l g n", g=self.ngroups),
             rearrange(c, "b l (g n) -> b l g n", g=self.ngroups),
-            D=self.D,
+            D=self.skip_weight(),
             dt_bias=self.dt_bias,
             dt_softplus=True,
+            dt_limit=self.dt_limit,
             chunk_size=self.chunk_size,
             impl="auto" if self.config.use_kernel else "torch",  # "torch": never the mamba-ssm kernel
         )
-        return self.norm(rearrange(y, "b l h p -> b l (h p)"), z)
+        y = self.gate(rearrange(y, "b l h p -> b l (h p)"), z)
+        if self.d_mlp:
+            y = torch.cat([F.silu(z0) * x0, y], dim=-1)
+        return y
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:
         """u (B, L, d_model) -> (B, L, d_model)."""
         return self.out_proj(self.mix(self.in_proj(u)))
+
+
+def _check_options(cfg: MixerConfig, d_inner: int, d_ssm: int) -> tuple[float, float]:
+    """Reject option values ``mamba_ssm.Mamba2`` would not accept; returns ``dt_limit`` as a float pair."""
+    if not 0 < d_ssm <= d_inner:
+        raise ValueError(f"d_ssm {d_ssm} must lie in (0, d_inner = expand x d_model = {d_inner}]")
+    if d_ssm % cfg.headdim:
+        raise ValueError(f"d_ssm {d_ssm} (default d_inner) must be a multiple of headdim {cfg.headdim}")
+    if (d_ssm // cfg.headdim) % cfg.ngroups:
+        raise ValueError(f"{d_ssm // cfg.headdim} heads are not divisible into {cfg.ngroups} B/C groups")
+    try:
+        lo, hi = (float(v) for v in cfg.dt_limit)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"dt_limit must be a pair (min, max), got {cfg.dt_limit!r}") from err
+    if not (0.0 <= lo < hi):
+        raise ValueError(f"dt_limit {cfg.dt_limit!r} must satisfy 0 <= min < max (max may be inf)")
+    if cfg.norm_before_gate and not cfg.rmsnorm:
+        raise ValueError("norm_before_gate=True needs rmsnorm=True (there is no norm to put before the gate)")
+    return lo, hi

@@ -24,8 +24,9 @@ def backbone_config(value: SkeletonMambaConfig | Mapping | None) -> SkeletonMamb
     mixer = fields.get("mixer")
     if isinstance(mixer, Mapping):
         mixer = dict(mixer)
-        if "A_init_range" in mixer:
-            mixer["A_init_range"] = tuple(mixer["A_init_range"])
+        for pair in ("A_init_range", "dt_limit"):
+            if pair in mixer:
+                mixer[pair] = tuple(mixer[pair])
         fields["mixer"] = MixerConfig(**mixer)
     return SkeletonMambaConfig(**fields)
 

@@ -33,7 +33,14 @@ def test_splits_keep_sources_together_and_respect_aist_test_list():
     assert aist == {"gBR_sBM_cAll_d04_mBR0_ch02.pkl": "test", "gBR_sBM_cAll_d04_mBR0_ch01.pkl": "train"}
 
 
-def _batches(n: int = 2, t: int = 16) -> list[dict]:
+@pytest.fixture(scope="module")
+def song(tmp_path_factory) -> str:
+    from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
+
+    return str(write_music(tmp_path_factory.mktemp("music") / "song.wav", synthesize_music(120.0, 6.0)))
+
+
+def _batches(song: str, n: int = 2, t: int = 16) -> list[dict]:
     gen = torch.Generator().manual_seed(0)
     motion = encode_motion(
         0.2 * torch.randn(n, t, 24, 3, generator=gen), 0.1 * torch.randn(n, t, 3, generator=gen)
@@ -47,15 +54,29 @@ def _batches(n: int = 2, t: int = 16) -> list[dict]:
             "music": music[i],
             "frames": torch.rand(t, 3, 32, 32, generator=gen),
             "head": torch.zeros(t, 3),
+            "music_path": song,
+            "music_start_s": 0.5 * i,
         }
         for i in range(n)
     ]
 
 
-def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module):
+def test_test_loop_under_the_edge_protocol(tmp_path, tiny_egodance_module, song):
+    """Default protocol ``edge``: 150-frame windows, each with its own 5 s music slice; PFC reported."""
     torch.manual_seed(0)
-    module = tiny_egodance_module(sampling_steps=3, ema_every=1)
-    loader = DataLoader(_batches(), batch_size=2)
+    module = tiny_egodance_module(sampling_steps=2)
+    assert module.test_evaluation.protocol.name == "edge"
+    trainer = Trainer(accelerator="cpu", logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                      enable_model_summary=False, default_root_dir=tmp_path)  # fmt: skip
+    results = trainer.test(module, DataLoader(_batches(song, t=150), batch_size=2), verbose=False)[0]
+    assert results["test/pfc"] >= 0 and 0 <= results["test/beat_align"] <= 1
+    assert np.isfinite(results["test/FID_k"]) and np.isfinite(results["test/Div_g"])
+
+
+def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song):
+    torch.manual_seed(0)
+    module = tiny_egodance_module(sampling_steps=3, ema_every=1, protocol="bailando")  # 16-frame windows
+    loader = DataLoader(_batches(song), batch_size=2)
     trainer = Trainer(
         accelerator="cpu",
         max_steps=2,
@@ -69,7 +90,7 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module):
     trainer.fit(module, loader, loader)
     assert any(not torch.equal(a, b) for a, b in zip(before, module.ema.module.parameters(), strict=True))
     results = trainer.test(module, loader, verbose=False)[0]
-    for key in ("test/mpjpe_mm", "test/root_error_mm", "test/head_error_mm", "test/pfc", "test/beat_align"):
+    for key in ("test/mpjpe_mm", "test/root_error_mm", "test/head_error_mm", "test/beat_align", "test/FID_k"):
         assert key in results and results[key] == results[key]  # present and not NaN
     assert results["test/mpjpe_mm"] > 0
     out = trainer.predict(module, loader)[0]

@@ -107,11 +107,11 @@ def test_feature_columns_match_librosa_called_directly(shared_data, fps):
 
 
 def test_octave_prior_is_soft(tmp_path):
-    # A 60 BPM click track: the prior is folded to 120 BPM, but the clicks' evidence keeps 60 BPM beats.
+    # A 60 BPM click track: folded to 120 BPM, the prior still lets the clicks' evidence keep 60 BPM beats.
     sr = 30 * 512
     click_track(tmp_path / "slow.wav", bpm=60.0, seconds=12.0, sr=sr)
     y, _ = librosa.load(tmp_path / "slow.wav", sr=sr)
-    analysis = compute_music_features(y, fps=30)
+    analysis = compute_music_features(y, fps=30, bpm_range=music.DANCE_BPM_RANGE)
     assert analysis.tempo_bpm == pytest.approx(60.0, rel=0.03)
     phase = analysis.beat_times - 0.5  # clicks at 0.5 s + k s
     assert np.abs(phase - np.round(phase)).max() < 0.05
@@ -178,7 +178,8 @@ def test_analyze_music_cli_json_and_out(tmp_path, capsys):
     rc = analyze_main([str(wav), "--fps", "30", "--json", "--out", str(out), "--cache-dir", cache])
     assert rc == 0
     report = json.loads(capsys.readouterr().out)
-    assert set(report) == {"file", "duration_s", "tempo_bpm", "beats_s", "fps", "feature_shape"}
+    keys = {"file", "duration_s", "tempo_bpm", "dance_tempo_bpm", "dance_bpm_range", "beats_s", "fps"}
+    assert set(report) == keys | {"feature_shape"}
     assert report["fps"] == 30 and report["duration_s"] == pytest.approx(8.0)
     assert report["tempo_bpm"] == pytest.approx(120.0, rel=0.03)
     feats = np.load(out)
@@ -202,3 +203,66 @@ def test_bad_audio_inputs_name_the_file(tmp_path, capsys):
         load_audio(bad, 22050)
     assert analyze_main([str(bad), "--no-cache"]) == 2
     assert "bad.wav" in capsys.readouterr().err
+
+
+def test_detected_tempo_and_the_dance_range_fold_are_separate(monkeypatch):
+    """The beat tracker's prior is librosa's estimate as detected (EDGE's fallback), not folded."""
+    priors = []
+    real_beat_track = librosa.beat.beat_track
+
+    def recording(**kwargs):
+        priors.append(kwargs["start_bpm"])
+        return real_beat_track(**kwargs)
+
+    monkeypatch.setattr(librosa.feature, "tempo", lambda **kwargs: np.array([68.0]))
+    monkeypatch.setattr(librosa.beat, "beat_track", recording)
+    y = np.random.default_rng(0).normal(0, 0.1, 4 * 15360).astype(np.float32)
+    compute_music_features(y, fps=30)
+    compute_music_features(y, fps=30, bpm_range=music.DANCE_BPM_RANGE)
+    assert priors == [68.0, 136.0]
+    # Hand-placed beats every 0.9 s (66.67 BPM): tempo as detected, the fold only in its own field.
+    features = np.zeros((600, 35), np.float32)
+    features[:, ENVELOPE] = 1.0
+    features[np.arange(10, 600, 27), BEAT] = 1.0  # 27 frames at 30 fps = 0.9 s
+    analysis = music.MusicAnalysis.from_features(features, 30, 20.0)
+    assert analysis.tempo_bpm == pytest.approx(60.0 / 0.9, rel=1e-9)
+    assert analysis.dance_tempo_bpm == pytest.approx(2 * 60.0 / 0.9, rel=1e-9)
+    assert analysis.tempo_note is None
+
+
+def test_no_tempo_says_why(tmp_path, capsys):
+    sr = 22050
+    sf.write(tmp_path / "silence.wav", np.zeros(5 * sr, np.float32), sr)
+    sf.write(tmp_path / "blip.wav", np.random.default_rng(0).normal(0, 0.1, sr // 10).astype(np.float32), sr)
+    assert analyze_main([str(tmp_path / "silence.wav"), "--no-cache"]) == 0
+    assert "no tempo: the audio is silent" in capsys.readouterr().out
+    assert analyze_main([str(tmp_path / "blip.wav"), "--no-cache", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["tempo_bpm"] is None and report["dance_tempo_bpm"] is None
+    assert report["tempo_note"].startswith("the audio is too short for a tempo (0.10 s")
+    steady = np.zeros((600, 35), np.float32)
+    steady[:, ENVELOPE] = 1.0
+    steady[300, BEAT] = 1.0
+    assert music.MusicAnalysis.from_features(steady, 30, 20.0).tempo_note.startswith("no steady beat")
+
+
+def test_analyze_music_out_of_range_samples_and_out_paths(tmp_path, capsys):
+    sr = 22050
+    huge = tmp_path / "huge.wav"
+    sf.write(huge, np.full(2 * sr, 1e30, np.float32), sr, subtype="FLOAT")
+    assert analyze_main([str(huge), "--no-cache"]) == 2
+    err = capsys.readouterr().err
+    assert "huge.wav: samples out of range" in err and len(err.strip().splitlines()) == 1
+    wav = tmp_path / "clicks.wav"
+    click_track(wav, seconds=4.0)
+    folder = tmp_path / "adir"
+    folder.mkdir()
+    assert analyze_main([str(wav), "--no-cache", "--out", str(folder)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    assert analyze_main([str(wav), "--no-cache", "--out", str(tmp_path / "feats")]) == 2
+    assert "must end in .npy" in capsys.readouterr().err
+    assert not (tmp_path / "adir.npy").exists() and not (tmp_path / "feats.npy").exists()
+    out = tmp_path / "sub" / "f.npy"
+    assert analyze_main([str(wav), "--no-cache", "--out", str(out)]) == 0
+    assert f"-> {out}" in capsys.readouterr().out and np.load(out).shape[1] == 35
+    assert sorted(p.name for p in out.parent.iterdir()) == ["f.npy"]  # no temporary file left

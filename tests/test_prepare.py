@@ -211,3 +211,29 @@ def test_save_annotations_is_atomic(tmp_path):
     with pytest.raises(AnnotationFileError):
         save_annotations(broken, out)
     assert out.read_bytes() == before and sorted(p.name for p in out.parent.iterdir()) == ["anno.pkl"]
+
+
+def test_prepare_float16_as_pyskl(raw_folder, tmp_path):
+    """``--dtype float16`` stores the keypoints as PYSKL's ntu_preproc.py does; float32 is the default."""
+    out16, out32 = tmp_path / "ntu60_fp16.pkl", tmp_path / "ntu60_fp32.pkl"
+    common = ["prepare", "ntu60", "--raw", str(raw_folder), "--workers", "1"]
+    assert sm_main([*common, "--out", str(out16), "--dtype", "float16"]) == 0
+    assert sm_main([*common, "--out", str(out32)]) == 0
+    with open(out16, "rb") as f:  # our own file, just written
+        raw16 = pickle.load(f)
+    with open(out32, "rb") as f:
+        raw32 = pickle.load(f)
+    assert {a["keypoint"].dtype for a in raw16["annotations"]} == {np.dtype(np.float16)}
+    assert {a["keypoint"].dtype for a in raw32["annotations"]} == {np.dtype(np.float32)}
+    for a16, a32 in zip(raw16["annotations"], raw32["annotations"], strict=True):
+        np.testing.assert_array_equal(a16["keypoint"], a32["keypoint"].astype(np.float16))
+    assert load_annotations(out16)["annotations"][0]["keypoint"].dtype == np.float32  # read back as float32
+
+
+def test_float16_overflow_is_refused(tmp_path):
+    data = {"split": {"a": ["x"]}, "annotations": [
+        {"frame_dir": "x", "label": 0, "total_frames": 1, "keypoint": np.full((1, 1, 25, 3), 7e4, np.float32)}
+    ]}  # fmt: skip
+    with pytest.raises(AnnotationFileError, match="x: keypoint exceeds the float16 range"):
+        save_annotations(data, tmp_path / "big.pkl", keypoint_dtype="float16")
+    assert not (tmp_path / "big.pkl").exists()

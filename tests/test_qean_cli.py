@@ -170,3 +170,16 @@ def test_sm_fit_one_training_step(aistpp, tmp_path, monkeypatch, caplog):
     assert run(argv) == 0
     assert "`max_steps=1` reached" in caplog.text  # fast_dev_run: exactly one training step
     assert len(losses) == 1 and losses[0][0] == "train/loss" and np.isfinite(losses[0][1])  # its L2 loss
+
+
+def test_test_loop_under_the_bailando_protocol(aistpp, caplog):
+    torch.manual_seed(0)
+    module = QEANModule(**TINY_MODEL, protocol="bailando")
+    trainer = Trainer(accelerator="cpu", logger=False, enable_progress_bar=False, enable_checkpointing=False)
+    with caplog.at_level("INFO"):
+        results = trainer.test(module, datamodule=_data(aistpp), verbose=False)[0]
+    assert 0.0 <= results["test/BeatAlign"] <= 1.0 and np.isfinite(results["test/FID_k"])
+    table = module.results_table({"FID_k": 1.0, "BeatAlign": 0.2})
+    assert "protocol bailando:" in table and "protocol bailando (the seed's Table 1 follows FACT's)" in table
+    with pytest.raises(ValueError, match="fact, bailando, edge"):
+        QEANModule(**TINY_MODEL, protocol="lodge")

@@ -187,3 +187,42 @@ def test_pipeline_2d_appends_scores():
     inds = pyskl_test_indices(12, 8, 2).reshape(2, 8)
     np.testing.assert_allclose(out[:, 0, :, :, :2], 2 * kp[0, inds] - 1, atol=1e-6)
     np.testing.assert_allclose(out[:, 0, :, :, 2], score[0, inds])
+
+
+def _pyskl_random_scale_rot(random, skeleton: np.ndarray, theta: float, scale: float) -> np.ndarray:
+    """PYSKL pose_related.py RandomScale then RandomRot, transcribed with its explicit matrices.
+
+    ``random`` stands for PYSKL's global ``np.random`` (a ``RandomState`` seeded like it).
+    """
+    c = skeleton.shape[-1]
+    skeleton = skeleton * (1 + random.uniform(-1, 1, size=c) * np.array((scale,) * c))
+    if np.all(np.isclose(skeleton, 0)):
+        return skeleton
+    if c == 3:
+        t = random.uniform(-theta, theta, size=3)
+        cos, sin = np.cos(t), np.sin(t)
+        rx = np.array([[1, 0, 0], [0, cos[0], sin[0]], [0, -sin[0], cos[0]]])
+        ry = np.array([[cos[1], 0, -sin[1]], [0, 1, 0], [sin[1], 0, cos[1]]])
+        rz = np.array([[cos[2], sin[2], 0], [-sin[2], cos[2], 0], [0, 0, 1]])
+        rot = rz @ ry @ rx
+    else:
+        t = random.uniform(-theta)
+        rot = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    return np.einsum("ab,mtvb->mtva", rot, skeleton)
+
+
+@pytest.mark.parametrize("c", [3, 2])
+def test_random_rotate_scale_is_pyskl_draw_for_draw(c):
+    kp = np.stack([moved_person(4, seed=5), moved_person(4, seed=6)]).astype(np.float32)[..., :c]
+    zeros = np.zeros_like(kp)
+    ours_rng, pyskl_rng = np.random.RandomState(7), np.random.RandomState(7)
+    for sample in (kp, zeros, kp, kp):  # an all-zero sample draws no angle in PYSKL: the streams stay aligned
+        expected = _pyskl_random_scale_rot(pyskl_rng, sample.astype(np.float64), 0.3, 0.1)
+        ours = random_rotate_scale(sample, ours_rng, max_angle=0.3, scale_range=0.1)
+        np.testing.assert_allclose(ours, expected, rtol=1e-5, atol=1e-5)
+    # PYSKL's 2-D angle is uniform on [-theta, 1): over many draws some exceed theta
+    rng = np.random.RandomState(0)
+    unit = np.zeros((1, 1, 1, 2), np.float32)
+    unit[..., 0] = 1.0
+    angles = [np.arctan2(*random_rotate_scale(unit, rng, 0.3)[0, 0, 0, ::-1]) for _ in range(200)]
+    assert max(angles) > 0.9 and min(angles) >= -0.3 - 1e-6

@@ -133,6 +133,8 @@ class EgoDanceDataset(Dataset):
             "motion": encode_motion(poses, torch.from_numpy((root - shift).astype(np.float32))),
             "music": torch.from_numpy(music.astype(np.float32)),
             "head": torch.from_numpy((head - shift).astype(np.float32)),
+            "music_path": str(music_meta["path"]),  # for the test loop's protocol beats
+            "music_start_s": float(music_meta.get("start_s", 0.0)),
         }
 
     def __len__(self) -> int:

@@ -8,7 +8,12 @@ interpretation: :func:`.losses.alignment_loss`), AdamW 2e-4, an exponential movi
 
 Validation logs the diffusion loss at seeded timesteps. Test samples every window (DDIM
 ``sampling_steps`` or DDPM, guidance weight ``guidance_weight``, head guidance) and reports MPJPE,
-root and head errors (mm, FK joints in the canonical frame) and the toolkit's PFC and BeatAlign.
+root and head errors (mm, FK joints in the canonical frame) and, under the named dance-evaluation
+``protocol`` (:mod:`~skeleton_mamba.tasks.motion.metrics.protocols`; default ``"edge"``: 5 s windows at
+30 fps, EDGE's per-slice music beats, PFC), BeatAlign, PFC and, over the epoch, FID_k / FID_g / Div_k /
+Div_g of the sampled windows against the ground-truth windows (with at least 2 windows). The music beats
+come from each window's music file (``music_path``, ``music_start_s`` of the batch, which the data module
+provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on).
 """
 
 from __future__ import annotations
@@ -26,9 +31,18 @@ from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance
-from skeleton_mamba.tasks.motion.metrics import PFC, BeatAlign
+from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
+from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 
 __all__ = ["EgoDanceModule"]
+
+MOTION_FPS = 30.0  # EMM's motion and music rate ([EgoMusic] supp. Table 2)
+
+
+def _music_cache_dir(module: LightningModule) -> str | None:
+    """The data module's ``music_cache_dir`` when the module runs in a Trainer with one, else ``None``."""
+    datamodule = getattr(module._trainer, "datamodule", None) if module._trainer is not None else None
+    return getattr(datamodule, "hparams", {}).get("music_cache_dir")
 
 
 class EgoDanceModule(LightningModule):
@@ -61,6 +75,8 @@ class EgoDanceModule(LightningModule):
         guidance_weight: classifier-free guidance weight w (EDGE: 2).
         head_guidance_weight: G_head step size (0 disables). head_guidance_steps: gradient steps per step.
         seed: seed of the evaluation noise.
+        protocol: dance-evaluation protocol of the test loop: ``"edge"`` (default), ``"bailando"`` or
+            ``"fact"`` (see the module docstring).
     """
 
     def __init__(
@@ -97,8 +113,11 @@ class EgoDanceModule(LightningModule):
         head_guidance_weight: float = 0.05,
         head_guidance_steps: int = 1,
         seed: int = 0,
+        protocol: str = "edge",
     ) -> None:
         super().__init__()
+        if protocol not in PROTOCOLS:
+            raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         config = backbone_config(backbone)
         self.save_hyperparameters(ignore=["backbone"])
         self.hparams["backbone"] = plain_backbone_config(config)
@@ -122,8 +141,8 @@ class EgoDanceModule(LightningModule):
         self.diffusion = GaussianDiffusion(diffusion_steps)
         self.weights = KinematicLossWeights(lambda_pos, lambda_vel, lambda_contact)
         self.test_mpjpe, self.test_root, self.test_head = MeanMetric(), MeanMetric(), MeanMetric()
-        self.test_pfc = PFC(fps=30.0, up_axis=1)
-        self.test_beat_align = BeatAlign(variant="bailando", fps=30.0)
+        scorer = FACTProtocol(seed_frames=0) if protocol == "fact" else get_protocol(protocol)
+        self.test_evaluation = DanceEvaluation(scorer)
 
     # ------------------------------------------------------------------ training
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
@@ -193,16 +212,29 @@ class EgoDanceModule(LightningModule):
         self.test_mpjpe.update(err.mean(dim=(1, 2)))
         self.test_root.update(err[..., 0].mean(dim=1))
         self.test_head.update(err[..., HEAD_JOINT].mean(dim=1))
-        self.test_pfc.update(pred.float().cpu())
-        self.test_beat_align.update(pred.float().cpu(), batch["music"][..., 34].cpu())
+        if "music_path" not in batch:
+            raise KeyError("EMM test: the batch needs music_path and music_start_s (protocol music beats)")
+        protocol, cache = self.test_evaluation.protocol, _music_cache_dir(self)
+        for i in range(b):
+            start, duration = float(batch["music_start_s"][i]), pred.shape[1] / MOTION_FPS
+            beats = protocol.music_beats(batch["music_path"][i], start, duration, cache)
+            self.test_evaluation.add(true[i].cpu(), MOTION_FPS, beats, real=True)
+            self.test_evaluation.add(pred[i].cpu(), MOTION_FPS, beats)
         metrics = {
             "test/mpjpe_mm": self.test_mpjpe,
             "test/root_error_mm": self.test_root,
             "test/head_error_mm": self.test_head,
-            "test/pfc": self.test_pfc,
-            "test/beat_align": self.test_beat_align,
         }
         self.log_dict(metrics, batch_size=b)
+
+    def on_test_epoch_end(self) -> None:
+        result = self.test_evaluation.compute()
+        names = {"BeatAlign": "beat_align", "PFC": "pfc", "FID_k": "FID_k", "FID_g": "FID_g",
+                 "Div_k": "Div_k", "Div_g": "Div_g"}  # fmt: skip
+        for key, name in names.items():
+            if key in result:
+                self.log(f"test/{name}", float(result[key]))
+        self.test_evaluation.reset(keep_real=False)
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         """``sample_id``, ``tokens`` (B, T, 24, 10) and FK ``joints`` (B, T, 24, 3) of sampled dances."""

@@ -1,5 +1,11 @@
 """``sm analyze-music FILE``: tempo, beat times and the 35-d music features of one audio file.
 
+The tempo is the one detected in the beats; the same tempo folded by octaves into the dance range
+80-170 BPM is printed beside it, labelled (``dance_tempo_bpm`` in JSON): a 68 BPM track reads "tempo
+68.0 BPM (dance range 80-170 BPM: 136.0)". Audio without a tempo (silent, shorter than 2 s, no steady
+beat) says so, and its tempo is ``null`` in JSON. ``--out`` must name a ``.npy`` file, written atomically
+to exactly that path. Undecodable audio or samples out of range end with one line naming the file (exit 2).
+
 Examples::
 
     sm analyze-music song.opus                    # tempo and beat times at 60 fps
@@ -12,9 +18,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
-import numpy as np
+from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE
 
 __all__ = ["main"]
 
@@ -35,42 +42,80 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``sm analyze-music``; returns the process exit code."""
-    args = _parser().parse_args(argv)
+def _check_out(out: Path) -> str | None:
+    """Why ``--out`` cannot be written as given (``None`` when it can)."""
+    if out.is_dir():
+        return f"--out {out} is a folder; give a .npy file name"
+    if out.suffix.lower() != ".npy":
+        return f"--out {out} must end in .npy (numpy would write {out}.npy instead)"
+    return None
+
+
+def _analyse(args: argparse.Namespace):
+    """The analysis, or a one-line reason naming the file when the audio cannot be analysed."""
+    import librosa
+
     from skeleton_mamba.tasks.motion.music import extract_music_features
 
     try:
-        analysis = extract_music_features(
-            args.file,
-            fps=args.fps,
-            start_bpm=args.start_bpm,
-            cache_dir=args.cache_dir,
-            use_cache=not args.no_cache,
-        )
-    except (FileNotFoundError, ValueError) as err:
-        print(f"sm analyze-music: error: {err}", file=sys.stderr)
+        with warnings.catch_warnings():  # librosa's CQT notes, overflow warnings: errors are one line
+            warnings.simplefilter("ignore", RuntimeWarning)
+            warnings.simplefilter("ignore", UserWarning)
+            return extract_music_features(
+                args.file,
+                fps=args.fps,
+                start_bpm=args.start_bpm,
+                cache_dir=args.cache_dir,
+                use_cache=not args.no_cache,
+            )
+    except (FileNotFoundError, ValueError) as err:  # messages name the file
+        return str(err)
+    except librosa.util.exceptions.ParameterError as err:
+        # decoded, then overflowed inside the analysis: samples far outside [-1, 1] (e.g. 1e30)
+        return f"{args.file}: samples out of range, the analysis overflows ({err}); audio lies in [-1, 1]"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``sm analyze-music``; returns the process exit code."""
+    args = _parser().parse_args(argv)
+    problem = None if args.out is None else _check_out(args.out)
+    analysis = _analyse(args) if problem is None else problem
+    if isinstance(analysis, str):
+        print(f"sm analyze-music: error: {analysis}", file=sys.stderr)
         return 2
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        np.save(args.out, analysis.features, allow_pickle=False)
+        from skeleton_mamba.tasks.motion.cache import save_npy_atomic
+
+        try:
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+            save_npy_atomic(args.out, analysis.features)
+        except OSError as err:
+            reason = err.strerror or err
+            print(f"sm analyze-music: error: {args.out}: cannot write ({reason})", file=sys.stderr)
+            return 2
     beats = [round(float(t), 4) for t in analysis.beat_times]
+    tempo, dance = analysis.tempo_bpm, analysis.dance_tempo_bpm
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "file": str(args.file),
-                    "duration_s": round(analysis.duration_s, 4),
-                    "tempo_bpm": round(analysis.tempo_bpm, 3),
-                    "beats_s": beats,
-                    "fps": analysis.fps,
-                    "feature_shape": list(analysis.features.shape),
-                }
-            )
-        )
+        report = {
+            "file": str(args.file),
+            "duration_s": round(analysis.duration_s, 4),
+            "tempo_bpm": None if tempo is None else round(tempo, 3),
+            "dance_tempo_bpm": None if dance is None else round(dance, 3),
+            "dance_bpm_range": list(DANCE_BPM_RANGE),
+            "beats_s": beats,
+            "fps": analysis.fps,
+            "feature_shape": list(analysis.features.shape),
+        }
+        if analysis.tempo_note:
+            report["tempo_note"] = analysis.tempo_note
+        print(json.dumps(report))
     else:
-        summary = f"{analysis.duration_s:.2f} s, tempo {analysis.tempo_bpm:.1f} BPM, {len(beats)} beats"
-        print(f"{args.file}: {summary}")
+        low, high = DANCE_BPM_RANGE
+        if tempo is None:
+            tempo_text = f"no tempo: {analysis.tempo_note}"
+        else:
+            tempo_text = f"tempo {tempo:.1f} BPM (dance range {low:g}-{high:g} BPM: {dance:.1f})"
+        print(f"{args.file}: {analysis.duration_s:.2f} s, {tempo_text}, {len(beats)} beats")
         print("beats (s): " + " ".join(f"{t:.3f}" for t in beats))
         if args.out is not None:
             print(f"features {tuple(analysis.features.shape)} @ {analysis.fps} fps -> {args.out}")

@@ -15,13 +15,19 @@ columns   content
 ========  =======================================================================
 
 ``start_bpm`` comes from the AIST music id when the file name carries one (:func:`aist_start_bpm`);
-otherwise (EDGE falls back to librosa's estimate) it is librosa's tempo estimate *folded into the dance
-range* 80-170 BPM (AIST++'s own range): beat trackers often lock onto half or double the tempo, and the
-fold is the prior that picks the dance octave. It is a prior, not a constraint: ``beat_track`` centres its
-log-normal tempo prior on it, so a track with strong evidence for another octave (a 60 BPM click track)
-keeps its own tempo; ``bpm_range=None`` disables the fold. The reported tempo is the slope of a
-least-squares line through the beat times, which is not quantised to whole frames like librosa's tempo
-estimate (at 30 fps a 132 BPM track reads 128.6 BPM there, 133.2 BPM here).
+otherwise it is librosa's tempo estimate as detected, as EDGE's fallback does (``bpm_range`` optionally
+folds that prior into a tempo octave first). The reported tempo (:attr:`MusicAnalysis.tempo_bpm`) is the
+tempo detected in the beats: the slope of a least-squares line through the beat times, which is not
+quantised to whole frames like librosa's estimate (at 30 fps a 132 BPM track reads 128.6 BPM there,
+133.2 BPM here). Folding it into the dance range 80-170 BPM (AIST++'s range; beat trackers often lock
+onto half or double the tempo) is a separate, labelled value, :attr:`MusicAnalysis.dance_tempo_bpm`: a
+68 BPM track has tempo 68 and dance-range tempo 136. Audio with fewer than two beats has no tempo, and
+:attr:`MusicAnalysis.tempo_note` says why (silent, too short, no steady beat).
+
+librosa versions (measured on three 31 s tracks at 60 fps, the same ``start_bpm``): 0.10.2.post1 and
+0.11.0 give identical features, onset peaks and beats; 0.10.1 identical features but one beat per track
+differs, in the first or last seconds; 0.8.1 (Bailando's requirements.txt) differs in the envelope, MFCCs,
+chroma, peaks and beats. pyproject.toml requires ``librosa>=0.10.2``; the cache key holds the version.
 
 Features are cached on disk (:mod:`~skeleton_mamba.tasks.motion.cache`) keyed by the audio file's content
 and every setting; tempo and beats are re-derived from the cached beat column, so hits and misses agree.
@@ -42,6 +48,7 @@ from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
 
 __all__ = [
     "BEAT",
+    "MIN_TEMPO_SECONDS",
     "CHROMA",
     "DANCE_BPM_RANGE",
     "ENVELOPE",
@@ -66,6 +73,7 @@ CHROMA = slice(21, 33)
 ONSET_PEAK = 33
 BEAT = 34
 DANCE_BPM_RANGE = (80.0, 170.0)
+MIN_TEMPO_SECONDS = 2.0  # two beats at 60 BPM: shorter audio is too short for a tempo
 TIGHTNESS = 100.0
 _CACHE_VERSION = 1
 
@@ -141,26 +149,42 @@ class MusicAnalysis:
     Attributes:
         features: ``(T, 35)`` float32, one row per motion frame.
         fps: frames per second of ``features``.
-        tempo_bpm: tempo from the beat times (:func:`tempo_from_beats`).
+        tempo_bpm: the detected tempo, from the beat times (:func:`tempo_from_beats`); ``None`` with
+            fewer than two beats.
         beat_frames: ``(B,)`` frame indices of the beats (the nonzero rows of column 34).
         duration_s: length of the audio in seconds.
+        tempo_note: why there is no tempo (``None`` when there is one).
     """
 
     features: np.ndarray
     fps: int
-    tempo_bpm: float
+    tempo_bpm: float | None
     beat_frames: np.ndarray
     duration_s: float
+    tempo_note: str | None = None
 
     @property
     def beat_times(self) -> np.ndarray:
         """``(B,)`` beat times in seconds."""
         return self.beat_frames / float(self.fps)
 
+    @property
+    def dance_tempo_bpm(self) -> float | None:
+        """:attr:`tempo_bpm` folded by octaves into :data:`DANCE_BPM_RANGE` (``None`` without a tempo)."""
+        return None if self.tempo_bpm is None else fold_tempo(self.tempo_bpm, DANCE_BPM_RANGE)
+
     @classmethod
     def from_features(cls, features: np.ndarray, fps: int, duration_s: float) -> MusicAnalysis:
         beats = np.flatnonzero(features[:, BEAT] > 0.5)
-        return cls(features, fps, tempo_from_beats(beats, fps), beats, duration_s)
+        if len(beats) >= 2:
+            return cls(features, fps, tempo_from_beats(beats, fps), beats, duration_s)
+        if not np.any(features[:, ENVELOPE] > 0):
+            note = "the audio is silent (no onsets), so it has no tempo"
+        elif duration_s < MIN_TEMPO_SECONDS:
+            note = f"the audio is too short for a tempo ({duration_s:.2f} s, needs {MIN_TEMPO_SECONDS:g} s)"
+        else:
+            note = f"no steady beat found ({len(beats)} beat{'s' * (len(beats) != 1)} in {duration_s:.2f} s)"
+        return cls(features, fps, None, beats, duration_s, note)
 
 
 def compute_music_features(
@@ -168,16 +192,16 @@ def compute_music_features(
     fps: int = 60,
     start_bpm: float | None = None,
     tightness: float = TIGHTNESS,
-    bpm_range: tuple[float, float] | None = DANCE_BPM_RANGE,
+    bpm_range: tuple[float, float] | None = None,
 ) -> MusicAnalysis:
     """The 35-d feature of mono audio ``y`` sampled at ``fps * 512`` Hz.
 
     Args:
         y: ``(N,)`` mono audio at ``fps * HOP_LENGTH`` Hz (see :func:`load_audio`).
         fps: motion frame rate: 60 (FACT) or 30 (EDGE); any positive integer works.
-        start_bpm: beat-tracker tempo prior; ``None`` estimates it (folded into ``bpm_range``).
+        start_bpm: beat-tracker tempo prior; ``None`` uses librosa's estimate (EDGE's fallback).
         tightness: beat-tracker tightness (100 in FACT and EDGE).
-        bpm_range: dance tempo octave used when ``start_bpm`` is estimated (``None``: no fold).
+        bpm_range: fold an estimated prior into this octave first (default ``None``: as detected).
 
     Returns:
         A :class:`MusicAnalysis` whose ``features`` are ``(1 + N // 512, 35)``.
@@ -196,8 +220,10 @@ def compute_music_features(
         peak_onehot = np.zeros_like(envelope, dtype=np.float32)
         peak_onehot[peak_idxs] = 1.0
         if start_bpm is None:
-            estimate = librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0]
-            start_bpm = float(estimate) if bpm_range is None else fold_tempo(float(estimate), bpm_range)
+            estimate = float(librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0])
+            if not estimate > 0:  # no periodicity at all (silence): librosa's default prior
+                estimate = 120.0
+            start_bpm = estimate if bpm_range is None else fold_tempo(estimate, bpm_range)
         _, beat_idxs = librosa.beat.beat_track(
             onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH, start_bpm=start_bpm, tightness=tightness
         )
@@ -215,7 +241,7 @@ def extract_music_features(
     fps: int = 60,
     start_bpm: float | None = None,
     tightness: float = TIGHTNESS,
-    bpm_range: tuple[float, float] | None = DANCE_BPM_RANGE,
+    bpm_range: tuple[float, float] | None = None,
     cache_dir: str | os.PathLike | None = None,
     use_cache: bool = True,
 ) -> MusicAnalysis:
@@ -225,9 +251,9 @@ def extract_music_features(
         path: audio file.
         fps: 60 (FACT, QEAN) or 30 (EDGE, EgoMusic).
         start_bpm: tempo prior; ``None`` uses the AIST music id in the file name if any
-            (:func:`aist_start_bpm`), else the folded librosa estimate.
+            (:func:`aist_start_bpm`), else librosa's estimate.
         tightness: beat-tracker tightness.
-        bpm_range: dance tempo octave for estimated priors (``None``: no fold).
+        bpm_range: fold an estimated prior into this octave (``None``, default: as detected).
         cache_dir: cache folder (default ``~/.cache/skeleton_mamba/music``).
         use_cache: ``False`` always recomputes and writes nothing.
     """

@@ -3,15 +3,17 @@
 Training (seed 003 section 4.2): Adam, lr 1e-4 decayed by 10 at 90k and 150k optimizer steps
 (``MultiStepLR`` stepped per step), L2 (mean squared error) between the predicted and true next 20 frames.
 
-Test (seed's protocol, FACT's metric code; dance.md sections 2.5, 7): each test sequence's first 120 frames
-seed an autoregressive generation of 1200 frames (:func:`.generate.generate_fast`) over its music. Metrics on
-SMPL-24 joints from the toolkit's offset-table FK: FID_k / FID_g of the 1200 generated frames against the
-full-length real set (the data module's ``reference_joints``), Dist_k / Dist_g of the generated set (both
-normalised by the real statistics), and BeatAlign in FACT's form on frames >= 120. They are logged as
-``test/FID_k`` ... and printed beside the seed's Table 1, headed by the protocol actually run (sequences x
-frames, size of the real set). The seed's 40 sequences are the crossmodal val + test lists (the data module's
-default, see :mod:`.data`); any other count or length, or data marked ``synthetic``, is labelled NOT
-COMPARABLE in the table.
+Test: each test sequence's first 120 frames seed an autoregressive generation of 1200 frames
+(:func:`.generate.generate_fast`) over its music, scored on SMPL-24 joints from the toolkit's offset-table FK
+under a named evaluation protocol (``protocol``, :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`),
+default ``"fact"``, the [QEAN] paper's (FACT's metric code): FID_k / FID_g of the generated frames after the
+seed against the full-length real set (the data module's ``reference_joints``), Dist_k / Dist_g of the
+generated set (both normalised by the real statistics), and BeatAlign in FACT's form from frame 120 against
+every beat of the track. ``"bailando"`` and ``"edge"`` score the same generations the other papers' ways.
+They are logged as ``test/FID_k`` ... and printed beside the seed's Table 1, headed by the protocol actually
+run (name, sequences x frames, size of the real set). The seed's 40 sequences are the crossmodal val + test
+lists (the data module's default, see :mod:`.data`); another protocol, count or length, or data marked
+``synthetic``, is labelled NOT COMPARABLE in the table.
 
 Predict: generate ``generate_frames`` frames for the data module's seed motion and music, save the seed and
 the dance as our ``.npz`` motion format (``smpl_poses``, ``smpl_trans``, ``joints``, 60 fps) and render an
@@ -31,8 +33,8 @@ from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
-from skeleton_mamba.tasks.motion.metrics import BeatAlign, FrechetMotionDistance, MotionDiversity
-from skeleton_mamba.tasks.motion.metrics.fid import motion_features
+from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
+from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.qean.generate import generate_fast
@@ -80,6 +82,8 @@ class QEANModule(LightningModule):
         audio_chunk: music windows encoded per batched call in fast generation.
         output_dir: folder for ``sm predict`` outputs.
         render: also render an mp4 at predict time.
+        protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, the seed's), ``"bailando"``
+            or ``"edge"`` (see :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`).
     """
 
     def __init__(
@@ -106,6 +110,7 @@ class QEANModule(LightningModule):
         audio_chunk: int = 32,
         output_dir: str = "qean_predictions",
         render: bool = True,
+        protocol: str = "fact",
     ) -> None:
         super().__init__()
         self.save_hyperparameters(ignore=["backbone"])
@@ -115,14 +120,10 @@ class QEANModule(LightningModule):
         names = {f.name for f in dataclasses.fields(QEANConfig)}
         config = QEANConfig(**{k: v for k, v in self.hparams.items() if k in names})
         self.model = QEAN(config, backbone_cfg)
-        metrics = {
-            "FID_k": FrechetMotionDistance("kinetic", reset_real_features=False),
-            "FID_g": FrechetMotionDistance("geometric", reset_real_features=False),
-            "Dist_k": MotionDiversity("kinetic", reset_real_features=False),
-            "Dist_g": MotionDiversity("geometric", reset_real_features=False),
-        }
-        self.test_metrics = torch.nn.ModuleDict(metrics)
-        self.test_beat_align = BeatAlign("fact", fps=FPS, start_frame=seed_frames)
+        if protocol not in PROTOCOLS:
+            raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+        scorer = FACTProtocol(seed_frames) if protocol == "fact" else get_protocol(protocol)
+        self.test_evaluation = DanceEvaluation(scorer)
         self._reference_loaded = False
         self._reference_count = 0
         self._generated_count = 0
@@ -170,55 +171,63 @@ class QEANModule(LightningModule):
             raise TypeError(
                 "QEAN test metrics need a data module with reference_joints() (AISTPPDanceDataModule)"
             )
-        kinetic, geometric = [], []
+        self.test_evaluation.reset(keep_real=False)
         for joints in datamodule.reference_joints():
-            kinetic.append(motion_features(joints[None].double(), "kinetic", FPS))
-            geometric.append(motion_features(joints[None].double(), "geometric", FPS))
-        kinetic, geometric = torch.cat(kinetic).to(self.device), torch.cat(geometric).to(self.device)
-        for name, metric in self.test_metrics.items():
-            metric.update_features(kinetic if name.endswith("_k") else geometric, real=True)
+            self.test_evaluation.add(joints.double(), FPS, real=True)
         self._reference_loaded = True
-        self._reference_count = len(kinetic)
-        rank_zero_info(f"QEAN test: real set of {len(kinetic)} AIST++ sequences")
+        self._reference_count = self.test_evaluation.counts["real"]
+        rank_zero_info(f"QEAN test: real set of {self._reference_count} AIST++ clips")
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
         full = self.generate(batch["seed"], batch["music"])
         joints = features_to_joints(full.double())  # (B, 120 + G, 24, 3)
-        generated = joints[:, self.hparams.seed_frames :]
-        for metric in self.test_metrics.values():
-            metric.update(generated, real=False)
-        beats = batch["music"][:, : full.shape[1], BEAT]
-        self.test_beat_align.update(joints, beats)
+        protocol = self.test_evaluation.protocol
+        for i in range(full.shape[0]):
+            if protocol.name == "fact":  # the data module's features are FACT's: beats of the whole window
+                beats = np.flatnonzero(batch["music"][i, :, BEAT].cpu().numpy() > 0.5)
+            else:
+                cache = getattr(self.trainer.datamodule, "hparams", {}).get("music_cache_dir")
+                beats = protocol.music_beats(batch["music_path"][i], cache_dir=cache)
+            self.test_evaluation.add(joints[i].cpu(), FPS, beats)
         self._generated_count += full.shape[0]
 
     def on_test_epoch_end(self) -> None:
-        values = {name: metric.compute() for name, metric in self.test_metrics.items()}
-        values["BeatAlign"] = self.test_beat_align.compute()
+        result = self.test_evaluation.compute()
+        values = {
+            "FID_k": result["FID_k"],
+            "FID_g": result["FID_g"],
+            "Dist_k": result["Div_k"],
+            "Dist_g": result["Div_g"],
+            "BeatAlign": result["BeatAlign"],
+        }
+        if "PFC" in result:
+            values["PFC"] = result["PFC"]
         for name, value in values.items():
-            self.log(f"test/{name}", value.float())
-        for metric in self.test_metrics.values():
-            metric.reset()
-        self.test_beat_align.reset()
-        rank_zero_info(self.results_table({k: v.item() for k, v in values.items()}))
+            self.log(f"test/{name}", float(value))
+        self.test_evaluation.reset(keep_real=True)
+        rank_zero_info(self.results_table(values))
 
     def results_table(self, values: dict[str, float]) -> str:
         """Our test figures beside the seed's Table 1, headed by the protocol run and its comparability."""
         sequences, frames = self._generated_count, self.hparams.generate_frames
         synthetic = bool(getattr(getattr(self._trainer, "datamodule", None), "synthetic", False))
         reasons = ["synthetic data in the AIST++ layout, not AIST++"] if synthetic else []
+        protocol = self.hparams.get("protocol", "fact")
+        if protocol != "fact":
+            reasons.append(f"protocol {protocol} (the seed's Table 1 follows FACT's)")
         if sequences != SEED_SEQUENCES:
             reasons.append(f"{sequences} sequences instead of {SEED_SEQUENCES}")
         if frames != SEED_FRAMES:
             reasons.append(f"{frames} frames instead of {SEED_FRAMES}")
         lines = [
             "QEAN test vs seed 003 Table 1",
-            f"protocol: {sequences} generated sequences x {frames} frames "
+            f"protocol {protocol}: {sequences} generated sequences x {frames} frames "
             f"(seed: {SEED_SEQUENCES} x {SEED_FRAMES}); real set: {self._reference_count} sequences",
             f"NOT COMPARABLE with the seed: {'; '.join(reasons)}" if reasons else "seed protocol",
             f"{'metric':<10} {'ours':>10} {'QEAN (seed)':>12} {'AIST++ GT':>10}",
         ]
         for name, value in values.items():
-            seed, gt = SEED_TABLE1[name]
+            seed, gt = SEED_TABLE1.get(name, ("-", None))
             lines.append(f"{name:<10} {value:>10.3f} {seed:>12} {'-' if gt is None else gt:>10}")
         return "\n".join(lines)
 

@@ -3,6 +3,7 @@
 ::
 
     sm prepare ntu60  --raw nturgb+d_skeletons/ --out data/ntu60_3danno.pkl [--workers 2] [--skip-bad]
+                      [--dtype float32|float16]
     sm prepare ntu120 --raw nturgb+d_skeletons/ --out data/ntu120_3danno.pkl
     sm prepare kinetics --raw kinetics-skeleton/ --out data/kinetics_2d.pkl [--labels A.json B.json]
 
@@ -18,7 +19,9 @@ Kinetics: ``--raw`` holds ST-GCN's ``kinetics_train/`` and ``kinetics_val/`` (on
 ``has_skeleton: false`` are skipped (ST-GCN ``ignore_empty_sample``). Splits: ``train`` and ``val``.
 Keypoints stay in ST-GCN's [0, 1] coordinates (``img_shape`` (1, 1), ``original_shape`` (256, 340)).
 
-A file that fails to parse stops the command with its name and line, unless ``--skip-bad`` is given.
+Keypoints are stored as float32 by default; ``--dtype float16`` writes them as PYSKL's own annotation files
+do (tools/data/ntu_preproc.py), half the size. A file that fails to parse stops the command with its name
+and line, unless ``--skip-bad`` is given.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from skeleton_mamba.tasks.recognition.kinetics import (
     read_kinetics_labels,
 )
 from skeleton_mamba.tasks.recognition.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
-from skeleton_mamba.tasks.recognition.pyskl import save_annotations
+from skeleton_mamba.tasks.recognition.pyskl import KEYPOINT_DTYPES, AnnotationFileError, save_annotations
 from skeleton_mamba.tasks.recognition.splits import benchmark_splits, in_dataset, load_missing_samples
 
 __all__ = ["main", "prepare_kinetics", "prepare_ntu"]
@@ -133,8 +136,11 @@ def _star(item: tuple) -> tuple:
 
 
 def prepare_ntu(dataset: str, raw: Path, out: Path, workers: int = 2, skip_bad: bool = False,
-                max_bodies: int = 2) -> dict:  # fmt: skip
+                max_bodies: int = 2, dtype: str = "float32") -> dict:  # fmt: skip
     """Build the PYSKL annotation file of ``dataset`` ("ntu60" or "ntu120") from raw ``.skeleton`` files.
+
+    ``dtype``: keypoint storage, ``"float32"`` or ``"float16"`` (as PYSKL's files; see
+    :func:`.pyskl.save_annotations`).
 
     Returns:
         A summary: counts of ``written``, ``missing_excluded``, ``outside_dataset``, ``empty`` and
@@ -164,15 +170,15 @@ def prepare_ntu(dataset: str, raw: Path, out: Path, workers: int = 2, skip_bad: 
     annos, empty, bad = _run(_ntu_annotation, jobs, workers, skip_bad, f"prepare {dataset}")
     names = sorted(annos)
     split = benchmark_splits(names, dataset)
-    save_annotations({"split": split, "annotations": [annos[n] for n in names]}, out)
+    save_annotations({"split": split, "annotations": [annos[n] for n in names]}, out, dtype)
     return {"written": len(names), "missing_excluded": len(inside) - len(selected),
             "outside_dataset": len(files) - len(inside), "empty": len(empty), "bad": len(bad),
             "splits": {k: len(v) for k, v in split.items()}}  # fmt: skip
 
 
 def prepare_kinetics(raw: Path, out: Path, labels: Sequence[Path] | None = None, workers: int = 2,
-                     skip_bad: bool = False) -> dict:  # fmt: skip
-    """Build a PYSKL 2D annotation file from ST-GCN's Kinetics-skeleton folders.
+                     skip_bad: bool = False, dtype: str = "float32") -> dict:  # fmt: skip
+    """Build a PYSKL 2D annotation file from ST-GCN's Kinetics-skeleton folders (``dtype`` as NTU's).
 
     Returns:
         A summary: counts of ``written``, ``no_skeleton`` (label file says so), ``empty`` and ``bad`` clips
@@ -208,7 +214,7 @@ def prepare_kinetics(raw: Path, out: Path, labels: Sequence[Path] | None = None,
         summary["bad"] += len(bad)
     names = {e["label_index"]: e.get("label", "") for e in label_info.values()}
     label_names = [names.get(i, "") for i in range(max(names, default=-1) + 1)]
-    save_annotations({"split": split, "annotations": annotations, "label_names": label_names}, out)
+    save_annotations({"split": split, "annotations": annotations, "label_names": label_names}, out, dtype)
     summary["written"] = len(annotations)
     summary["splits"] = {k: len(v) for k, v in split.items()}
     return summary
@@ -229,6 +235,8 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--out", type=Path, required=True, help="annotation pickle to write")
         p.add_argument("--workers", type=int, default=2, help="parallel processes (default: 2)")
         p.add_argument("--skip-bad", action="store_true", help="skip unreadable files with a warning")
+        p.add_argument("--dtype", choices=KEYPOINT_DTYPES, default="float32",
+                       help="keypoint storage (default float32; float16 as PYSKL's own files)")  # fmt: skip
         if name == "kinetics":
             p.add_argument("--labels", type=Path, nargs="+",
                            help="label jsons (default: RAW/kinetics_{train,val}_label.json)")  # fmt: skip
@@ -245,12 +253,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         if args.dataset == "kinetics":
-            summary = prepare_kinetics(args.raw, args.out, args.labels, args.workers, args.skip_bad)
+            summary = prepare_kinetics(
+                args.raw, args.out, args.labels, args.workers, args.skip_bad, args.dtype
+            )
         else:
             summary = prepare_ntu(
-                args.dataset, args.raw, args.out, args.workers, args.skip_bad, args.max_bodies
+                args.dataset, args.raw, args.out, args.workers, args.skip_bad, args.max_bodies, args.dtype
             )
-    except PrepareError as e:
+    except (PrepareError, AnnotationFileError) as e:
         print(f"sm prepare {args.dataset}: error: {e}", file=sys.stderr)
         return 1
     splits = ", ".join(f"{k} {v}" for k, v in summary.pop("splits").items())

@@ -9,15 +9,14 @@ restricted unpickler of :mod:`skeleton_mamba.tasks.motion.safe_pickle`, never pl
 
 from __future__ import annotations
 
-import os
 import pickle
-import tempfile
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.motion.cache import write_atomic
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 
 __all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
@@ -131,26 +130,41 @@ def load_annotations(path: str | PathLike[str]) -> dict:
     return validate_annotations(safe_load_pickle(path), str(path))
 
 
-def save_annotations(data: dict, path: str | PathLike[str]) -> Path:
+KEYPOINT_DTYPES = ("float32", "float16")
+
+
+def _cast(anno: dict, dtype: str, source: str) -> dict:
+    """``keypoint`` / ``keypoint_score`` of one annotation in ``dtype``; overflowing values are refused."""
+    out = dict(anno)
+    for key in ("keypoint", "keypoint_score"):
+        if key in out:
+            with np.errstate(over="ignore"):  # overflow is reported below, naming the sample
+                cast = out[key].astype(dtype)
+            if not np.isfinite(cast).all():
+                raise AnnotationFileError(f"{source}: {anno['frame_dir']}: {key} exceeds the {dtype} range")
+            out[key] = cast
+    return out
+
+
+def save_annotations(data: dict, path: str | PathLike[str], keypoint_dtype: str = "float32") -> Path:
     """Validate ``data`` and write it as a standard pickle, atomically (temp file + ``os.replace``).
 
     The pickle uses protocol 4 and holds only dicts, lists, strings, ints and numpy arrays, so PYSKL,
-    mmaction2 and :func:`load_annotations` all read it.
+    mmaction2 and :func:`load_annotations` all read it. ``keypoint_dtype`` stores ``keypoint`` and
+    ``keypoint_score`` as float32 (default, lossless for the parsed values) or float16 (PYSKL's own files:
+    tools/data/ntu_preproc.py, custom_2d_skeleton.py; half the size, about 3 significant digits).
+
+    Raises:
+        AnnotationFileError: the structure is wrong, or a value does not fit in ``keypoint_dtype``.
 
     Returns:
         The written path.
     """
     path = Path(path)
     data = validate_annotations(data, str(path))
+    if keypoint_dtype not in KEYPOINT_DTYPES:
+        raise ValueError(f"keypoint_dtype must be one of {KEYPOINT_DTYPES}, got {keypoint_dtype!r}")
+    if keypoint_dtype != "float32":
+        data["annotations"] = [_cast(a, keypoint_dtype, str(path)) for a in data["annotations"]]
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            pickle.dump(data, f, protocol=4)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_atomic(path, lambda f: pickle.dump(data, f, protocol=4))

@@ -14,7 +14,7 @@ whose ST-GCN++ / CTR-GCN configs report NTU numbers with 10-clip testing::
 - :func:`pre_normalize_2d` = ``PreNormalize2D``: x, y scaled to [-1, 1] by the image size.
 - :func:`uniform_sample_indices` = ``UniformSampleFrames``: ``clip_len`` segments, one random frame each;
   test mode reseeds a ``RandomState(255)`` for every call, so indices match PYSKL's exactly.
-- :func:`random_rotate_scale`: PYSKL ``RandomScale`` then ``RandomRot`` (the CTR-GCN ``random_rot`` angle
+- :func:`random_rotate_scale`: PYSKL ``RandomScale`` then ``RandomRot``, draw for draw (angle signs, the 2-D
   range); PYSKL's NTU configs do not use them, so the pipeline's defaults switch them off.
 """
 
@@ -197,17 +197,24 @@ def uniform_sample_indices(
 
 def random_rotate_scale(
     keypoint: np.ndarray,
-    rng: np.random.Generator,
-    max_angle: float = 0.3,
+    rng: np.random.Generator | np.random.RandomState,
+    max_angle: float | None = 0.3,
     scale_range: float = 0.0,
 ) -> np.ndarray:
-    """Random per-axis scaling then a random rotation (PYSKL ``RandomScale`` + ``RandomRot``).
+    """Per-axis scaling then a rotation, draw for draw as [PYSKL] ``RandomScale`` + ``RandomRot``.
+
+    PYSKL pyskl/datasets/pipelines/pose_related.py: the scale draws ``uniform(-1, 1, size=C)``; the
+    rotation draws nothing when every joint is (close to) zero, else for C = 3 ``theta = uniform(-max_angle,
+    max_angle, size=3)`` and ``R = Rz Ry Rx`` with PYSKL's matrices, which turn by ``-theta`` about each axis
+    (``Rotation.from_euler("xyz", -theta)``), and for C = 2 ``theta = uniform(-max_angle)``, i.e. uniform
+    on ``[-max_angle, 1)`` rad (numpy's default upper bound 1.0; PYSKL's 2-D range, kept for parity), and
+    ``R = [[cos, -sin], [sin, cos]]``. With ``np.random.RandomState(seed)`` as ``rng`` the result equals
+    PYSKL's after ``np.random.seed(seed)``.
 
     Args:
         keypoint: (M, T, V, C) joints, C = 3 (or 2 for image-plane skeletons).
         rng: the random generator.
-        max_angle: rotation angles are uniform in [-max_angle, max_angle] (radians) about each of x, y, z
-            (R = Rz Ry Rx), or about the image normal for C = 2.
+        max_angle: PYSKL's ``theta`` (radians); ``None``: no ``RandomRot`` (and no draw for it).
         scale_range: each coordinate axis is scaled by 1 + U(-1, 1) * scale_range (0 disables).
 
     Returns:
@@ -217,13 +224,15 @@ def random_rotate_scale(
     c = keypoint.shape[-1]
     if c not in (2, 3):
         raise ValueError(f"random_rotate_scale expects C = 2 or 3 coordinates, got shape {keypoint.shape}")
-    scale = 1.0 + rng.uniform(-1.0, 1.0, size=c) * scale_range
+    keypoint = keypoint * (1.0 + rng.uniform(-1.0, 1.0, size=c) * scale_range)
+    if max_angle is None or np.all(np.isclose(keypoint, 0)):
+        return keypoint.astype(np.float32)
     if c == 3:
-        matrix = Rotation.from_euler("xyz", rng.uniform(-max_angle, max_angle, size=3)).as_matrix()
+        matrix = Rotation.from_euler("xyz", -rng.uniform(-max_angle, max_angle, size=3)).as_matrix()
     else:
-        theta = rng.uniform(-max_angle, max_angle)
+        theta = rng.uniform(-max_angle)
         matrix = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-    return ((keypoint * scale) @ matrix.T).astype(np.float32)
+    return (keypoint @ matrix.T).astype(np.float32)
 
 
 class SkeletonPipeline:
@@ -290,7 +299,8 @@ class SkeletonPipeline:
         clips = keypoint[:, inds]  # (M, num_clips * clip_len, V, C)
         if not self.test_mode and (self.max_angle or self.scale_range):
             xyz = 2 if "keypoint_score" in annotation else c
-            clips[..., :xyz] = random_rotate_scale(clips[..., :xyz], rng, self.max_angle, self.scale_range)
+            angle = self.max_angle or None  # 0 = off (PYSKL's 2-D RandomRot(0) would still turn by U[0, 1))
+            clips[..., :xyz] = random_rotate_scale(clips[..., :xyz], rng, angle, self.scale_range)
         clips = keep_bodies(clips, self.num_person)
         clips = clips.reshape(self.num_person, self.num_clips, self.clip_len, v, c).transpose(1, 0, 2, 3, 4)
         return np.ascontiguousarray(clips, dtype=np.float32)

@@ -11,9 +11,12 @@ MMV                     ``MMV()``                                               
 ======================  =====================================================  ==========================
 
 Feature functions: :func:`kinetic_features` (72-d), :func:`geometric_features` (32-d).
+Named evaluation protocols ``fact | bailando | edge`` (frames, music beats, BeatAlign form per paper):
+:func:`get_protocol`, and :class:`DanceEvaluation` for a whole table row.
 """
 
 from skeleton_mamba.tasks.motion.metrics.beat_align import BeatAlign, alignment_score, kinematic_beats
+from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.fid import (
     FrechetMotionDistance,
     MotionDiversity,
@@ -25,11 +28,14 @@ from skeleton_mamba.tasks.motion.metrics.geometric import geometric_features
 from skeleton_mamba.tasks.motion.metrics.kinetic import kinetic_features
 from skeleton_mamba.tasks.motion.metrics.mmv import MMV, flow_magnitudes, visual_beats
 from skeleton_mamba.tasks.motion.metrics.pfc import PFC
+from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, get_protocol
 
 __all__ = [
     "MMV",
     "PFC",
+    "PROTOCOLS",
     "BeatAlign",
+    "DanceEvaluation",
     "FrechetMotionDistance",
     "MotionDiversity",
     "alignment_score",
@@ -37,6 +43,7 @@ __all__ = [
     "flow_magnitudes",
     "frechet_distance",
     "geometric_features",
+    "get_protocol",
     "kinematic_beats",
     "kinetic_features",
     "motion_features",

@@ -16,8 +16,11 @@ The two published definitions disagree (dance.md section 7.4), so the variant is
 Frame constants are the published 60 fps values; at another ``fps`` they are scaled by ``fps / 60`` so they
 keep their meaning in seconds (minima window 1/6 s, sigma 0.05 s, smoothing 1/12 s). FACT scores generated
 motion on frames ``>= 120`` (after the seed) with beats found on the whole sequence: ``start_frame=120``;
-Bailando scores the whole sequence (``start_frame=0``). Music beats past the motion's end are dropped (the
-FACT script keeps them for generated motion, which only matters for motion beats in the last frames).
+Bailando scores the whole sequence (``start_frame=0``). Music beats past the motion's end are dropped for
+real motion and by Bailando (``get_mb(key, length)``); the FACT script keeps them when it scores generated
+motion from frame 120 (``audio_beats[120:]`` of the whole track), which moves the score of a motion beat in
+the last frames: ``truncate_music=False``, the default of :class:`BeatAlign` for ``"fact"`` with
+``start_frame > 0``. The named protocols of :mod:`.protocols` set all of this.
 """
 
 from __future__ import annotations
@@ -80,10 +83,13 @@ def sequence_beat_align(
     variant: Variant,
     fps: float = 60.0,
     start_frame: int = 0,
+    truncate_music: bool = True,
 ) -> float:
     """BeatAlign of one ``(T, J, 3)`` motion against its music beats (one-hot or frame indices).
 
     Beats are found on the whole sequence; only motion and music beats at frames ``>= start_frame`` count.
+    ``truncate_music`` drops music beats past the motion (``T`` for FACT, the envelope's ``T - 1`` for
+    Bailando); ``False`` keeps every beat of the track (FACT's script on generated motion).
     """
     motion = kinematic_beats(positions, variant, fps)
     motion = motion[motion >= start_frame]
@@ -92,9 +98,11 @@ def sequence_beat_align(
     sigma = 3.0 * fps / _REFERENCE_FPS
     t = len(positions)
     if variant == "fact":
-        beats = beats[beats < t]  # music truncated to the motion length
+        if truncate_music:
+            beats = beats[beats < t]  # music truncated to the motion length
         return alignment_score(motion, beats, sigma)
-    beats = beats[beats < t - 1]  # Bailando: truncated to the envelope length T - 1
+    if truncate_music:
+        beats = beats[beats < t - 1]  # Bailando: truncated to the envelope length T - 1
     return alignment_score(beats, motion, sigma)
 
 
@@ -105,6 +113,8 @@ class BeatAlign(Metric):
         variant: ``"fact"`` (averaged over motion beats) or ``"bailando"`` (averaged over music beats).
         fps: frame rate of motion and beats (published constants are for 60 fps and scale with it).
         start_frame: score only beats from this frame on (FACT generated motion: 120, after the seed).
+        truncate_music: drop music beats past the motion's end; ``None``: ``False`` for ``"fact"`` with
+            ``start_frame > 0`` (FACT's script on generated motion), else ``True``.
 
     ``update(positions, music_beats)`` takes ``(B, T, J, 3)`` joints (or a list of ``(T_i, J, 3)``) and one
     beat vector per sequence: one-hot ``(T,)`` (column 34 of the music features) or frame indices.
@@ -115,7 +125,12 @@ class BeatAlign(Metric):
     full_state_update = False
 
     def __init__(
-        self, variant: Variant = "bailando", fps: float = 60.0, start_frame: int = 0, **kwargs: Any
+        self,
+        variant: Variant = "bailando",
+        fps: float = 60.0,
+        start_frame: int = 0,
+        truncate_music: bool | None = None,
+        **kwargs: Any,
     ) -> None:
         super().__init__(**kwargs)
         if variant not in ("fact", "bailando"):
@@ -123,6 +138,8 @@ class BeatAlign(Metric):
         self.variant = variant
         self.fps = fps
         self.start_frame = start_frame
+        fact_generated = variant == "fact" and start_frame > 0
+        self.truncate_music = not fact_generated if truncate_music is None else truncate_music
         self.add_state("score_sum", default=torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum")
         self.add_state("count", default=torch.tensor(0, dtype=torch.long), dist_reduce_fx="sum")
 
@@ -131,7 +148,9 @@ class BeatAlign(Metric):
         if len(music_beats) != len(sequences):
             raise ValueError(f"got {len(sequences)} motions but {len(music_beats)} beat vectors")
         for seq, beats in zip(sequences, music_beats, strict=True):
-            self.score_sum += sequence_beat_align(seq, beats, self.variant, self.fps, self.start_frame)
+            self.score_sum += sequence_beat_align(
+                seq, beats, self.variant, self.fps, self.start_frame, self.truncate_music
+            )
             self.count += 1
 
     def compute(self) -> torch.Tensor:

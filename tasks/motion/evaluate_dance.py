@@ -1,0 +1,169 @@
+"""``sm evaluate-dance GENERATED_DIR REAL_DIR --protocol fact|bailando|edge``: dance metrics over files.
+
+Examples::
+
+    sm evaluate-dance outputs/ aist_plusplus_final/motions --protocol bailando --music-dir aist/music
+    sm evaluate-dance edge_clips/ aist_plusplus_final/motions --protocol edge --music-dir aist/music --json
+
+Both folders hold SMPL-24 motions: our ``.npz`` files (``joints``, or SMPL parameters through forward
+kinematics) or AIST++ ``motions/*.pkl`` (read with the restricted unpickler). Every file is scored under the
+named protocol (:mod:`.metrics.protocols`: frames, root handling, music beats and BeatAlign form of
+[FACT], [Bailando] or [EDGE]); REAL_DIR is the reference set of FID and of the normalisation of Div (the
+published codes use every AIST++ sequence minus the ignore list, full length). With ``--music-dir``, each
+motion's music is ``<music id>.wav`` from an AIST++ name in its file name, else the audio file with the
+same stem, and every motion starts with its music; BeatAlign is then reported for both sets. Prints a
+table, or one JSON object with ``--json``. (EDGE's own output pickles, z-up at 30 fps without
+``smpl_scaling``, are not AIST++ files: convert them to our ``.npz`` first.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from tqdm import tqdm
+
+__all__ = ["evaluate_folders", "main"]
+
+MOTION_SUFFIXES = (".npz", ".pkl")
+AUDIO_SUFFIXES = (".wav", ".mp3", ".flac", ".ogg", ".opus", ".m4a")
+_ROWS = ("FID_k", "FID_g", "Div_k", "Div_g", "BeatAlign", "PFC")
+
+
+class EvaluateDanceError(ValueError):
+    """An input folder or file cannot be evaluated (the message names it)."""
+
+
+def _motion_files(folder: Path) -> list[Path]:
+    if not folder.is_dir():
+        raise EvaluateDanceError(f"{folder}: no such folder")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MOTION_SUFFIXES and p.is_file())
+    if not files:
+        raise EvaluateDanceError(f"{folder}: no motion files ({', '.join(MOTION_SUFFIXES)})")
+    return files
+
+
+def _music_for(motion: Path, music_dir: Path) -> Path:
+    """``<music id>.<ext>`` for an AIST++ name in the motion's file name, else the audio with its stem."""
+    from skeleton_mamba.tasks.motion.aistpp import music_id
+
+    try:
+        stems = [music_id(motion.stem), motion.stem]
+    except ValueError:  # not an AIST++ sequence name
+        stems = [motion.stem]
+    for stem in stems:
+        for suffix in AUDIO_SUFFIXES:
+            candidate = music_dir / f"{stem}{suffix}"
+            if candidate.is_file():
+                return candidate
+    raise EvaluateDanceError(f"{motion}: no music in {music_dir} (looked for {', '.join(stems)}.wav ...)")
+
+
+def _joints(path: Path):
+    from skeleton_mamba.tasks.motion.render_cli import load_joints
+
+    try:
+        clip = load_joints(path)
+    except (OSError, ValueError) as err:  # MotionFileError, UnsafePickleError are ValueErrors
+        raise EvaluateDanceError(str(err) if str(path) in str(err) else f"{path}: {err}") from err
+    if clip.joints.ndim != 3 or clip.joints.shape[1:] != (24, 3):
+        raise EvaluateDanceError(f"{path}: needs SMPL-24 joints (T, 24, 3), got {clip.joints.shape}")
+    return clip.joints, clip.fps
+
+
+def evaluate_folders(
+    generated: Path,
+    real: Path,
+    protocol: str = "fact",
+    music_dir: Path | None = None,
+    cache_dir: Path | None = None,
+    progress: bool = True,
+) -> dict:
+    """Score every motion of ``generated`` against the reference set ``real`` under ``protocol``.
+
+    Returns:
+        The :meth:`.metrics.evaluation.DanceEvaluation.compute` dict plus ``protocol`` and file counts.
+    """
+    from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
+
+    evaluation = DanceEvaluation(protocol)
+    sets = (("generated", _motion_files(generated)), ("real", _motion_files(real)))
+    for side, files in sets:
+        for path in tqdm(files, desc=f"{protocol}: {side}", disable=not progress):
+            joints, fps = _joints(path)
+            beats = None
+            if music_dir is not None:
+                music = _music_for(path, music_dir)
+                try:
+                    beats = evaluation.protocol.music_beats(music, cache_dir=cache_dir)
+                except (FileNotFoundError, ValueError) as err:
+                    raise EvaluateDanceError(f"{music}: {err}") from err
+            try:
+                evaluation.add(joints, fps, beats, real=side == "real")
+            except ValueError as err:
+                raise EvaluateDanceError(f"{path}: {err}") from err
+    counts = {"generated_files": len(sets[0][1]), "real_files": len(sets[1][1])}
+    values = evaluation.compute()
+    if "FID_k" not in values:
+        raise EvaluateDanceError(
+            f"{generated} / {real}: FID and Div need at least 2 clips in each set, got "
+            f"{values['generated_clips']} generated and {values['real_clips']} real"
+        )
+    return {"protocol": protocol, **counts, **values}
+
+
+def format_table(result: dict) -> str:
+    """The metrics as a two-column table (generated, real) headed by the protocol and the counts."""
+    lines = [
+        f"protocol {result['protocol']}: {result['generated_files']} generated files "
+        f"({result['generated_clips']} clips), {result['real_files']} real files "
+        f"({result['real_clips']} clips)",
+        f"{'metric':<10} {'generated':>12} {'real':>12}",
+    ]
+    for name in _ROWS:
+        if name not in result:
+            continue
+        real = result.get(f"{name}_real")
+        real_text = f"{real:>12.6g}" if real is not None else f"{'-':>12}"
+        lines.append(f"{name:<10} {result[name]:>12.6g} {real_text}")
+    return "\n".join(lines)
+
+
+def _parser() -> argparse.ArgumentParser:
+    from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
+
+    p = argparse.ArgumentParser(
+        prog="sm evaluate-dance",
+        description="FID_k/g, Div_k/g, BeatAlign (and PFC for edge) of generated dance under a named "
+        "paper protocol.",
+    )
+    p.add_argument("generated", type=Path, help="folder of generated motions (.npz, AIST++ .pkl)")
+    p.add_argument("real", type=Path, help="folder of real motions: the FID reference set")
+    p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="fact",
+                   help="fact (FACT/QEAN, default), bailando or edge")  # fmt: skip
+    p.add_argument("--music-dir", type=Path, default=None, help="music files, for BeatAlign (see --help)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    p.add_argument("--cache-dir", type=Path, default=None, help="music feature cache folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm evaluate-dance``; returns the exit code."""
+    args = _parser().parse_args(argv)
+    try:
+        result = evaluate_folders(
+            args.generated, args.real, args.protocol, args.music_dir, args.cache_dir, not args.quiet
+        )
+    except EvaluateDanceError as err:
+        print(f"sm evaluate-dance: error: {err}", file=sys.stderr)
+        return 2
+    print(json.dumps(result) if args.json else format_table(result))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
