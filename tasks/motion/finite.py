@@ -1,0 +1,58 @@
+"""Non-finite values (NaN, +-Inf, overflow such as ``1e999``) stopped at the loaders, named by location.
+
+Every reader of outside data calls :func:`check_finite` on the arrays it parsed, so a NaN in one file
+stops with a message naming the file and the first bad entry instead of flowing into training.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from skeleton_mamba.tasks.errors import DataFileError
+
+__all__ = ["check_finite", "non_finite_message"]
+
+
+def non_finite_message(array: np.ndarray, what: str, axes: Sequence[str] = ()) -> str | None:
+    """A description of the first non-finite entry of ``array``, or ``None`` when all are finite.
+
+    Args:
+        array: any numeric array (integers are always finite).
+        what: the array's name in the message (``"joints"``).
+        axes: names of the leading axes (``("frame", "joint")``); indices are 0-based.
+
+    Returns:
+        e.g. ``"joints: nan at frame 12, joint 3 (0-based; 2 non-finite values)"``.
+    """
+    array = np.asarray(array)
+    if not np.issubdtype(array.dtype, np.inexact):
+        return None
+    bad = ~np.isfinite(array)
+    if not bad.any():
+        return None
+    first = np.unravel_index(int(np.argmax(bad)), array.shape)
+    named = [f"{name} {i}" for name, i in zip(axes, first)] or [f"index {tuple(int(i) for i in first)}"]
+    return f"{what}: {array[first]} at {', '.join(named)} (0-based; {int(bad.sum())} non-finite values)"
+
+
+def check_finite(
+    array: np.ndarray,
+    source: str,
+    what: str,
+    axes: Sequence[str] = (),
+    error: type[DataFileError] = DataFileError,
+) -> np.ndarray:
+    """Return ``array`` when every entry is finite, else raise ``error`` naming ``source`` and the entry.
+
+    Args:
+        array: the parsed values.
+        source: the file (or ``file: key``) the values come from.
+        what, axes: see :func:`non_finite_message`.
+        error: the reader's own :class:`DataFileError` subclass.
+    """
+    message = non_finite_message(array, what, axes)
+    if message is not None:
+        raise error(f"{source}: {message}")
+    return array
