@@ -24,8 +24,8 @@ import torch
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-from skeleton_mamba.tasks.motion.resample import FPS_RANGE
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
+from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
 
 __all__ = ["BvhError", "BvhMotion", "load_bvh", "save_bvh", "smpl_to_bvh", "bvh_to_smpl"]
 

@@ -21,25 +21,7 @@ from skeleton_mamba.tasks.motion.rotations import (
     quaternion_to_matrix,
 )
 
-__all__ = [
-    "FPS_RANGE",
-    "check_fps",
-    "resample_times",
-    "resample_linear",
-    "resample_rotations",
-    "resample_smpl",
-]
-
-# Frame rates accepted from files and options. Outside it a rate is a corrupt header, and allocations that
-# scale with it (resampled frames, the renderer's smoothing window) would be unbounded.
-FPS_RANGE = (1.0, 1000.0)
-
-
-def check_fps(fps: float, what: str = "frame rate") -> float:
-    """``fps`` when it lies in :data:`FPS_RANGE`, else a ``ValueError`` naming ``what``."""
-    if not (math.isfinite(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
-        raise ValueError(f"{what} {fps} is outside {FPS_RANGE[0]:g}-{FPS_RANGE[1]:g} frames per second")
-    return fps
+__all__ = ["resample_times", "resample_linear", "resample_rotations", "resample_smpl"]
 
 
 def resample_times(num_frames: int, src_fps: float, dst_fps: float) -> torch.Tensor:

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from skeleton_mamba.tasks.errors import DataFileError
-from skeleton_mamba.tasks.motion.finite import check_finite
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.value_checks import check_finite
 
 __all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
 

@@ -1,18 +1,31 @@
-"""Non-finite values (NaN, +-Inf, overflow such as ``1e999``) stopped at the loaders, named by location.
+"""Checks on values read from files: finite numbers, frame rates in a sane range.
 
-Every reader of outside data calls :func:`check_finite` on the arrays it parsed, so a NaN in one file
-stops with a message naming the file and the first bad entry instead of flowing into training.
+Every reader of outside data calls :func:`check_finite` on the arrays it parsed, so a NaN, an Inf or
+an overflow such as ``1e999`` in one file stops with a message naming the file and the first bad
+entry instead of flowing into training. Frame rates outside :data:`FPS_RANGE` are refused: they are
+corrupt headers, and allocations that scale with a rate (resampled frames, the renderer's smoothing
+window) would be unbounded.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
 from skeleton_mamba.tasks.errors import DataFileError
 
-__all__ = ["check_finite", "non_finite_message"]
+__all__ = ["FPS_RANGE", "check_finite", "check_fps", "non_finite_message"]
+
+FPS_RANGE = (1.0, 1000.0)
+
+
+def check_fps(fps: float, what: str = "frame rate") -> float:
+    """``fps`` when it lies in :data:`FPS_RANGE`, else a ``ValueError`` naming ``what``."""
+    if not (math.isfinite(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
+        raise ValueError(f"{what} {fps} is outside {FPS_RANGE[0]:g}-{FPS_RANGE[1]:g} frames per second")
+    return fps
 
 
 def non_finite_message(array: np.ndarray, what: str, axes: Sequence[str] = ()) -> str | None:
