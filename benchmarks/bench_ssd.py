@@ -5,7 +5,9 @@ batch 192 at T = 150 and batch * T kept at 28,800 tokens for the other lengths (
 ``sdpa_ms`` is ``torch.nn.functional.scaled_dot_product_attention(is_causal=True)`` with the same
 heads, width and batch. ``max_abs_err`` compares ``ssd`` in fp32 with the float64 recurrence on
 ``--err-batch`` sequences of the same length (``max_rel_err`` divides it by max |y|, and
-``fp32_recurrence_abs_err`` is the error of the fp32 recurrence itself, for scale). The recurrence
+``fp32_recurrence_abs_err`` is the error of the fp32 recurrence itself, for scale).
+``finite_check_ms`` times the finiteness check ``ssd`` runs on its inputs once per call (the fast path
+of ``skeleton_mamba/ssd/non_finite.py``); ``finite_check_share`` divides it by ``ssd_ms``. The recurrence
 (one Python step per time step) is timed at the first length, and at later lengths only when the
 per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
 
@@ -28,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
 
 from skeleton_mamba.ssd import ssd, ssd_recurrence  # noqa: E402
+from skeleton_mamba.ssd.non_finite import inputs_finite  # noqa: E402
 
 HEADS, HEADDIM, STATE, GROUPS = 4, 64, 64, 1
 TOKENS = 192 * 150
@@ -80,6 +83,7 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
     inp = make_inputs(batch, T)
     ssd_ms = median_ms(fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl), repeats=repeats)
     sdpa_ms = median_ms(sdpa_fwd_bwd(batch, T), repeats=repeats)
+    check_ms = median_ms(lambda: inputs_finite(inp["x"], inp["dt"], inp["B"], inp["C"]), repeats=repeats)
     recurrence_ms = None
     # The recurrence is one Python step per time step; run it only when the cost measured on an
     # earlier row says it fits in the budget (it is never extrapolated into a reported number).
@@ -99,6 +103,7 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
                max_rel_err=err / y_ref.abs().max().item(),
                fp32_recurrence_abs_err=(y_rec32.double() - y_ref).abs().max().item(),
                sdpa_over_ssd=round(sdpa_ms / ssd_ms, 2),
+               finite_check_ms=round(check_ms, 3), finite_check_share=round(check_ms / ssd_ms, 4),
                recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1))
     return row, step_s
 
