@@ -18,6 +18,7 @@ A file holds SMPL parameters (then ``skeleton`` is ``smpl24``), joint positions,
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -152,7 +153,7 @@ def load_motion(path: str | PathLike[str]) -> MotionData:
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (ValueError, OSError) as e:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
         raise MotionFileError(f"{path}: not a readable .npz motion file ({e})") from e
     if "fps" not in arrays:
         raise MotionFileError(f"{path}: missing key 'fps' (keys: {sorted(arrays)})")
