@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.errors import DataFileError, DatasetNotFoundError
-from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, FPS
 
 __all__ = [
@@ -163,12 +163,7 @@ def read_features(path: str | PathLike[str]) -> np.ndarray:
         NonFiniteFeaturesError: a NaN / Inf (or a value beyond float32), naming its frame and column.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such feature file")
-    try:
-        array = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise DataFileError(f"{path}: not a readable .npy array ({e})") from None
+    array = load_npy(path)
     if array.ndim != 2 or array.shape[1] != FEATURE_DIM or not len(array):
         raise DataFileError(f"{path}: expected HumanML3D features (T >= 1, {FEATURE_DIM}), got {array.shape}")
     if not np.issubdtype(array.dtype, np.number):

@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
+from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, read_npy_header
 
 __all__ = [
     "COMPLETE",
@@ -134,12 +135,7 @@ def _npz_shapes(path: Path) -> dict[str, tuple[int, ...]]:
     with zipfile.ZipFile(path) as archive:
         for name in archive.namelist():
             with archive.open(name) as member:
-                version = np.lib.format.read_magic(member)
-                if version not in ((1, 0), (2, 0)):
-                    raise ValueError(f"{path}: {name} has .npy format version {version}")
-                fmt = np.lib.format
-                read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
-                shapes[name.removesuffix(".npy")] = tuple(read(member)[0])
+                shapes[name.removesuffix(".npy")] = read_npy_header(member)[0]
     return shapes
 
 
@@ -182,7 +178,7 @@ def sample_problem(folder: str | Path) -> str | None:
             if any(p.stat().st_size == 0 for p in pngs):
                 return "an rgb/*.png frame is empty"
             lengths["rgb/"] = len(pngs)
-    except (OSError, ValueError, KeyError, TypeError, RuntimeError, zipfile.BadZipFile) as e:
+    except (*NPY_HEADER_ERRORS, KeyError, TypeError, RuntimeError, zipfile.BadZipFile) as e:
         return f"unreadable ({type(e).__name__}: {e})"
     wrong = {name: n for name, n in lengths.items() if n != count}
     return f"frame counts {wrong} differ from meta.json's {count}" if wrong else None
