@@ -31,7 +31,7 @@ FPS_RANGE = (1.0, 1000.0)
 def check_fps(fps: float, what: str = "frame rate") -> float:
     """``fps`` when it lies in :data:`FPS_RANGE`, else a ``ValueError`` naming ``what``."""
     if not (math.isfinite(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
-        raise ValueError(f"{what} {fps} is outside {FPS_RANGE[0]:g}-{FPS_RANGE[1]:g} frames per second")
+        raise ValueError(f"{what} {fps:g} is outside {FPS_RANGE[0]:g}-{FPS_RANGE[1]:g} frames per second")
     return fps
 
 
