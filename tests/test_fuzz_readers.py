@@ -56,13 +56,15 @@ def _mutate_lines(data: st.DataObject, lines: list[str], numeric: list[int]) -> 
     return "\n".join(lines)
 
 
-def _write(folder: str, name: str, content: str | bytes) -> Path:
-    path = Path(folder) / name
-    if isinstance(content, bytes):
-        path.write_bytes(content)
-    else:
-        path.write_bytes(content.encode("utf-8", errors="surrogatepass"))
-    return path
+def _read(read, name: str, content: str | bytes):
+    """``read(path)`` of ``content`` written to a temporary file, or ``None`` when it raises DataFileError."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / name
+        path.write_bytes(content if isinstance(content, bytes) else content.encode("utf-8", "surrogatepass"))
+        try:
+            return read(path)
+        except DataFileError:
+            return None
 
 
 def test_ntu_reader_survives_corruptions():
@@ -72,13 +74,11 @@ def test_ntu_reader_survives_corruptions():
     @FUZZ
     @given(st.data())
     def run(data):
-        text = _mutate_lines(data, lines, numeric)
-        with tempfile.TemporaryDirectory() as folder:
-            try:
-                sequence = read_skeleton_file(_write(folder, "S001C001P001R001A001.skeleton", text))
-                keypoint = sequence.keypoints()
-            except DataFileError:
-                return
+        parsed = _read(lambda p: (s := read_skeleton_file(p), s.keypoints()), "S001C001P001R001A001.skeleton",
+                       _mutate_lines(data, lines, numeric))  # fmt: skip
+        if parsed is None:
+            return
+        sequence, keypoint = parsed
         assert keypoint.ndim == 4 and keypoint.shape[2:] == (25, 3) and np.isfinite(keypoint).all()
         assert all(np.isfinite(b.joints).all() for f in sequence.frames for b in f.bodies)
 
@@ -95,12 +95,9 @@ def test_bvh_reader_survives_corruptions():
     @FUZZ
     @given(st.data())
     def run(data):
-        text = _mutate_lines(data, lines, numeric)
-        with tempfile.TemporaryDirectory() as folder:
-            try:
-                bvh = load_bvh(_write(folder, "clip.bvh", text))
-            except DataFileError:
-                return
+        bvh = _read(load_bvh, "clip.bvh", _mutate_lines(data, lines, numeric))
+        if bvh is None:
+            return
         assert bvh.values.shape == (bvh.num_frames, sum(len(c) for c in bvh.channels)) and bvh.num_frames >= 1
         assert np.isfinite(bvh.values).all() and np.isfinite(bvh.offsets).all() and 1 <= bvh.fps <= 1000
 
@@ -151,11 +148,10 @@ def test_kinetics_reader_survives_corruptions():
         text = json.dumps(clip)
         if data.draw(st.booleans()):  # also damage the text itself
             text = _mutate_lines(data, text.replace(", ", ",\n").splitlines(), [0])
-        with tempfile.TemporaryDirectory() as folder:
-            try:
-                keypoint, score, label, name = read_kinetics_clip(_write(folder, "clip.json", text))
-            except DataFileError:
-                return
+        parsed = _read(read_kinetics_clip, "clip.json", text)
+        if parsed is None:
+            return
+        keypoint, score, label, name = parsed
         assert keypoint.shape[:3] == score.shape and keypoint.shape[2:] == (KINETICS_JOINTS, 2)
         assert np.isfinite(keypoint).all() and np.isfinite(score).all()
         assert isinstance(label, int) and label >= 0 and isinstance(name, str)
@@ -180,19 +176,16 @@ def test_humanml3d_reader_survives_corruptions():
         elif kind == "dtype":
             array = array.astype(data.draw(st.sampled_from([np.int16, np.bool_, np.complex64, "U3"])))
         with tempfile.TemporaryDirectory() as folder:
-            path = Path(folder) / "000001.npy"
-            np.save(path, array)
-            raw = bytearray(path.read_bytes())
-            if kind == "truncate":
-                raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
-            elif kind == "flip":
-                for _ in range(data.draw(st.integers(1, 4))):
-                    raw[data.draw(st.integers(0, 127))] = data.draw(st.integers(0, 255))
-            path.write_bytes(bytes(raw))
-            try:
-                features = read_features(path)
-            except DataFileError:
-                return
+            np.save(Path(folder) / "a.npy", array)
+            raw = bytearray((Path(folder) / "a.npy").read_bytes())
+        if kind == "truncate":
+            raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+        elif kind == "flip":
+            for _ in range(data.draw(st.integers(1, 4))):
+                raw[data.draw(st.integers(0, 127))] = data.draw(st.integers(0, 255))
+        features = _read(read_features, "000001.npy", bytes(raw))
+        if features is None:
+            return
         assert features.dtype == np.float32 and features.ndim == 2 and features.shape[1] == FEATURE_DIM
         assert len(features) >= 1 and np.isfinite(features).all()
 
