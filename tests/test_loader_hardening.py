@@ -250,3 +250,27 @@ def test_audio_with_nan_samples_is_refused_with_the_time(tmp_path):
     y[36000, 1] = 0.0
     sf.write(tmp_path / "a.wav", y, 48000, subtype="FLOAT")
     assert load_audio(tmp_path / "a.wav", 15360).shape == (15360,)
+
+
+def test_humanml3d_statistics_must_be_finite_and_std_positive(tmp_path):
+    from skeleton_mamba.tasks.text2motion.humanml3d import read_statistics
+
+    np.save(tmp_path / "Mean.npy", np.zeros(263, np.float32))
+    std = np.ones(263, np.float32)
+    std[17] = np.inf
+    np.save(tmp_path / "Std.npy", std)
+    with pytest.raises(DataFileError, match=r"Std.npy: Std: inf at column 17"):
+        read_statistics(tmp_path)
+    std[17] = 0.0
+    np.save(tmp_path / "Std.npy", std)
+    with pytest.raises(DataFileError, match=r"Std.npy: Std must be positive, column 17 is 0.0"):
+        read_statistics(tmp_path)
+
+
+def test_kinetics_label_file_needs_integer_labels(tmp_path):
+    from skeleton_mamba.tasks.recognition.kinetics import read_kinetics_labels
+
+    path = tmp_path / "labels.json"
+    path.write_text(json.dumps({"abc": {"has_skeleton": True, "label_index": "3"}}))
+    with pytest.raises(KineticsFileError, match=r"entry 'abc': 'label_index' must be a 0-based integer, got '3'"):
+        read_kinetics_labels(path)

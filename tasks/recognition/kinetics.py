@@ -144,4 +144,8 @@ def read_kinetics_labels(path: str | PathLike[str]) -> dict[str, dict]:
     for video_id, entry in labels.items():
         if not isinstance(entry, dict) or not {"has_skeleton", "label_index"} <= entry.keys():
             raise KineticsFileError(f"{path}: entry {video_id!r} needs 'has_skeleton' and 'label_index'")
+        label = entry["label_index"]
+        if isinstance(label, bool) or not isinstance(label, int) or label < 0:
+            raise KineticsFileError(f"{path}: entry {video_id!r}: 'label_index' must be a 0-based integer, "
+                                    f"got {label!r}")  # fmt: skip
     return labels

@@ -133,19 +133,21 @@ def read_split(root: str | PathLike[str], split: str) -> list[str]:
 def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
     """A (263,) float32 vector from a ``.npy`` file (statistics); ``what`` names it in errors."""
     path = Path(path)
-    array = np.load(_require(path, what), allow_pickle=False)
-    if array.shape != (FEATURE_DIM,):
-        raise ValueError(f"{path}: expected {what} of shape ({FEATURE_DIM},), got {array.shape}")
-    return array.astype(np.float32)
+    array = load_npy(_require(path, what))
+    if array.shape != (FEATURE_DIM,) or not np.issubdtype(array.dtype, np.number):
+        raise DataFileError(f"{path}: expected numeric {what} of shape ({FEATURE_DIM},), got {array.shape}")
+    with np.errstate(over="ignore"):
+        return check_finite(array.astype(np.float32), str(path), what, ("column",))
 
 
 def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; Std must be positive."""
+    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; finite, Std positive."""
     root = Path(root)
     mean = read_feature_vector(root / "Mean.npy", "Mean")
     std = read_feature_vector(root / "Std.npy", "Std")
-    if not np.all(std > 0) or not np.all(np.isfinite(mean)):
-        raise ValueError(f"{root / 'Std.npy'}: Std must be positive and Mean finite")
+    if not np.all(std > 0):
+        column = int(np.argmin(std > 0))
+        raise DataFileError(f"{root / 'Std.npy'}: Std must be positive, column {column} is {std[column]}")
     return mean, std
 
 
