@@ -272,5 +272,5 @@ def test_kinetics_label_file_needs_integer_labels(tmp_path):
 
     path = tmp_path / "labels.json"
     path.write_text(json.dumps({"abc": {"has_skeleton": True, "label_index": "3"}}))
-    with pytest.raises(KineticsFileError, match=r"entry 'abc': 'label_index' must be a 0-based integer, got '3'"):
+    with pytest.raises(KineticsFileError, match=r"'abc': 'label_index' must be a 0-based integer, got '3'"):
         read_kinetics_labels(path)
