@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps
+from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
 
 __all__ = ["JointsClip", "load_joints", "render_file", "main"]
 
@@ -69,7 +69,7 @@ def load_joints(
         motion = load_aistpp_motion(path)
         return _from_skeleton(motion.joint_positions(), "smpl24", motion_fps or motion.fps)
     if suffix == ".npy":
-        joints = np.load(path, allow_pickle=False)
+        joints = load_npy(path)
         if joints.ndim != 3 or joints.shape[2] != 3:
             raise ValueError(f"{path}: expected joint positions (T, J, 3), got shape {joints.shape}")
         name = skeleton or _BY_JOINT_COUNT.get(joints.shape[1])

@@ -264,12 +264,11 @@ class _Lines:
             raise self.error(f"expected {expected} (>= 0), got {value}")
         return value
 
-    def check_room(self, count: int, lines_each: int, what: str) -> None:
-        """Refuse a count that the rest of the file cannot hold (each item needs ``lines_each`` lines)."""
+    def check_room(self, count: int, what: str) -> None:
+        """Refuse a count of items (of at least one line each) that the rest of the file cannot hold."""
         left = len(self.lines) - self.pos
-        if count * lines_each > left:
-            raise self.error(f"{count} {what} declared, but only {left} lines follow "
-                             f"(each needs {lines_each})", self.pos)  # fmt: skip
+        if count > left:
+            raise self.error(f"{count} {what} declared, but only {left} lines follow")
 
     def check_finite_joints(self, joints: np.ndarray, blocks: list[tuple[int, str]]) -> None:
         """Raise naming the line of the first NaN / Inf joint value (or an x, y, z beyond float32)."""
@@ -338,7 +337,8 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
     Raises:
         FileNotFoundError: the file does not exist.
         SkeletonFileError: the file is truncated or malformed (message: file, 1-based line, what was
-            expected), or has non-blank content after the last frame.
+            expected), has non-blank content after the last frame, declares more frames than it has
+            lines, or holds a NaN / Inf (or an x, y, z beyond float32) on a body or joint line.
     """
     path_str = str(path)
     try:
@@ -347,7 +347,7 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
         raise SkeletonFileError(f"{path_str}: not a text .skeleton file ({e})") from None
     lines = _Lines(path_str, text)
     num_frames = lines.count("the frame count")
-    lines.check_room(num_frames, 1, "frames")
+    lines.check_room(num_frames, "frames")
     frames: list[NTUFrame] = []
     records: list[tuple[int, int, int, np.ndarray]] = []  # (frame, timeline index, bodyID, info)
     blocks: list[tuple[int, str]] = []  # (index of the first joint line, description) per body
