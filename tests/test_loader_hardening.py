@@ -274,3 +274,16 @@ def test_kinetics_label_file_needs_integer_labels(tmp_path):
     path.write_text(json.dumps({"abc": {"has_skeleton": True, "label_index": "3"}}))
     with pytest.raises(KineticsFileError, match=r"'abc': 'label_index' must be a 0-based integer, got '3'"):
         read_kinetics_labels(path)
+
+
+def test_glove_vectors_with_nan_are_refused(tmp_path):
+    from skeleton_mamba.tasks.text2motion.glove import WordVectorizer
+
+    vectors = np.zeros((2, 300), np.float32)
+    vectors[1, 42] = np.nan
+    np.save(tmp_path / "our_vab_data.npy", vectors)
+    for name, value in (("words", ["unk", "walk"]), ("idx", {"unk": 0, "walk": 1})):
+        with open(tmp_path / f"our_vab_{name}.pkl", "wb") as f:
+            pickle.dump(value, f)
+    with pytest.raises(DataFileError, match=r"our_vab_data.npy: vectors: nan at row 1"):
+        WordVectorizer(tmp_path)
