@@ -149,9 +149,10 @@ def sample_problem(folder: str | Path) -> str | None:
     """Why a COMPLETE sample folder cannot be trusted, or ``None`` when its files agree with ``meta.json``.
 
     Checks that every file of the layout is present and not empty and that ``motion.npz``, ``camera.npz``,
-    ``depth.npz`` (array headers) and the RGB frames (``rgb.mp4`` decoded by ffmpeg, or the ``rgb/``
-    PNG count) all hold ``meta["frames"]["count"]`` frames of ``width`` x ``height``. A build interrupted
-    while copying, or a file truncated afterwards, fails these checks; a resumed build rebuilds the sample.
+    ``depth.npz`` (array headers) and the RGB frames (``rgb.mp4``: counted by an ffmpeg stream copy, no
+    decoding; ``rgb/``: the PNG count) all hold ``meta["frames"]["count"]`` frames (depth: of ``height`` x
+    ``width``). A build interrupted while copying, or a file truncated afterwards, fails these checks; a
+    resumed build rebuilds the sample.
     """
     folder = Path(folder)
     try:
