@@ -8,7 +8,9 @@ heads, width and batch. ``max_abs_err`` compares ``ssd`` in fp32 with the float6
 ``fp32_recurrence_abs_err`` is the error of the fp32 recurrence itself, for scale). ``gemm`` is this
 machine's fp32 matrix-product rate timed in the same process (before and after the rows), and each row
 gives ``ssd_rate`` / ``sdpa_rate``: the matrix-product work of one forward + backward, the rate it ran at
-and its fraction of the GEMM rate. The recurrence
+and its fraction of the GEMM rate. ``finite_check_ms`` times the finiteness check ``ssd`` runs on its
+inputs once per call (the fast path of ``skeleton_mamba/ssd/non_finite.py``); ``finite_check_share``
+divides it by ``ssd_ms``. The recurrence
 (one Python step per time step) is timed at the first length, and at later lengths only when the
 per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
 
@@ -32,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, rate  # noqa: E402
 
 from skeleton_mamba.ssd import ssd, ssd_recurrence  # noqa: E402
+from skeleton_mamba.ssd.non_finite import inputs_finite  # noqa: E402
 
 HEADS, HEADDIM, STATE, GROUPS = 4, 64, 64, 1
 TOKENS = 192 * 150
@@ -93,6 +96,7 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
     sdpa_run = sdpa_fwd_bwd(batch, T)
     ssd_ms = median_ms(ssd_run, repeats=repeats)
     sdpa_ms = median_ms(sdpa_run, repeats=repeats)
+    check_ms = median_ms(lambda: inputs_finite(inp["x"], inp["dt"], inp["B"], inp["C"]), repeats=repeats)
     recurrence_ms = None
     # The recurrence is one Python step per time step; run it only when the cost measured on an
     # earlier row says it fits in the budget (it is never extrapolated into a reported number).
@@ -112,6 +116,7 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
                max_rel_err=err / y_ref.abs().max().item(),
                fp32_recurrence_abs_err=(y_rec32.double() - y_ref).abs().max().item(),
                sdpa_over_ssd=round(sdpa_ms / ssd_ms, 2),
+               finite_check_ms=round(check_ms, 3), finite_check_share=round(check_ms / ssd_ms, 4),
                recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1),
                ssd_rate=rate(matmul_gflop(ssd_run), ssd_ms, gemm),
                sdpa_rate=rate(sdpa_gflop(batch, T), sdpa_ms, gemm))

@@ -7,12 +7,15 @@ import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
+from skeleton_mamba.padding import zero_padding
+
 
 class CrossAttention(nn.Module):
     """Queries (B, T, J, D) attend to a condition (B, S, Dc) -> (B, T, J, D).
 
     Every joint token of every frame attends over the whole condition sequence, which may be
-    padded: ``context_mask`` (B, S) bool marks valid condition tokens.
+    padded: ``context_mask`` (B, S) bool marks valid condition tokens; padded tokens are replaced by
+    zeros before the projections, so whatever they hold (NaN included) cannot reach the output.
     """
 
     def __init__(self, dim: int, context_dim: int, heads: int = 4, dropout: float = 0.0):
@@ -29,9 +32,12 @@ class CrossAttention(nn.Module):
         self, x: torch.Tensor, context: torch.Tensor, context_mask: torch.Tensor | None = None
     ) -> torch.Tensor:
         b, t, j, _ = x.shape
+        attn_mask = None
+        if context_mask is not None:
+            attn_mask = context_mask[:, None, None, :]
+            context = zero_padding(context, context_mask)  # a weight of 0 times a NaN value is NaN
         q = rearrange(self.to_q(x), "b t j (h c) -> b h (t j) c", h=self.heads)
         k, v = rearrange(self.to_kv(context), "b s (two h c) -> two b h s c", two=2, h=self.heads)
-        attn_mask = None if context_mask is None else context_mask[:, None, None, :]
         y = F.scaled_dot_product_attention(
             q, k, v, attn_mask=attn_mask, dropout_p=self.dropout if self.training else 0.0
         )

@@ -8,6 +8,7 @@ from torch.utils.checkpoint import checkpoint
 
 from skeleton_mamba.block import SkeletonMambaBlock
 from skeleton_mamba.config import SkeletonMambaConfig
+from skeleton_mamba.padding import zero_padding
 from skeleton_mamba.skeletons import DEFAULT_GROUP_PATHS, get_skeleton
 from skeleton_mamba.temporal_scan import check_prefix_mask
 
@@ -83,7 +84,8 @@ class SkeletonMamba(nn.Module):
         Args:
             x: (B, T, J, C_in) per-joint features.
             mask: (B, T) bool, True on valid frames (a valid prefix per sequence; right padding).
-                Padded frames never influence valid ones.
+                Padded frames never influence valid ones, whatever they hold (NaN and Inf included):
+                they are replaced by zeros here and in every Temporal Scan.
             context: (B, S, Dc) condition sequence for cross-attention (when ``context_dim`` is set).
             context_mask: (B, S) bool, True on valid condition tokens.
 
@@ -97,6 +99,7 @@ class SkeletonMamba(nn.Module):
             )
         if mask is not None:
             check_prefix_mask(mask)
+            x = zero_padding(x, mask)  # NaN / Inf in the padding would survive a multiplication by 0
         h = self.input_proj(x)
         if self.joint_embedding is not None:
             h = h + self.joint_embedding

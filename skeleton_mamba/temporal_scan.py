@@ -15,6 +15,7 @@ from torch import nn
 
 from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.mixer import Mamba2Mixer
+from skeleton_mamba.padding import zero_padding
 from skeleton_mamba.slicing import map_slices, slice_length
 
 
@@ -53,9 +54,11 @@ class TemporalScan(nn.Module):
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         num_joints = x.shape[2]
-        seq = rearrange(x, "b t j d -> (b j) t d")
         if mask is None:
             mask = torch.ones(x.shape[:2], dtype=torch.bool, device=x.device)
+        else:
+            x = zero_padding(x, mask)  # padded values never enter the scans (matrix forms spread them back)
+        seq = rearrange(x, "b t j d -> (b j) t d")
         index = valid_prefix_reversal(mask).repeat_interleave(num_joints, dim=0)
         per_sequence = seq.shape[1] * self.forward_mixer.in_proj.out_features
         length = slice_length(seq, 0, per_sequence, self.slice_elements)

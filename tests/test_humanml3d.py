@@ -168,7 +168,7 @@ def test_bad_files_raise_errors_naming_the_file(tmp_path):
     with pytest.raises(DatasetNotFoundError, match=r"000009.npy: missing HumanML3D motion"):
         read_motion(tmp_path, "000009")
     np.save(tmp_path / "new_joint_vecs" / "000004.npy", np.zeros((10, 251), np.float32))
-    with pytest.raises(ValueError, match=r"000004.npy: expected features \(T, 263\)"):
+    with pytest.raises(ValueError, match=r"000004.npy: expected HumanML3D features \(T >= 1, 263\)"):
         read_motion(tmp_path, "000004")
     (tmp_path / "val.txt").write_text("000001\nabc\n")
     with pytest.raises(ValueError, match=r"val.txt:2: malformed"):

@@ -23,6 +23,7 @@ from einops import rearrange
 
 from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
+from skeleton_mamba.ssd.non_finite import confine_non_finite
 from skeleton_mamba.ssd.segsum import segsum_stable
 
 
@@ -86,6 +87,7 @@ def state_output(S_in: torch.Tensor, cs: torch.Tensor, C: torch.Tensor) -> torch
     return y * torch.exp(cs).to(y.dtype)[..., None]
 
 
+@confine_non_finite
 def ssd_chunked(
     x: torch.Tensor,
     dt: torch.Tensor,

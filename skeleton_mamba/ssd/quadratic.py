@@ -25,6 +25,7 @@ import torch
 from skeleton_mamba.ssd.chunked import ssd_chunked
 from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
+from skeleton_mamba.ssd.non_finite import confine_non_finite
 
 # Target block length q (benchmarks/bench_ssd.py, L = 150, 4 heads, P = N = 64, fp32, 2 threads).
 BLOCK_SIZE = 64
@@ -59,6 +60,7 @@ def below_diagonal(
     return torch.cat(parts, dim=1)
 
 
+@confine_non_finite
 def ssd_quadratic(
     x: torch.Tensor,
     dt: torch.Tensor,

@@ -36,6 +36,7 @@ from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.value_checks import check_finite
 
 __all__ = ["EgoDanceDataset", "EgoDanceDataModule", "SyntheticEgoDanceDataModule", "assign_splits"]
 
@@ -114,7 +115,10 @@ class EgoDanceDataset(Dataset):
         t = self.window
         root = motion.trans[:t] / motion.scaling
         with np.load(folder / "camera.npz", allow_pickle=False) as cam:
-            head = head_targets_from_camera(cam["positions"][:t], cam["rotations"][:t])
+            source = str(folder / "camera.npz")
+            positions = check_finite(cam["positions"][:t], source, "positions", ("frame",))
+            rotations = check_finite(cam["rotations"][:t], source, "rotations", ("frame",))
+        head = head_targets_from_camera(positions, rotations)
         shift = np.array([root[0, 0], meta.get("scene", {}).get("floor_height", 0.0), root[0, 2]])
         music_meta = meta.get("music") or {}
         if not music_meta.get("path"):

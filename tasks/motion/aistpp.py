@@ -61,17 +61,16 @@ def load_aistpp_motion(path: str | PathLike[str]) -> MotionData:
     missing = [k for k in ("smpl_poses", "smpl_trans", "smpl_scaling") if k not in data]
     if missing:
         raise MotionFileError(f"{path}: missing keys {missing} (found {sorted(map(str, data))})")
-    poses = np.asarray(data["smpl_poses"], dtype=np.float32)  # (N, 72) is reshaped by MotionData
-    scaling = np.asarray(data["smpl_scaling"], dtype=np.float64).reshape(-1)
+    try:
+        with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused by validate()
+            poses = np.asarray(data["smpl_poses"], dtype=np.float32)  # (N, 72) is reshaped by MotionData
+            trans = np.asarray(data["smpl_trans"], dtype=np.float32)
+        scaling = np.asarray(data["smpl_scaling"], dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise MotionFileError(f"{path}: smpl_poses, smpl_trans, smpl_scaling must be numeric ({e})") from None
     if scaling.size != 1:
         raise MotionFileError(f"{path}: smpl_scaling must hold one value, got shape {scaling.shape}")
-    motion = MotionData(
-        fps=AISTPP_FPS,
-        skeleton="smpl24",
-        poses=poses,
-        trans=np.asarray(data["smpl_trans"], dtype=np.float32),
-        scaling=float(scaling[0]),
-    )
+    motion = MotionData(AISTPP_FPS, "smpl24", poses=poses, trans=trans, scaling=float(scaling[0]))
     return motion.validate(str(path))
 
 

@@ -22,8 +22,10 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import SMPL24
+from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
+from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
 
 __all__ = ["BvhError", "BvhMotion", "load_bvh", "save_bvh", "smpl_to_bvh", "bvh_to_smpl"]
 
@@ -31,7 +33,7 @@ _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
 
-class BvhError(ValueError):
+class BvhError(DataFileError):
     """A BVH file is malformed (the message names the file and line)."""
 
 
@@ -121,6 +123,8 @@ def _floats(tokens: list[str], n: int, source: str, line: int) -> np.ndarray:
         raise _fail(source, line, f"expected {n} numbers, got {' '.join(tokens)!r}") from None
     if len(values) != n:
         raise _fail(source, line, f"expected {n} numbers, got {len(values)}")
+    if not all(map(math.isfinite, values)):
+        raise _fail(source, line, f"expected {n} finite numbers, got {' '.join(tokens)!r}")
     return np.asarray(values)
 
 
@@ -213,19 +217,28 @@ def _parse(text: str, source: str) -> BvhMotion:
         frame_time = float(header("Frame Time:"))
     except ValueError as e:
         raise _fail(source, i, f"bad Frames / Frame Time value ({e})") from None
-    if num_frames < 0 or not frame_time > 0:
-        raise _fail(source, i, f"bad Frames ({num_frames}) or Frame Time ({frame_time})")
+    if num_frames < 1:
+        raise _fail(source, i - 1, f"Frames says {num_frames}: a BVH file needs at least one frame of motion")
+    low, high = 1.0 / FPS_RANGE[1], 1.0 / FPS_RANGE[0]
+    if not low <= frame_time <= high:  # NaN fails too
+        raise _fail(source, i, f"Frame Time {frame_time} s is outside [{low:g}, {high:g}] s "
+                               f"({FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second)")  # fmt: skip
     num_channels = sum(len(c) for c in channels)
-    rows = [ln for ln in lines[i:] if ln.strip()]
-    if len(rows) < num_frames:
-        raise _fail(source, i, f"Frames says {num_frames} but only {len(rows)} data lines follow")
+    rows = [(n + 1, ln) for n, ln in enumerate(lines[i:], start=i) if ln.strip()]
+    if len(rows) != num_frames:
+        raise _fail(source, i, f"Frames says {num_frames} but {len(rows)} data lines follow")
     try:
-        values = np.loadtxt(io.StringIO("\n".join(rows[:num_frames])), ndmin=2).reshape(num_frames, -1)
+        values = np.loadtxt(io.StringIO("\n".join(ln for _, ln in rows)), ndmin=2).reshape(num_frames, -1)
     except ValueError as e:
         raise _fail(source, i + 1, f"motion data is not {num_channels} numbers per line ({e})") from None
     if values.shape[1] != num_channels:
         msg = f"motion lines have {values.shape[1]} values, channels need {num_channels}"
         raise _fail(source, i + 1, msg)
+    bad = np.argwhere(~np.isfinite(values))
+    if len(bad):
+        frame, column = bad[0]
+        msg = f"frame {frame + 1}, channel {column + 1}: {values[frame, column]} (NaN and Inf are refused)"
+        raise _fail(source, rows[frame][0], msg)
     return BvhMotion(names, parents, np.stack(offsets), channels, frame_time, values, end_sites)
 
 

@@ -18,6 +18,7 @@ A file holds SMPL parameters (then ``skeleton`` is ``smpl24``), joint positions,
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -26,11 +27,13 @@ from typing import NoReturn
 import numpy as np
 
 from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.motion.value_checks import check_fps, non_finite_message
 
 __all__ = ["MotionData", "MotionFileError", "save_motion", "load_motion"]
 
 
-class MotionFileError(ValueError):
+class MotionFileError(DataFileError):
     """A motion file is missing keys or has inconsistent shapes (the message names the file)."""
 
 
@@ -64,8 +67,10 @@ class MotionData:
         def fail(msg: str) -> NoReturn:
             raise MotionFileError(f"{source}: {msg}")
 
-        if not np.isfinite(self.fps) or self.fps <= 0:
-            fail(f"fps must be a positive number, got {self.fps}")
+        try:
+            check_fps(self.fps, "fps")
+        except ValueError as e:
+            fail(str(e))
         try:
             skel = get_skeleton(self.skeleton)
         except KeyError as e:
@@ -93,8 +98,9 @@ class MotionData:
             fail("motion has no frames")
         for name in ("poses", "trans", "joints"):
             value = getattr(self, name)
-            if value is not None and not np.all(np.isfinite(value)):
-                fail(f"{name} contains NaN or infinite values")
+            message = None if value is None else non_finite_message(value, name, ("frame", "joint"))
+            if message is not None:
+                fail(message)
         return self
 
     @property
@@ -147,7 +153,7 @@ def load_motion(path: str | PathLike[str]) -> MotionData:
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (ValueError, OSError) as e:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
         raise MotionFileError(f"{path}: not a readable .npz motion file ({e})") from e
     if "fps" not in arrays:
         raise MotionFileError(f"{path}: missing key 'fps' (keys: {sorted(arrays)})")
@@ -161,6 +167,9 @@ def load_motion(path: str | PathLike[str]) -> MotionData:
     skeleton = str(arrays["skeleton"]) if "skeleton" in arrays else "smpl24"
     if arrays["fps"].size != 1:
         raise MotionFileError(f"{path}: fps must be a single number, got shape {arrays['fps'].shape}")
+    for key, value in arrays.items():
+        if key != "skeleton" and not np.issubdtype(value.dtype, np.number):
+            raise MotionFileError(f"{path}: {key!r} must be numeric, got dtype {value.dtype}")
     motion = MotionData(
         fps=float(arrays["fps"].reshape(-1)[0]),
         skeleton=skeleton,

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.cache import FeatureCache
 from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
 
@@ -124,6 +125,7 @@ def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
     Raises:
         FileNotFoundError: the file does not exist.
         ValueError: the file cannot be decoded or holds no samples (the message names the file).
+        DataFileError: a decoded sample is NaN or Inf (the message gives the time of the first).
     """
     import librosa
 
@@ -134,12 +136,18 @@ def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
         with warnings.catch_warnings():  # librosa warns before falling back to audioread; we raise instead
             warnings.simplefilter("ignore", UserWarning)
             warnings.simplefilter("ignore", FutureWarning)
-            y, _ = librosa.load(path, sr=sr, mono=True)
+            # native rate, all channels: librosa's mono mix and resampling refuse NaN with a vaguer error
+            y, native_sr = librosa.load(path, sr=None, mono=False)
     except Exception as err:  # soundfile/audioread raise many unrelated types
         raise ValueError(f"{path}: cannot decode audio ({type(err).__name__}: {err})") from err
     if y.size == 0:
         raise ValueError(f"{path}: the audio holds no samples")
-    return y
+    bad = np.flatnonzero(~np.isfinite(y))  # (channels, samples) flattened
+    if bad.size:  # float WAV / FLAC can store NaN and Inf
+        first = np.unravel_index(bad[0], y.shape)[-1] / native_sr
+        raise DataFileError(f"{path}: {bad.size} audio samples are NaN or Inf, the first at {first:.3f} s")
+    y = librosa.to_mono(y)
+    return y if native_sr == sr else librosa.resample(y, orig_sr=native_sr, target_sr=sr)  # as librosa.load
 
 
 @dataclass

@@ -25,6 +25,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from skeleton_mamba.tasks.motion.value_checks import check_fps
+
 __all__ = ["RenderStyle", "joint_sides", "render_frames", "render_motion"]
 
 _AA = cv2.LINE_AA
@@ -252,8 +254,7 @@ def render_motion(
     suffix = out.suffix.lower()
     if suffix not in (".mp4", ".gif"):
         raise ValueError(f"{out}: output must end in .mp4 or .gif")
-    if not (math.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be a positive number, got {fps}")
+    check_fps(fps, "fps")  # bounds the camera smoothing window (it grows with fps)
     if music is not None and not Path(music).is_file():
         raise FileNotFoundError(f"{music}: no such music file")
     style = style or RenderStyle()

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
 
 __all__ = ["JointsClip", "load_joints", "render_file", "main"]
 
@@ -68,7 +69,7 @@ def load_joints(
         motion = load_aistpp_motion(path)
         return _from_skeleton(motion.joint_positions(), "smpl24", motion_fps or motion.fps)
     if suffix == ".npy":
-        joints = np.load(path, allow_pickle=False)
+        joints = load_npy(path)
         if joints.ndim != 3 or joints.shape[2] != 3:
             raise ValueError(f"{path}: expected joint positions (T, J, 3), got shape {joints.shape}")
         name = skeleton or _BY_JOINT_COUNT.get(joints.shape[1])
@@ -78,7 +79,8 @@ def load_joints(
         if skel.num_joints != joints.shape[1]:
             raise ValueError(f"{path}: {joints.shape[1]} joints, skeleton {skel.name} has {skel.num_joints}")
         fps = motion_fps or _DEFAULT_FPS.get(skel.name, 30.0)
-        return _from_skeleton(joints.astype(np.float64), name, fps)
+        joints = check_finite(joints.astype(np.float64), str(path), "joints", ("frame", "joint"))
+        return _from_skeleton(joints, name, fps)
     if suffix == ".bvh":
         from skeleton_mamba.tasks.motion.bvh import load_bvh
 
@@ -115,7 +117,9 @@ def render_file(
     from skeleton_mamba.tasks.motion.resample import resample_linear
 
     clip = load_joints(motion, skeleton=skeleton, motion_fps=motion_fps)
-    joints, out_fps = clip.joints, clip.fps
+    joints, out_fps = clip.joints, check_fps(clip.fps, f"{motion}: motion frame rate")
+    if fps is not None:
+        check_fps(fps, "--fps")
     if fps is not None and abs(fps - clip.fps) > 1e-9:
         joints = resample_linear(torch.from_numpy(np.asarray(joints, np.float64)), clip.fps, fps).numpy()
         out_fps = fps

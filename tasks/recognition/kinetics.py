@@ -25,12 +25,16 @@ from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.motion.value_checks import check_finite
+
 __all__ = ["NUM_JOINTS", "KineticsFileError", "read_kinetics_clip", "read_kinetics_labels"]
 
 NUM_JOINTS = 18  # OpenPose COCO-18
+MAX_FRAMES = 100_000  # a frame_index span beyond this (~55 min at 30 fps) is refused, not allocated
 
 
-class KineticsFileError(ValueError):
+class KineticsFileError(DataFileError):
     """A Kinetics-skeleton JSON file does not follow the ST-GCN layout (the message names the file)."""
 
 
@@ -49,9 +53,13 @@ def _numbers(values: Any, count: int, what: str) -> np.ndarray:
         got = len(values) if isinstance(values, list) else type(values).__name__
         raise KineticsFileError(f"{what}: expected a list of {count} numbers, got {got}")
     try:
-        return np.asarray(values, dtype=np.float32)
-    except (TypeError, ValueError):
+        with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
+            array = np.asarray(values, dtype=np.float32)
+    except (TypeError, ValueError, OverflowError):
         raise KineticsFileError(f"{what}: expected {count} numbers, got non-numeric values") from None
+    if array.shape != (count,):
+        raise KineticsFileError(f"{what}: expected a flat list of {count} numbers, got shape {array.shape}")
+    return check_finite(array, what, "value", ("entry",), KineticsFileError)
 
 
 def read_kinetics_clip(
@@ -109,6 +117,9 @@ def read_kinetics_clip(
         empty = np.zeros((0, 0, NUM_JOINTS), np.float32)
         return empty[..., None].repeat(2, -1), empty, label, label_name
     first, last = min(frames), max(frames)
+    if last - first >= MAX_FRAMES:
+        raise KineticsFileError(f"{path}: frame_index runs from {first} to {last}, more than {MAX_FRAMES} "
+                                "frames (a Kinetics clip has about 300)")  # fmt: skip
     num_people = min(num_person_out, max(len(p) for p in frames.values()))
     keypoint = np.zeros((num_people, last - first + 1, NUM_JOINTS, 2), np.float32)
     score = np.zeros((num_people, last - first + 1, NUM_JOINTS), np.float32)
@@ -133,4 +144,8 @@ def read_kinetics_labels(path: str | PathLike[str]) -> dict[str, dict]:
     for video_id, entry in labels.items():
         if not isinstance(entry, dict) or not {"has_skeleton", "label_index"} <= entry.keys():
             raise KineticsFileError(f"{path}: entry {video_id!r} needs 'has_skeleton' and 'label_index'")
+        label = entry["label_index"]
+        if isinstance(label, bool) or not isinstance(label, int) or label < 0:
+            raise KineticsFileError(f"{path}: entry {video_id!r}: 'label_index' must be a 0-based integer, "
+                                    f"got {label!r}")  # fmt: skip
     return labels

@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import DataFileError
+
 __all__ = [
     "BODY_FIELDS",
     "JOINT_FIELDS",
@@ -63,7 +65,7 @@ ZERO_EPS = 1e-3  # frames whose summed |xyz| is below this are empty (PYSKL ``no
 _NAME_RE = re.compile(r"S(\d{3})C(\d{3})P(\d{3})R(\d{3})A(\d{3})")
 
 
-class SkeletonFileError(ValueError):
+class SkeletonFileError(DataFileError):
     """A ``.skeleton`` file is truncated or malformed; the message names the file and the 1-based line."""
 
 
@@ -262,6 +264,24 @@ class _Lines:
             raise self.error(f"expected {expected} (>= 0), got {value}")
         return value
 
+    def check_room(self, count: int, what: str) -> None:
+        """Refuse a count of items (of at least one line each) that the rest of the file cannot hold."""
+        left = len(self.lines) - self.pos
+        if count > left:
+            raise self.error(f"{count} {what} declared, but only {left} lines follow")
+
+    def check_finite_joints(self, joints: np.ndarray, blocks: list[tuple[int, str]]) -> None:
+        """Raise naming the line of the first NaN / Inf joint value (or an x, y, z beyond float32)."""
+        with np.errstate(over="ignore"):
+            bad = ~np.isfinite(joints)
+            bad[..., :3] |= ~np.isfinite(joints[..., :3].astype(np.float32))  # kept as float32
+        if bad.any():
+            k, j, c = np.argwhere(bad)[0]
+            first, where = blocks[k]
+            value = f"{JOINT_FIELDS[c]} = {joints[k, j, c]}"
+            message = f"joint {j + 1} of {where}: {value} (NaN, Inf and overflow are refused)"
+            raise self.error(message, first + j + 1)
+
     def skip_joints(self, where: str) -> int:
         """Check that the next 25 lines are joint lines of 12 values; return the first one's index."""
         first = self.pos
@@ -317,7 +337,8 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
     Raises:
         FileNotFoundError: the file does not exist.
         SkeletonFileError: the file is truncated or malformed (message: file, 1-based line, what was
-            expected), or has non-blank content after the last frame.
+            expected), has non-blank content after the last frame, declares more frames than it has
+            lines, or holds a NaN / Inf (or an x, y, z beyond float32) on a body or joint line.
     """
     path_str = str(path)
     try:
@@ -326,6 +347,7 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
         raise SkeletonFileError(f"{path_str}: not a text .skeleton file ({e})") from None
     lines = _Lines(path_str, text)
     num_frames = lines.count("the frame count")
+    lines.check_room(num_frames, "frames")
     frames: list[NTUFrame] = []
     records: list[tuple[int, int, int, np.ndarray]] = []  # (frame, timeline index, bodyID, info)
     blocks: list[tuple[int, str]] = []  # (index of the first joint line, description) per body
@@ -345,6 +367,8 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
             except ValueError:
                 raise lines.error(f"expected the body line of {where} (integer bodyID, then 9 numbers), "
                                   f"got {' '.join(values)!r}") from None  # fmt: skip
+            if not np.isfinite(info).all():
+                raise lines.error(f"the body line of {where} holds a non-finite number: {' '.join(values)!r}")
             joint_count = lines.count(f"the joint count of {where}")
             if joint_count != NUM_JOINTS:
                 raise lines.error(f"expected the joint count of {where} = {NUM_JOINTS}, got {joint_count}")
@@ -356,6 +380,7 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
     if rest:
         raise lines.error(f"unexpected content after the last of {num_frames} frames", rest[0] + 1)
     joints = lines.parse_all_joints(blocks) if blocks else np.zeros((0, NUM_JOINTS, len(JOINT_FIELDS)))
+    lines.check_finite_joints(joints, blocks)
     tracks: dict[int, dict] = {}
     for (f, step, body_id, info), body_joints in zip(records, joints):
         frames[f].bodies.append(NTUBodyFrame(body_id, info, body_joints))

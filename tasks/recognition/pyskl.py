@@ -16,13 +16,15 @@ from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.cache import write_atomic
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.value_checks import check_finite
 
 __all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
 
 
-class AnnotationFileError(ValueError):
+class AnnotationFileError(DataFileError):
     """A PYSKL annotation file does not have the documented structure (the message names the file)."""
 
 
@@ -33,6 +35,13 @@ def _int(value: Any) -> int | None:
     if isinstance(value, int | np.integer):
         return int(value)
     return None
+
+
+def _finite_float32(array: np.ndarray, where: str, what: str) -> np.ndarray:
+    """``array`` as float32, refusing NaN, Inf and values beyond the float32 range."""
+    with np.errstate(over="ignore"):  # an overflow becomes Inf, refused by check_finite
+        out = np.asarray(array, dtype=np.float32)
+    return check_finite(out, where, what, ("body", "frame", "joint"), AnnotationFileError)
 
 
 def _validate_annotation(anno: Any, index: int, source: str) -> dict:
@@ -60,14 +69,16 @@ def _validate_annotation(anno: Any, index: int, source: str) -> dict:
         raise AnnotationFileError(f"{where}: 'total_frames' ({anno.get('total_frames')!r}) must be an "
                                   f"integer equal to the T axis of 'keypoint' {keypoint.shape}")  # fmt: skip
     out = dict(anno)
-    out.update(label=label, total_frames=total_frames, keypoint=np.asarray(keypoint, dtype=np.float32))
+    out.update(label=label, total_frames=total_frames, keypoint=_finite_float32(keypoint, where, "keypoint"))
     if keypoint.shape[-1] == 2 or "keypoint_score" in anno:
         score = anno.get("keypoint_score")
         if not isinstance(score, np.ndarray) or score.shape != keypoint.shape[:3]:
             shape = getattr(score, "shape", None if score is None else type(score).__name__)
             raise AnnotationFileError(f"{where}: 2D keypoints need 'keypoint_score' of shape "
                                       f"{keypoint.shape[:3]} (M, T, V), got {shape}")  # fmt: skip
-        out["keypoint_score"] = np.asarray(score, dtype=np.float32)
+        if not np.issubdtype(score.dtype, np.number):
+            raise AnnotationFileError(f"{where}: 'keypoint_score' must be numeric, got dtype {score.dtype}")
+        out["keypoint_score"] = _finite_float32(score, where, "keypoint_score")
     return out
 
 

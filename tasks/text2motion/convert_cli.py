@@ -18,7 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, denormalize, recover_from_ric
+from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.text2motion.features import denormalize, recover_from_ric
+from skeleton_mamba.tasks.text2motion.humanml3d import read_features, read_statistics
 
 __all__ = ["convert_file", "main"]
 
@@ -27,19 +29,14 @@ def convert_file(
     features: str | PathLike[str], out: str | PathLike[str], stats: str | PathLike[str] | None = None
 ) -> Path:
     """Read (T, 263) features, de-normalise with ``stats`` (folder of Mean/Std) if given, save (T, 22, 3)."""
-    path = Path(features)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such feature file")
-    array = np.load(path, allow_pickle=False)
-    if array.ndim != 2 or array.shape[1] != FEATURE_DIM:
-        raise ValueError(f"{path}: expected HumanML3D features (T, {FEATURE_DIM}), got shape {array.shape}")
+    array = read_features(features)
     x = torch.from_numpy(array.astype(np.float64))
     if stats is not None:
-        from skeleton_mamba.tasks.text2motion.humanml3d import read_statistics
-
         mean, std = read_statistics(stats)
         x = denormalize(x, torch.from_numpy(mean).double(), torch.from_numpy(std).double())
-    joints = recover_from_ric(x).numpy().astype(np.float32)
+    with np.errstate(over="ignore"):
+        joints = recover_from_ric(x).numpy().astype(np.float32)
+    check_finite(joints, f"{features} (converted)", "joints", ("frame", "joint"))  # e.g. Std * x overflowed
     out = Path(out)
     if out.suffix != ".npy":
         raise ValueError(f"{out}: the output must be a .npy file")

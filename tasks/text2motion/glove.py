@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
 
 __all__ = [
     "POS_ENUMERATOR",
@@ -129,12 +130,13 @@ class WordVectorizer(_TokenFeatures):
         for path in paths:
             if not path.is_file():
                 raise FileNotFoundError(f"{path}: missing GloVe file of the T2M evaluator")
-        vectors = np.load(paths[0], allow_pickle=False)
+        vectors = load_npy(paths[0])
         words, word_to_row = safe_load_pickle(paths[1]), safe_load_pickle(paths[2])
         if not isinstance(words, list) or not isinstance(word_to_row, dict):
             raise ValueError(f"{root}: expected a word list in {paths[1].name} and a dict in {paths[2].name}")
-        if vectors.ndim != 2:
-            raise ValueError(f"{paths[0]}: expected (V, dim) vectors, got shape {vectors.shape}")
+        if vectors.ndim != 2 or not np.issubdtype(vectors.dtype, np.number):
+            raise ValueError(f"{paths[0]}: expected numeric (V, dim) vectors, got shape {vectors.shape}")
+        check_finite(vectors, str(paths[0]), "vectors", ("row",))
         self.word_to_vector = {w: vectors[word_to_row[w]].astype(np.float32) for w in words}
         if "unk" not in self.word_to_vector:
             raise ValueError(f"{paths[1]}: the vocabulary has no 'unk' entry")

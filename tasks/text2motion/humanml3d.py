@@ -21,18 +21,21 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, FPS
 
 __all__ = [
     "Caption",
     "MotionClip",
+    "NonFiniteFeaturesError",
     "MIN_MOTION_LENGTH",
     "MAX_MOTION_LENGTH",
     "UNIT_LENGTH",
@@ -41,6 +44,7 @@ __all__ = [
     "read_split",
     "read_statistics",
     "read_feature_vector",
+    "read_features",
     "read_motion",
     "read_captions",
     "load_clips",
@@ -129,31 +133,51 @@ def read_split(root: str | PathLike[str], split: str) -> list[str]:
 def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
     """A (263,) float32 vector from a ``.npy`` file (statistics); ``what`` names it in errors."""
     path = Path(path)
-    array = np.load(_require(path, what), allow_pickle=False)
-    if array.shape != (FEATURE_DIM,):
-        raise ValueError(f"{path}: expected {what} of shape ({FEATURE_DIM},), got {array.shape}")
-    return array.astype(np.float32)
+    array = load_npy(_require(path, what))
+    if array.shape != (FEATURE_DIM,) or not np.issubdtype(array.dtype, np.number):
+        raise DataFileError(f"{path}: expected numeric {what} of shape ({FEATURE_DIM},), got {array.shape}")
+    with np.errstate(over="ignore"):
+        return check_finite(array.astype(np.float32), str(path), what, ("column",))
 
 
 def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; Std must be positive."""
+    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; finite, Std positive."""
     root = Path(root)
     mean = read_feature_vector(root / "Mean.npy", "Mean")
     std = read_feature_vector(root / "Std.npy", "Std")
-    if not np.all(std > 0) or not np.all(np.isfinite(mean)):
-        raise ValueError(f"{root / 'Std.npy'}: Std must be positive and Mean finite")
+    if not np.all(std > 0):
+        column = int(np.argmin(std > 0))
+        raise DataFileError(f"{root / 'Std.npy'}: Std must be positive, column {column} is {std[column]}")
     return mean, std
 
 
+class NonFiniteFeaturesError(DataFileError):
+    """A feature file holds NaN or Inf. The released HumanML3D has two such motions, 007975 and its
+    mirror M007975 (reported on the [HumanML3D] issue tracker); :func:`load_clips` leaves them out."""
+
+
+def read_features(path: str | PathLike[str]) -> np.ndarray:
+    """A (T, 263) HumanML3D feature ``.npy`` (T >= 1) as float32.
+
+    Raises:
+        FileNotFoundError: no such file.
+        DataFileError: not a numeric ``.npy`` array of that shape.
+        NonFiniteFeaturesError: a NaN / Inf (or a value beyond float32), naming its frame and column.
+    """
+    path = Path(path)
+    array = load_npy(path)
+    if array.ndim != 2 or array.shape[1] != FEATURE_DIM or not len(array):
+        raise DataFileError(f"{path}: expected HumanML3D features (T >= 1, {FEATURE_DIM}), got {array.shape}")
+    if not np.issubdtype(array.dtype, np.number):
+        raise DataFileError(f"{path}: expected numeric features, got dtype {array.dtype}")
+    with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
+        array = array.astype(np.float32)
+    return check_finite(array, str(path), "features", ("frame", "column"), NonFiniteFeaturesError)
+
+
 def read_motion(root: str | PathLike[str], motion_id: str) -> np.ndarray:
-    """``ROOT/new_joint_vecs/{id}.npy`` as (T, 263) float32, checked for shape and finite values."""
-    path = _require(Path(root) / "new_joint_vecs" / f"{motion_id}.npy", "motion")
-    array = np.load(path, allow_pickle=False)
-    if array.ndim != 2 or array.shape[1] != FEATURE_DIM:
-        raise ValueError(f"{path}: expected features (T, {FEATURE_DIM}), got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{path}: features contain NaN or infinite values")
-    return array.astype(np.float32)
+    """``ROOT/new_joint_vecs/{id}.npy`` as (T, 263) float32, checked by :func:`read_features`."""
+    return read_features(_require(Path(root) / "new_joint_vecs" / f"{motion_id}.npy", "motion"))
 
 
 def _seconds(value: str) -> float:
@@ -201,12 +225,19 @@ def load_clips(
         limit: read at most this many ids (quick runs).
 
     Returns:
-        One clip per id with its whole-clip captions, plus one clip per captioned sub-clip.
+        One clip per id with its whole-clip captions, plus one clip per captioned sub-clip. Motions
+        with NaN / Inf features (:class:`NonFiniteFeaturesError`) are left out with a warning that
+        counts and names them.
     """
     clips = []
+    excluded = []
     ids = read_split(root, split)
     for motion_id in ids[:limit] if limit is not None else ids:
-        features = read_motion(root, motion_id)
+        try:
+            features = read_motion(root, motion_id)
+        except NonFiniteFeaturesError:
+            excluded.append(motion_id)
+            continue
         if not _keep(len(features), min_length):
             continue
         whole = []
@@ -220,6 +251,10 @@ def load_clips(
                 clips.append(MotionClip(motion_id, part, [caption], start_frame=first))
         if whole:
             clips.append(MotionClip(motion_id, features, whole))
+    if excluded:
+        names = ", ".join(excluded[:10]) + (" ..." if len(excluded) > 10 else "")
+        message = f"HumanML3D {split}: left out {len(excluded)} motions with NaN or Inf features: {names}"
+        warnings.warn(message, stacklevel=2)
     return clips
 
 

@@ -11,7 +11,10 @@ frames above the threshold, so the scores of rejected placements are lower bound
 The kept window is rendered from the head camera (:mod:`.camera`, :mod:`.raycast`) and written in the
 layout of :mod:`.layout`. Each window's random numbers come from ``(seed, crc32(sample_id))``, so a
 build is reproducible whatever the worker count and order, and an interrupted build resumes: complete
-samples and windows already skipped are not redone; temporary and unmarked folders are removed first.
+samples and windows already skipped are not redone; temporary and unmarked folders are removed first,
+and a complete sample whose files do not agree with its ``meta.json`` (a truncated ``rgb.mp4``, a short
+``depth.npz``: :func:`.layout.sample_problem`) is rebuilt. A corrupt motion file stops the build with its
+name, or with ``skip_bad`` is passed over and listed in the summary (``bad_inputs``).
 
 The manual verification step of the seed is left to the user (``meta.json`` keeps the score).
 """
@@ -21,6 +24,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import shutil
 import zlib
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -39,6 +43,7 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
+from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
@@ -96,6 +101,7 @@ class BuildConfig:
     smpl_model: str | None = None  # SMPL model file (.pkl official / .npz): score the mesh, not capsules
     music_dir: str | None = None
     keep_ignored: bool = False
+    skip_bad: bool = False  # go on past corrupt motion files and list them at the end
     workers: int = 1
     progress: bool = True
 
@@ -126,7 +132,9 @@ class BuildSummary:
     skipped: int = 0
     already_complete: int = 0
     already_skipped: int = 0
+    rebuilt: int = 0  # complete samples whose files failed layout.sample_problem on resume
     skip_reasons: list[str] = field(default_factory=list)
+    bad_inputs: list[str] = field(default_factory=list)  # corrupt motion files passed over (--skip-bad)
 
 
 # ---------------------------------------------------------------- inputs
@@ -176,14 +184,29 @@ def scene_keys(cfg: BuildConfig) -> list[str]:
     return files
 
 
-def plan_windows(cfg: BuildConfig, motions: list[Path]) -> list[WindowTask]:
-    """All windows of all motions, in a fixed order, each with its scene."""
+def plan_windows(
+    cfg: BuildConfig, motions: list[Path], bad_inputs: list[str] | None = None
+) -> list[WindowTask]:
+    """All windows of all motions, in a fixed order, each with its scene.
+
+    A motion file that cannot be read stops the plan with its name, unless ``cfg.skip_bad``: then its
+    error message is appended to ``bad_inputs`` and the other files are planned.
+    """
     keys = scene_keys(cfg)
     window = round(cfg.window_s * cfg.fps)
     stride = round(cfg.stride * cfg.fps)
     tasks: list[WindowTask] = []
     for path in motions:
-        motion = read_motion(path)
+        try:
+            motion = read_motion(path)
+        except (ValueError, OSError, EOFError) as e:  # DataFileError, UnsafePickleError, unreadable files
+            message = str(e) if str(path) in str(e) else f"{path}: {e}"
+            if not cfg.skip_bad:
+                raise DataFileError(f"{message}\n(--skip-bad goes on past corrupt motion files)") from e
+            log.warning("skipping corrupt motion file: %s", message)
+            if bad_inputs is not None:
+                bad_inputs.append(message)
+            continue
         frames = int(np.floor((motion.num_frames - 1) * cfg.fps / motion.fps + 1e-9)) + 1
         for w, start in enumerate(aistpp.window_starts(frames, window, stride)):
             sample_id = f"{path.stem}__w{w:03d}"
@@ -386,11 +409,18 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
     removed = layout.clean_incomplete(out)
     if removed:
         log.info("removed %d incomplete sample folder(s): %s", len(removed), ", ".join(removed))
-    tasks = plan_windows(cfg, motion_files(motion, cfg.keep_ignored))
-    summary = BuildSummary(planned=len(tasks))
+    bad_inputs: list[str] = []
+    tasks = plan_windows(cfg, motion_files(motion, cfg.keep_ignored), bad_inputs)
+    summary = BuildSummary(planned=len(tasks), bad_inputs=bad_inputs)
     todo = []
     for task in tasks:
-        if layout.is_complete(layout.sample_dir(out, task.sample_id)):
+        folder = layout.sample_dir(out, task.sample_id)
+        problem = layout.sample_problem(folder) if layout.is_complete(folder) else None
+        if problem is not None:
+            log.warning("rebuilding %s: %s", task.sample_id, problem)
+            shutil.rmtree(folder)
+            summary.rebuilt += 1
+        if layout.is_complete(folder):
             summary.already_complete += 1
         elif (out / layout.SKIPPED / f"{task.sample_id}.json").is_file():
             summary.already_skipped += 1

@@ -85,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--music-dir", default=None, help="folder of AIST++ music (<music id>.wav) for meta.json")
     p.add_argument("--keep-ignored", action="store_true", help="keep AIST++ ignore-list sequences")
+    p.add_argument(
+        "--skip-bad", action="store_true", help="go on past corrupt motion files and list them at the end"
+    )
     p.add_argument("--workers", type=int, default=default_workers(), help="worker processes")
     p.add_argument("--no-progress", action="store_false", dest="progress", help="hide the progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="log every skipped window and cleanup")
@@ -106,5 +109,9 @@ def main(argv: list[str]) -> int:
         f"rejected {summary.rejected} placements, skipped {summary.skipped} windows; "
         f"{summary.already_complete} were already complete, {summary.already_skipped} already skipped; "
         f"{summary.complete} complete samples in {cfg.out}"
+        + (f"; rebuilt {summary.rebuilt} damaged samples" if summary.rebuilt else "")
     )
+    if summary.bad_inputs:
+        print(f"make-ego: skipped {len(summary.bad_inputs)} corrupt motion files:")
+        print("\n".join(f"  {message}" for message in summary.bad_inputs))
     return 0

@@ -45,12 +45,14 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
+from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, read_npy_header
 
 __all__ = [
     "COMPLETE",
@@ -58,6 +60,7 @@ __all__ = [
     "EgoSample",
     "sample_dir",
     "is_complete",
+    "sample_problem",
     "complete_samples",
     "clean_incomplete",
     "write_sample",
@@ -124,6 +127,62 @@ def clean_incomplete(root: str | Path) -> list[str]:
                 shutil.rmtree(p)
                 removed.append(p.name)
     return removed
+
+
+def _npz_shapes(path: Path) -> dict[str, tuple[int, ...]]:
+    """The array shapes of an ``.npz`` from the member headers (nothing is decompressed beyond them)."""
+    shapes = {}
+    with zipfile.ZipFile(path) as archive:
+        for name in archive.namelist():
+            with archive.open(name) as member:
+                shapes[name.removesuffix(".npy")] = read_npy_header(member)[0]
+    return shapes
+
+
+def _count_video_frames(path: Path) -> int:
+    import imageio_ffmpeg
+
+    return imageio_ffmpeg.count_frames_and_secs(str(path))[0]
+
+
+def sample_problem(folder: str | Path) -> str | None:
+    """Why a COMPLETE sample folder cannot be trusted, or ``None`` when its files agree with ``meta.json``.
+
+    Checks that every file of the layout is present and not empty and that ``motion.npz``, ``camera.npz``,
+    ``depth.npz`` (array headers) and the RGB frames (``rgb.mp4``: counted by an ffmpeg stream copy, no
+    decoding; ``rgb/``: the PNG count) all hold ``meta["frames"]["count"]`` frames (depth: of ``height`` x
+    ``width``). A build interrupted while copying, or a file truncated afterwards, fails these checks; a
+    resumed build rebuilds the sample.
+    """
+    folder = Path(folder)
+    try:
+        meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+        frames = meta["frames"]
+        count, fmt = int(frames["count"]), frames["format"]
+        size = (int(frames["height"]), int(frames["width"]))
+        rgb = folder / ("rgb.mp4" if fmt == "mp4" else "rgb")
+        for name in ("motion.npz", "camera.npz", "depth.npz", *(("rgb.mp4",) if fmt == "mp4" else ())):
+            if not (folder / name).is_file() or (folder / name).stat().st_size == 0:
+                return f"{name} is missing or empty"
+        lengths = {
+            "motion.npz": _npz_shapes(folder / "motion.npz").get("smpl_poses", (None,))[0],
+            "camera.npz": _npz_shapes(folder / "camera.npz").get("positions", (None,))[0],
+        }
+        depth = _npz_shapes(folder / "depth.npz").get("depth")
+        if depth is None or depth[1:] != size:
+            return f"depth.npz holds {depth}, expected ({count}, {size[0]}, {size[1]})"
+        lengths["depth.npz"] = depth[0]
+        if fmt == "mp4":
+            lengths["rgb.mp4"] = _count_video_frames(rgb)
+        else:
+            pngs = sorted(rgb.glob("*.png"))
+            if any(p.stat().st_size == 0 for p in pngs):
+                return "an rgb/*.png frame is empty"
+            lengths["rgb/"] = len(pngs)
+    except (*NPY_HEADER_ERRORS, KeyError, TypeError, RuntimeError, zipfile.BadZipFile) as e:
+        return f"unreadable ({type(e).__name__}: {e})"
+    wrong = {name: n for name, n in lengths.items() if n != count}
+    return f"frame counts {wrong} differ from meta.json's {count}" if wrong else None
 
 
 def _write_frames(folder: Path, rgb: np.ndarray, fps: float, fmt: str) -> None:
