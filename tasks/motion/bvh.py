@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import SMPL24
+from skeleton_mamba.tasks.errors import SkeletonMambaError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
 
@@ -31,7 +32,7 @@ _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
 
-class BvhError(ValueError):
+class BvhError(SkeletonMambaError, ValueError):
     """A BVH file is malformed (the message names the file and line)."""
 
 

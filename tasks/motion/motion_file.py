@@ -26,11 +26,12 @@ from typing import NoReturn
 import numpy as np
 
 from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.errors import SkeletonMambaError
 
 __all__ = ["MotionData", "MotionFileError", "save_motion", "load_motion"]
 
 
-class MotionFileError(ValueError):
+class MotionFileError(SkeletonMambaError, ValueError):
     """A motion file is missing keys or has inconsistent shapes (the message names the file)."""
 
 

@@ -25,12 +25,14 @@ from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import SkeletonMambaError
+
 __all__ = ["NUM_JOINTS", "KineticsFileError", "read_kinetics_clip", "read_kinetics_labels"]
 
 NUM_JOINTS = 18  # OpenPose COCO-18
 
 
-class KineticsFileError(ValueError):
+class KineticsFileError(SkeletonMambaError, ValueError):
     """A Kinetics-skeleton JSON file does not follow the ST-GCN layout (the message names the file)."""
 
 

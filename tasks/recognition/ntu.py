@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import SkeletonMambaError
+
 __all__ = [
     "BODY_FIELDS",
     "JOINT_FIELDS",
@@ -63,7 +65,7 @@ ZERO_EPS = 1e-3  # frames whose summed |xyz| is below this are empty (PYSKL ``no
 _NAME_RE = re.compile(r"S(\d{3})C(\d{3})P(\d{3})R(\d{3})A(\d{3})")
 
 
-class SkeletonFileError(ValueError):
+class SkeletonFileError(SkeletonMambaError, ValueError):
     """A ``.skeleton`` file is truncated or malformed; the message names the file and the 1-based line."""
 
 

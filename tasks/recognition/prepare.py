@@ -31,6 +31,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from skeleton_mamba.tasks.errors import SkeletonMambaError
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,
@@ -46,7 +47,7 @@ KINETICS_PARTS = ("train", "val")
 KINETICS_FRAME_SHAPE = (256, 340)  # ST-GCN resized the videos to 340x256 before OpenPose
 
 
-class PrepareError(RuntimeError):
+class PrepareError(SkeletonMambaError, RuntimeError):
     """A raw file could not be converted (its message names the file and what is wrong)."""
 
 

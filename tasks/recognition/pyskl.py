@@ -18,12 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import SkeletonMambaError
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 
 __all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
 
 
-class AnnotationFileError(ValueError):
+class AnnotationFileError(SkeletonMambaError, ValueError):
     """A PYSKL annotation file does not have the documented structure (the message names the file)."""
 
 
