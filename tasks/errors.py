@@ -18,6 +18,7 @@ import os
 __all__ = [
     "CheckpointError",
     "DatasetNotFoundError",
+    "InputError",
     "NonFiniteLossError",
     "SkeletonMambaError",
     "expected_failure",
@@ -38,6 +39,10 @@ class DatasetNotFoundError(SkeletonMambaError, FileNotFoundError):
     The message says where the data is expected and which command (``sm prepare ...``) builds it;
     ``sm fit|validate|test|predict`` prints it and exits with status 2.
     """
+
+
+class InputError(SkeletonMambaError, ValueError):
+    """A command's input is unusable: a file's content, or an argument about files (the message names it)."""
 
 
 class CheckpointError(SkeletonMambaError, ValueError):

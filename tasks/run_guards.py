@@ -122,5 +122,5 @@ class InterruptRecorder(pl.Callback):
             dirpath = getattr(checkpoint, "dirpath", None)
             if trainer.state.fn == "fit" and dirpath:
                 path = os.path.join(dirpath, "last.ckpt")
-                trainer.save_checkpoint(path)
+                trainer.save_checkpoint(path, weights_only=False)  # the full state, for resuming
                 self.saved = path

@@ -15,12 +15,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 
 __all__ = ["FeatureCache", "default_cache_root", "file_sha256"]
 
@@ -90,16 +91,7 @@ class FeatureCache:
         """Write ``array`` atomically under ``key``; returns the entry path (``None`` when disabled)."""
         if not self.enabled:
             return None
-        self.dir.mkdir(parents=True, exist_ok=True)
         final = self.path_for(key)
-        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=self.dir)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.save(f, np.ascontiguousarray(array), allow_pickle=False)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, final)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_open(final, "wb") as f:
+            np.save(f, np.ascontiguousarray(array), allow_pickle=False)
         return final

@@ -5,7 +5,7 @@ a floor grid, and the time. The camera looks at the body from a fixed direction,
 smoothed horizontal position, and is placed so that the body's height fills about 60 % of the frame.
 Drawing is done directly with OpenCV (anti-aliased lines, painter's order by depth), frames are
 encoded by the ffmpeg binary that imageio-ffmpeg ships, and music is muxed into the mp4 (AAC),
-cut to the motion's length.
+cut to the motion's length. The file is written under a temporary name and renamed when complete.
 
 Input joints are y-up (the toolkit's convention) in any unit: the floor grid spacing is chosen from
 the body's size (1 m for a human in metres).
@@ -13,10 +13,11 @@ the body's size (1 m for a human in metres).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -24,6 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 from tqdm import tqdm
+
+from skeleton_mamba.tasks.motion.atomic import atomic_path
 
 __all__ = ["RenderStyle", "joint_sides", "render_frames", "render_motion"]
 
@@ -266,8 +269,18 @@ def render_motion(
     if suffix == ".gif":
         if music is not None:
             warnings.warn(f"{out}: GIF has no audio track, music ignored", stacklevel=2)
-        _write_gif(out, list(frames), fps)
+        with atomic_path(out) as tmp:
+            _write_gif(tmp, list(frames), fps)
         return out
+    with atomic_path(out) as tmp:
+        _write_mp4(tmp, frames, fps, style, music)
+    return out
+
+
+def _write_mp4(
+    out: Path, frames: Iterable[np.ndarray], fps: float, style: RenderStyle, music: str | PathLike[str] | None
+) -> None:
+    """Encode RGB frames to an H.264 mp4 with the ffmpeg binary of imageio-ffmpeg (music muxed as AAC)."""
     import imageio_ffmpeg
 
     writer = imageio_ffmpeg.write_frames(
@@ -285,6 +298,8 @@ def render_motion(
     try:
         for image in frames:
             writer.send(np.ascontiguousarray(image))
-    finally:
-        writer.close()
-    return out
+    except BaseException:
+        with contextlib.suppress(Exception):  # ffmpeg may be gone already (Ctrl-C reaches it too)
+            writer.close()
+        raise
+    writer.close()

@@ -9,9 +9,7 @@ restricted unpickler of :mod:`skeleton_mamba.tasks.motion.safe_pickle`, never pl
 
 from __future__ import annotations
 
-import os
 import pickle
-import tempfile
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -19,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from skeleton_mamba.tasks.errors import SkeletonMambaError
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 
 __all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
@@ -143,15 +142,6 @@ def save_annotations(data: dict, path: str | PathLike[str]) -> Path:
     """
     path = Path(path)
     data = validate_annotations(data, str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            pickle.dump(data, f, protocol=4)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_open(path, "wb") as f:
+        pickle.dump(data, f, protocol=4)
     return path

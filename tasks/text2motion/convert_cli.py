@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, denormalize, recover_from_ric
 
 __all__ = ["convert_file", "main"]
@@ -43,8 +44,8 @@ def convert_file(
     out = Path(out)
     if out.suffix != ".npy":
         raise ValueError(f"{out}: the output must be a .npy file")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.save(out, joints)
+    with atomic_open(out, "wb") as f:
+        np.save(f, joints)
     return out
 
 
