@@ -26,11 +26,17 @@ def check_writable(path: str | PathLike[str]) -> Path:
 
     Raises:
         IsADirectoryError: ``path`` is an existing directory.
-        NotADirectoryError / PermissionError: its folder cannot hold it (checked by creating the folder).
+        NotADirectoryError: a file stands where one of its folders should be.
+        PermissionError: its folder is not writable.
     """
     path = Path(path)
     if path.is_dir():
         raise IsADirectoryError(21, "Is a directory", str(path))
+    for folder in path.parents:
+        if folder.exists():
+            if not folder.is_dir():
+                raise NotADirectoryError(20, "Not a directory (a file is in the way)", str(folder))
+            break
     path.parent.mkdir(parents=True, exist_ok=True)
     if not os.access(path.parent, os.W_OK):
         raise PermissionError(13, "Permission denied", str(path.parent))

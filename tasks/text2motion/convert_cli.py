@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, denormalize, recover_from_ric
 
@@ -67,7 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         out = convert_file(args.features, args.out, stats=args.stats if args.normalized else None)
     except (OSError, ValueError) as e:
-        print(f"sm convert: error: {e}", file=sys.stderr)
+        print(f"sm convert: error: {one_line_message(e)}", file=sys.stderr)
         return 2
     print(f"wrote {out}")
     return 0

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 
@@ -112,7 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not checkpoint.is_file():
             raise FileNotFoundError(f"{checkpoint}: no such checkpoint")
     except (OSError, ValueError) as e:
-        print(f"sm generate: error: {e}", file=sys.stderr)
+        print(f"sm generate: error: {one_line_message(e)}", file=sys.stderr)
         return 2
     from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.text2motion.module import TextToMotionModule

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import signal
 import zlib
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -247,8 +248,19 @@ def _pool_context() -> multiprocessing.context.BaseContext:
 
 
 def _init_worker() -> None:
-    """One torch thread per worker process (the processes already share the cores)."""
+    """One torch thread per worker process; Ctrl-C is the parent's to handle (it stops the workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     torch.set_num_threads(1)
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued windows and end the workers now (a window in progress leaves only a temp folder)."""
+    processes = list((pool._processes or {}).values())  # the executor has no public handle on them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=5)
 
 
 # ---------------------------------------------------------------- one window
@@ -413,13 +425,18 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
             record(build_window(task, cfg))
             bar.update()
     else:
-        with ProcessPoolExecutor(
+        pool = ProcessPoolExecutor(
             max_workers=min(cfg.workers, len(todo)), mp_context=_pool_context(), initializer=_init_worker
-        ) as pool:
+        )
+        try:
             futures = [pool.submit(build_window, task, cfg) for task in todo]
             for future in as_completed(futures):
                 record(future.result())
                 bar.update()
+        except BaseException:
+            _stop_pool(pool)  # Ctrl-C or a failed window: do not wait for the queued windows
+            raise
+        pool.shutdown()
     bar.close()
     summary.placed, summary.skipped, summary.rejected = (
         counts["placed"],
