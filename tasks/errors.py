@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import errno
 import os
+import signal
 
 __all__ = [
     "CheckpointError",
@@ -23,6 +24,7 @@ __all__ = [
     "SkeletonMambaError",
     "expected_failure",
     "one_line_message",
+    "worker_ignores_ctrl_c",
 ]
 
 
@@ -81,3 +83,9 @@ def one_line_message(err: BaseException) -> str:
         names = [os.fspath(n) for n in (err.filename, err.filename2) if n is not None]
         return f"{' -> '.join(map(str, names))}: {reason}" if names else reason
     return str(err) or type(err).__name__
+
+
+def worker_ignores_ctrl_c() -> None:
+    """Initializer of worker processes: Ctrl-C reaches the whole process group, but only the parent acts on
+    it (it stops the workers), so workers print no traceback of their own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

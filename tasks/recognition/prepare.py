@@ -31,7 +31,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from skeleton_mamba.tasks.errors import SkeletonMambaError
+from skeleton_mamba.tasks.errors import SkeletonMambaError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,
@@ -107,7 +107,7 @@ def _run(
             return (worker(*job) for job in jobs)
         return pool.imap(_star, [(worker, job) for job in jobs], chunksize=chunksize)
 
-    pool = multiprocessing.Pool(workers) if workers > 1 else None
+    pool = multiprocessing.Pool(workers, initializer=worker_ignores_ctrl_c) if workers > 1 else None
     try:
         progress = tqdm(results(pool), total=len(jobs), desc=desc, unit="file", file=sys.stderr)
         for name, anno, error in progress:

@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
-import signal
 import zlib
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -40,6 +39,7 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
+from skeleton_mamba.tasks.errors import worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
@@ -249,7 +249,7 @@ def _pool_context() -> multiprocessing.context.BaseContext:
 
 def _init_worker() -> None:
     """One torch thread per worker process; Ctrl-C is the parent's to handle (it stops the workers)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    worker_ignores_ctrl_c()
     torch.set_num_threads(1)
 
 
