@@ -78,6 +78,8 @@ def one_line_message(err: BaseException) -> str:
         reason = err.strerror
         if isinstance(err, IsADirectoryError) or err.errno == errno.EISDIR:
             reason = "is a directory (a file path is expected)"
+        elif isinstance(err, FileExistsError) and err.filename and not os.path.isdir(err.filename):
+            reason = "is a file (a folder is expected)"
         elif isinstance(err, PermissionError):
             reason = "permission denied (not writable or not readable)"
         names = [os.fspath(n) for n in (err.filename, err.filename2) if n is not None]

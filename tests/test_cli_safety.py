@@ -428,6 +428,25 @@ def test_a_directory_or_a_file_in_the_way_is_a_one_line_error(tmp_path, capsys):
     ]
 
 
+def test_undecodable_audio_unreadable_arrays_and_files_in_the_way_are_one_line_errors(tmp_path, capsys):
+    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
+
+    motion = save_motion(tmp_path / "m.npz", synthesize_dance(120, 1.0, 10.0, "bounce", 1))
+    (tmp_path / "bad.wav").write_text("not audio")
+    (tmp_path / "bad.npy").write_text("not an array")
+    (tmp_path / "afile").write_text("x")
+    video = tmp_path / "v.mp4"
+    assert sm_main(["render", str(motion), "--out", str(video), "--music", str(tmp_path / "bad.wav")]) == 2
+    assert sm_main(["convert", str(tmp_path / "bad.npy"), "--out", str(tmp_path / "j.npy")]) == 2
+    assert sm_main(["make-ego", "--motion", str(motion), "--out", str(tmp_path / "afile")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith(f"sm render: error: {tmp_path / 'bad.wav'}: not a readable audio file (")
+    assert lines[1].startswith(f"sm convert: error: {tmp_path / 'bad.npy'}: not a readable .npy array (")
+    assert lines[2] == f"sm make-ego: {tmp_path / 'afile'}: is a file (a folder is expected)"
+    assert not video.exists() and len(lines) == 3
+
+
 def test_one_line_message_maps_os_errors():
     err = PermissionError(13, "Permission denied", "/x/y.mp4")
     assert one_line_message(err) == "/x/y.mp4: permission denied (not writable or not readable)"

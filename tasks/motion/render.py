@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from skeleton_mamba.tasks.motion.atomic import atomic_path
+from skeleton_mamba.tasks.motion.atomic import atomic_path, check_writable
 
 __all__ = ["RenderStyle", "joint_sides", "render_frames", "render_motion"]
 
@@ -224,6 +224,21 @@ def _write_gif(out: Path, frames: list[np.ndarray], fps: float) -> None:
     images[0].save(out, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0)
 
 
+def _check_audio(path: Path) -> None:
+    """Fail before rendering when ffmpeg cannot decode ``path`` (rather than a broken pipe mid-video)."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    if not path.is_file():
+        raise FileNotFoundError(2, "No such music file", str(path))
+    probe = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path), "-t", "0.1", "-f", "null", "-"]
+    result = subprocess.run(probe, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    if result.returncode != 0:
+        reason = (result.stderr.strip().splitlines() or ["ffmpeg cannot read it"])[-1]
+        raise ValueError(f"{path}: not a readable audio file ({reason})")
+
+
 def render_motion(
     joints: np.ndarray,
     parents: Sequence[int],
@@ -257,13 +272,13 @@ def render_motion(
         raise ValueError(f"{out}: output must end in .mp4 or .gif")
     if not (math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps}")
-    if music is not None and not Path(music).is_file():
-        raise FileNotFoundError(f"{music}: no such music file")
+    check_writable(out)
+    if music is not None:
+        _check_audio(Path(music))
     style = style or RenderStyle()
     joints = _check_joints(joints, parents)  # fail before an output file is opened
     if suffix == ".mp4" and (style.width % 16 or style.height % 16):
         raise ValueError(f"mp4 width and height must be multiples of 16, got {style.width}x{style.height}")
-    out.parent.mkdir(parents=True, exist_ok=True)
     frames = render_frames(joints, parents, fps, names=names, style=style, title=title)
     frames = tqdm(frames, total=len(joints), desc=f"render {out.name}", unit="frame", disable=not progress)
     if suffix == ".gif":

@@ -69,7 +69,10 @@ def load_joints(
         motion = load_aistpp_motion(path)
         return _from_skeleton(motion.joint_positions(), "smpl24", motion_fps or motion.fps)
     if suffix == ".npy":
-        joints = np.load(path, allow_pickle=False)
+        try:
+            joints = np.load(path, allow_pickle=False)
+        except (ValueError, EOFError) as err:
+            raise ValueError(f"{path}: not a readable .npy array ({err})") from None
         if joints.ndim != 3 or joints.shape[2] != 3:
             raise ValueError(f"{path}: expected joint positions (T, J, 3), got shape {joints.shape}")
         name = skeleton or _BY_JOINT_COUNT.get(joints.shape[1])

@@ -32,7 +32,10 @@ def convert_file(
     path = Path(features)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such feature file")
-    array = np.load(path, allow_pickle=False)
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError) as err:
+        raise ValueError(f"{path}: not a readable .npy array ({err})") from None
     if array.ndim != 2 or array.shape[1] != FEATURE_DIM:
         raise ValueError(f"{path}: expected HumanML3D features (T, {FEATURE_DIM}), got shape {array.shape}")
     x = torch.from_numpy(array.astype(np.float64))
