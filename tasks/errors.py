@@ -56,15 +56,17 @@ class NonFiniteLossError(SkeletonMambaError, FloatingPointError):
 
 
 def expected_failure(err: BaseException | None) -> BaseException | None:
-    """The expected failure behind ``err`` (itself or a cause: jsonargparse and Lightning wrap errors).
+    """The expected failure behind ``err``: itself or an explicit cause (jsonargparse wraps with ``from``).
 
     A :class:`SkeletonMambaError` anywhere in the chain wins over an :class:`OSError`; ``None`` when the
-    chain holds neither (a bug, which keeps its traceback).
+    chain holds neither (a bug, which keeps its traceback). Implicit contexts (an error raised while
+    handling another) are not followed, so a bug in an ``except`` block is never hidden behind the error it
+    was handling.
     """
     chain: list[BaseException] = []
     while err is not None and all(err is not seen for seen in chain):
         chain.append(err)
-        err = err.__cause__ or err.__context__
+        err = err.__cause__
     for kinds in (SkeletonMambaError, OSError):
         for item in chain:
             if isinstance(item, kinds):

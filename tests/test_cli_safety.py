@@ -454,6 +454,13 @@ def test_one_line_message_maps_os_errors():
     wrapped.__cause__ = FileNotFoundError(2, "No such file or directory", "a.wav")
     assert one_line_message(expected_failure(wrapped)) == "a.wav: No such file or directory"
     assert expected_failure(ValueError("a bug")) is None
+    try:
+        try:
+            raise FileNotFoundError(2, "No such file or directory", "b.wav")
+        except OSError:
+            raise KeyError("a bug while handling it")  # noqa: B904 - the implicit context is the point
+    except KeyError as bug:
+        assert expected_failure(bug) is None  # the traceback of the bug is kept
 
 
 def test_prepare_with_every_file_bad_keeps_the_old_annotation_file(tmp_path, capsys):
