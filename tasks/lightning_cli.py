@@ -6,12 +6,17 @@ A recipe composes a task's LightningModule and LightningDataModule through ``cla
     sm fit --recipe ntu60.yaml                          # packaged recipe (see `sm recipes`)
     sm fit --recipe my.yaml --config more.yaml --trainer.max_epochs 3 --data.init_args.root data/
     sm test --recipe ntu60.yaml --ckpt_path runs/ntu60_xsub/version_0/checkpoints/last.ckpt
+    sm fit --recipe ntu60.yaml --ckpt_path last         # resume the latest run, in its own version_N
     sm fit --recipe ntu60.yaml --print_config
 
 ``--recipe`` is an alias of ``-c/--config`` (:mod:`skeleton_mamba.tasks.recipe_resolution`);
 config files and dotted overrides merge left to right. Values that follow from the data set are
 linked from the instantiated data module to the model (:data:`DATA_TO_MODEL_LINKS`), never typed
 twice; a link applies when both the data module has the attribute and the model the argument.
+
+Every run gets :class:`~skeleton_mamba.tasks.run_guards.NonFiniteLossGuard` and
+:class:`~skeleton_mamba.tasks.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
+:mod:`skeleton_mamba.tasks.checkpoints` before Lightning reads it (README "Safety and errors").
 """
 
 from __future__ import annotations
