@@ -36,7 +36,7 @@ from skeleton_mamba import __version__
 from skeleton_mamba.tasks.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
 from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty, resume_in_run_folder
-from skeleton_mamba.tasks.run_guards import InterruptRecorder, NonFiniteLossGuard
+from skeleton_mamba.tasks.run_guards import InterruptRecorder, NonFiniteLossGuard, silence_interrupt_notice
 
 __all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "list_recipes", "run"]
 
@@ -177,6 +177,7 @@ def run(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     import_task_modules()
     recorder = InterruptRecorder()
+    silence_interrupt_notice()
     try:
         SkeletonMambaCLI(
             LightningModule,

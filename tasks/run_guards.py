@@ -13,6 +13,7 @@ resumes from the step where the run stopped.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from pathlib import Path
@@ -24,7 +25,7 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 
 from skeleton_mamba.tasks.errors import NonFiniteLossError
 
-__all__ = ["InterruptRecorder", "NonFiniteLossGuard", "describe_batch"]
+__all__ = ["InterruptRecorder", "NonFiniteLossGuard", "describe_batch", "silence_interrupt_notice"]
 
 _ID_KEYS = ("sample_id", "name", "frame_dir", "motion_id")
 MAX_LISTED = 8
@@ -124,3 +125,17 @@ class InterruptRecorder(pl.Callback):
                 path = os.path.join(dirpath, "last.ckpt")
                 trainer.save_checkpoint(path, weights_only=False)  # the full state, for resuming
                 self.saved = path
+
+
+class _DropInterruptNotice(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "Detected KeyboardInterrupt" not in record.getMessage()
+
+
+def silence_interrupt_notice() -> None:
+    """Drop Lightning's own Ctrl-C notice, so that ``sm``'s ``interrupted`` line is the only one."""
+    from lightning_utilities.core import rank_zero
+
+    logger = rank_zero.log  # the logger rank_zero_info writes to (Lightning sets it when imported)
+    if not any(isinstance(f, _DropInterruptNotice) for f in logger.filters):
+        logger.addFilter(_DropInterruptNotice())
