@@ -449,6 +449,24 @@ def test_undecodable_audio_unreadable_arrays_and_files_in_the_way_are_one_line_e
     assert not video.exists() and len(lines) == 3
 
 
+def test_sm_dance_bad_inputs_are_one_line_errors(tmp_path, tiny_egodance_module, capsys):
+    module = tiny_egodance_module()
+    ckpt = tmp_path / "emm.ckpt"
+    hparams = dict(module.hparams)
+    torch.save(
+        {"state_dict": module.state_dict(), "hyper_parameters": hparams, "pytorch-lightning_version": "2"},
+        ckpt,
+    )
+    (tmp_path / "bad.wav").write_text("not audio")
+    base = ["dance", "--ckpt", str(ckpt), "--music", str(tmp_path / "bad.wav"), "--out", str(tmp_path / "o")]
+    assert sm_main([*base, "--video", str(tmp_path / "none.mp4")]) == 2
+    assert sm_main([*base, "--render-size", "100x100"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith(f"sm dance: {tmp_path / 'bad.wav'}: cannot decode audio")
+    assert lines[1] == "sm dance: --render-size 100x100: use multiples of 16"
+    assert len(lines) == 2 and not (tmp_path / "o").exists()
+
+
 def test_one_line_message_maps_os_errors():
     err = PermissionError(13, "Permission denied", "/x/y.mp4")
     assert one_line_message(err) == "/x/y.mp4: permission denied (not writable or not readable)"

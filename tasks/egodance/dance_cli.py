@@ -134,7 +134,10 @@ def main(argv: list[str] | None = None) -> int:
 
     module = load_module(EgoDanceModule, args.ckpt).eval()  # checked: local, weights_only, project classes
     hp = module.hparams
-    music, frames, head = _conditions(args, module)
+    try:
+        music, frames, head = _conditions(args, module)
+    except ValueError as err:  # the music, video or sample files (their readers name the file)
+        raise InputError(str(err)) from err
     model = module.model if args.no_ema else module.ema.module
     tokens = sample_long_dance(
         model,
