@@ -2,7 +2,9 @@
 
 ``sm fit|validate|test|predict --recipe NAME`` runs LightningCLI (``skeleton_mamba.tasks``);
 the helper commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the
-task code that implements them. Everything is imported lazily, so ``import skeleton_mamba`` and
+task code that implements them. Every command shares one error policy (``skeleton_mamba.tasks.errors``):
+expected failures print one line and exit 2, Ctrl-C prints one line and exits 130.
+Everything is imported lazily, so ``import skeleton_mamba`` and
 ``sm --help`` stay light (torch and einops only).
 """
 
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import sys
 from collections.abc import Sequence
 
@@ -36,6 +39,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
 }
 LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
+EXIT_BAD_INPUT = 2  # an expected failure: bad or missing input, unwritable output (one line, no traceback)
+EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT), as shells report it
 
 
 def _module_available(target: str) -> bool:
@@ -81,11 +86,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module_name, func_name = commands[command][0].split(":")
-    func = getattr(importlib.import_module(module_name), func_name)
     if command in LIGHTNING_SUBCOMMANDS:
         rest = [command, *rest]
-    result = func(rest)
+    try:
+        func = getattr(importlib.import_module(module_name), func_name)
+        result = func(rest)
+    except KeyboardInterrupt:
+        print(f"sm {command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as err:
+        message = _expected_failure_message(err)
+        if message is None or os.environ.get("SM_TRACEBACK"):
+            raise
+        print(f"sm {command}: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     return int(result or 0)
+
+
+def _expected_failure_message(err: BaseException) -> str | None:
+    """The one-line message for an expected failure (bad input, missing or unwritable path); else None.
+
+    The policy lives in ``skeleton_mamba.tasks.errors`` (imported here, lazily, like every command).
+    """
+    try:
+        from skeleton_mamba.tasks.errors import expected_failure, one_line_message
+    except ImportError:
+        return None
+    failure = expected_failure(err)
+    return None if failure is None else one_line_message(failure)
 
 
 if __name__ == "__main__":

@@ -6,12 +6,17 @@ A recipe composes a task's LightningModule and LightningDataModule through ``cla
     sm fit --recipe ntu60.yaml                          # packaged recipe (see `sm recipes`)
     sm fit --recipe my.yaml --config more.yaml --trainer.max_epochs 3 --data.init_args.root data/
     sm test --recipe ntu60.yaml --ckpt_path runs/ntu60_xsub/version_0/checkpoints/last.ckpt
+    sm fit --recipe ntu60.yaml --ckpt_path last         # resume the latest run, in its own version_N
     sm fit --recipe ntu60.yaml --print_config
 
 ``--recipe`` is an alias of ``-c/--config`` (:mod:`skeleton_mamba.tasks.recipe_resolution`);
 config files and dotted overrides merge left to right. Values that follow from the data set are
 linked from the instantiated data module to the model (:data:`DATA_TO_MODEL_LINKS`), never typed
 twice; a link applies when both the data module has the attribute and the model the argument.
+
+Every run gets :class:`~skeleton_mamba.tasks.run_guards.NonFiniteLossGuard` and
+:class:`~skeleton_mamba.tasks.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
+:mod:`skeleton_mamba.tasks.checkpoints` before Lightning reads it (README "Safety and errors").
 """
 
 from __future__ import annotations
@@ -21,14 +26,17 @@ import importlib.util
 import inspect
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import lightning.pytorch as pl
 from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _get_module_type, _InstantiatorFn
 
 from skeleton_mamba import __version__
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
+from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty, resume_in_run_folder
+from skeleton_mamba.tasks.run_guards import InterruptRecorder, NonFiniteLossGuard, silence_interrupt_notice
 
 __all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "list_recipes", "run"]
 
@@ -121,18 +129,55 @@ class SkeletonMambaCLI(LightningCLI):
 
         Recipes log to TensorBoard and CSV under the same ``save_dir/name``; each logger picks the next
         free ``version_N`` lazily, so the second would see the first's new folder and take N + 1.
-        Reading all versions up front gives both the same folder.
+        Reading all versions up front gives both the same folder. The folders this run creates are
+        recorded so that a run stopping before it wrote anything leaves none behind.
         """
         trainer = super().instantiate_trainer(**kwargs)
         for logger in trainer.loggers:
             _ = logger.version
+        recorder = next((c for c in trainer.callbacks if isinstance(c, InterruptRecorder)), None)
+        if recorder is not None:
+            recorder.new_run_dirs = [
+                Path(logger.log_dir)
+                for logger in trainer.loggers
+                if logger.log_dir and not Path(logger.log_dir).exists()
+            ]
         return trainer
+
+    def _parse_ckpt_path(self) -> None:
+        """Check ``--ckpt_path`` before Lightning reads it (:mod:`skeleton_mamba.tasks.checkpoints`).
+
+        ``last`` becomes the last checkpoint of the latest run of this recipe; the file must be local and
+        load with ``weights_only=True``, and the class paths in its hyper-parameters must be the project's,
+        all before Lightning parses them (which imports the classes they name). ``sm fit`` resumes in the
+        checkpoint's own run folder (:func:`~skeleton_mamba.tasks.run_folders.resume_in_run_folder`).
+        """
+        subcommand = self.config.get("subcommand")
+        config = self.config.get(subcommand) if subcommand else None
+        ckpt_path = config.get("ckpt_path") if config is not None else None
+        if ckpt_path is not None:
+            if str(ckpt_path) == "last":
+                ckpt_path = str(find_last_checkpoint(config.trainer))
+                config.ckpt_path = ckpt_path
+            load_checkpoint(ckpt_path)
+            if subcommand == "fit":
+                resume_in_run_folder(config.trainer, Path(ckpt_path))
+        super()._parse_ckpt_path()
+
+    def _prepare_subcommand_kwargs(self, subcommand: str) -> dict:
+        """The trainer method's arguments, with Lightning's own checkpoint load forced to ``weights_only``."""
+        kwargs = super()._prepare_subcommand_kwargs(subcommand)
+        if "weights_only" in inspect.signature(getattr(self.trainer, subcommand)).parameters:
+            kwargs["weights_only"] = True
+        return kwargs
 
 
 def run(argv: Sequence[str] | None = None) -> int:
     """``sm fit|validate|test|predict ARGS``: argv starts with the subcommand; returns the exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
     import_task_modules()
+    recorder = InterruptRecorder()
+    silence_interrupt_notice()
     try:
         SkeletonMambaCLI(
             LightningModule,
@@ -140,29 +185,33 @@ def run(argv: Sequence[str] | None = None) -> int:
             subclass_mode_model=True,
             subclass_mode_data=True,
             save_config_kwargs={"overwrite": True},
+            trainer_defaults={"callbacks": [NonFiniteLossGuard(), recorder]},
             parser_kwargs={
                 "description": "Skeleton Mamba (LightningCLI). Pick a recipe with --recipe NAME|PATH."
             },
             args=None if args == sys.argv[1:] else args,  # LightningCLI warns when both are given
         )
-    except Exception as err:
-        missing = _dataset_not_found(err)
-        if missing is None:
-            raise
-        print(f"sm {args[0] if args else ''}: {missing}", file=sys.stderr)
-        return 2
+    except SystemExit as err:
+        _remove_empty_run_dirs(recorder)
+        if recorder.stopped_by == "interrupt":  # Lightning turns Ctrl-C into sys.exit(1)
+            raise KeyboardInterrupt from None
+        if recorder.stopped_by == "sigterm":  # Lightning's SIGTERMException exits with code 0
+            saved = f"; saved {recorder.saved}" if recorder.saved else ""
+            print(f"sm {args[0]}: stopped by SIGTERM{saved}", file=sys.stderr)
+            return EXIT_SIGTERM
+        raise err
+    except BaseException:
+        _remove_empty_run_dirs(recorder)
+        raise
     return 0
 
 
-def _dataset_not_found(err: BaseException | None) -> DatasetNotFoundError | None:
-    """The :class:`DatasetNotFoundError` behind ``err`` (jsonargparse wraps instantiation errors)."""
-    seen = set()
-    while err is not None and id(err) not in seen:
-        if isinstance(err, DatasetNotFoundError):
-            return err
-        seen.add(id(err))
-        err = err.__cause__ or err.__context__
-    return None
+EXIT_SIGTERM = 143  # 128 + SIGTERM, as shells report a process ended by it
+
+
+def _remove_empty_run_dirs(recorder: InterruptRecorder) -> None:
+    for folder in recorder.new_run_dirs:
+        remove_if_empty(folder)
 
 
 def list_recipes(argv: Sequence[str] | None = None) -> int:

@@ -8,7 +8,8 @@ resolved path to :class:`jsonargparse.ActionConfigFile`. Resolution order for a 
 2. a YAML mapping given inline (``--config '{trainer: {max_epochs: 1}}'``) is passed through;
 3. otherwise the value is looked up among the packaged recipes
    (``importlib.resources.files("skeleton_mamba.recipes")``), with or without the ``.yaml`` suffix;
-4. an unknown name ends in ``parser.error`` listing the available recipes.
+4. an unknown name ends in ``parser.error`` listing the available recipes; a file that is not valid
+   YAML ends in ``parser.error`` naming the file, line and column.
 
 Several ``--recipe``/``--config`` options and dotted overrides merge left to right.
 """
@@ -96,4 +97,18 @@ class RecipeConfigAction(ActionConfigFile):
                     f"name. Available recipes: {available} (`sm recipes` describes them)."
                 )
             values = str(resolved)
+            _check_yaml(parser, resolved)
         super().__call__(parser, cfg, values, option_string)
+
+
+def _check_yaml(parser, path: Path) -> None:
+    """``parser.error`` naming ``path`` and the line of a YAML syntax error (jsonargparse names neither)."""
+    try:
+        yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        parser.error(f"{where}: YAML syntax error in the recipe: {problem}")
+    except (OSError, UnicodeDecodeError) as err:
+        parser.error(f"{path}: cannot read the recipe ({err})")

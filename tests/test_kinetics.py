@@ -107,6 +107,6 @@ def test_prepare_kinetics(tmp_path, capsys):
 def test_prepare_kinetics_label_mismatch_fails(tmp_path, capsys):
     raw = _kinetics_folder(tmp_path / "k")
     write_clip(raw / "kinetics_val" / "vid_c.json", {0: [person(0, 0.5)]}, "class 1", 5)  # label file says 1
-    assert sm_main(["prepare", "kinetics", "--raw", str(raw), "--out", str(tmp_path / "o.pkl")]) == 1
+    assert sm_main(["prepare", "kinetics", "--raw", str(raw), "--out", str(tmp_path / "o.pkl")]) == 2
     err = capsys.readouterr().err
     assert "vid_c.json" in err and "label_index 5 differs from 1" in err

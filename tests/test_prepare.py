@@ -113,7 +113,7 @@ def test_bad_file_fails_or_is_skipped(raw_folder, tmp_path, capsys):
     bad.write_text("\n".join(lines[:100]) + "\n")  # truncated inside frame 4
     out = tmp_path / "out.pkl"
     args = ["prepare", "ntu60", "--raw", str(raw), "--out", str(out), "--workers", "2"]
-    assert sm_main(args) == 1
+    assert sm_main(args) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "line 101" in err and "file ends early" in err and "--skip-bad" in err
     assert not out.exists()
@@ -126,7 +126,7 @@ def test_bad_file_fails_or_is_skipped(raw_folder, tmp_path, capsys):
 
 
 def test_prepare_reports_an_empty_folder(tmp_path, capsys):
-    assert sm_main(["prepare", "ntu60", "--raw", str(tmp_path), "--out", str(tmp_path / "x.pkl")]) == 1
+    assert sm_main(["prepare", "ntu60", "--raw", str(tmp_path), "--out", str(tmp_path / "x.pkl")]) == 2
     assert "no .skeleton files found" in capsys.readouterr().err
 
 

@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import torch
+
+from skeleton_mamba.tasks.errors import InputError
 
 __all__ = ["main", "build_parser"]
 
@@ -65,18 +66,18 @@ def _read_video(path: Path) -> np.ndarray:
     if path.is_dir():
         images = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp"))
         if not images:
-            raise SystemExit(f"sm dance: {path} holds no .png/.jpg images")
+            raise InputError(f"{path}: holds no .png/.jpg images")
         frames = [np.asarray(iio.imread(p)) for p in images]
     elif path.is_file():
         frames = list(np.asarray(iio.imread(path)))
     else:
-        raise SystemExit(f"sm dance: video {path} not found")
+        raise FileNotFoundError(2, "No such video file or image folder", str(path))
     out = []
     for i, f in enumerate(frames):
         if f.ndim == 2:
             f = np.repeat(f[..., None], 3, axis=-1)
         if f.ndim != 3 or f.shape[-1] not in (3, 4):
-            raise SystemExit(f"sm dance: {path}: frame {i} has shape {f.shape}, expected (H, W, 3)")
+            raise InputError(f"{path}: frame {i} has shape {f.shape}, expected (H, W, 3)")
         out.append(f[..., :3])
     return np.stack(out)
 
@@ -111,7 +112,7 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
     frames = None
     if vision:
         if not args.video:
-            raise SystemExit(f"sm dance: {args.ckpt} conditions on egocentric video; pass --video")
+            raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
         import kornia
 
         rgb = torch.from_numpy(_read_video(Path(args.video))).permute(0, 3, 1, 2)
@@ -123,17 +124,20 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
+        raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
+    from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.egodance.export import write_dance
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
     from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
     from skeleton_mamba.tasks.motion.render import RenderStyle
 
-    if not Path(args.ckpt).is_file():
-        print(f"sm dance: checkpoint {args.ckpt} not found", file=sys.stderr)
-        return 2
-    module = EgoDanceModule.load_from_checkpoint(args.ckpt, map_location="cpu").eval()
+    module = load_module(EgoDanceModule, args.ckpt).eval()  # checked: local, weights_only, project classes
     hp = module.hparams
-    music, frames, head = _conditions(args, module)
+    try:
+        music, frames, head = _conditions(args, module)
+    except ValueError as err:  # the music, video or sample files (their readers name the file)
+        raise InputError(str(err)) from err
     model = module.model if args.no_ema else module.ema.module
     tokens = sample_long_dance(
         model,

@@ -26,6 +26,7 @@ import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
 from skeleton_mamba.tasks.egodance.export import write_dance
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.render import RenderStyle
 
 __all__ = ["DanceDemo"]
@@ -119,7 +120,8 @@ class DanceDemo(Callback):
             "global_step": trainer.global_step,
             "samples": records,
         }
-        (out / "demo.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+        with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
+            f.write(json.dumps(summary, indent=2))
         if was_training:
             pl_module.train()
         lines = [f"[egodance demo] {LABEL}", f"[egodance demo] dance for held-out ({split}) music -> {out}"]

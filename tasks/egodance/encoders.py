@@ -97,7 +97,7 @@ class VisionEncoder(nn.Module):
                 raise FileNotFoundError(
                     f"ResNet folder {resnet_path!r} does not exist (save_pretrained output)"
                 )
-            self.resnet = ResNetModel.from_pretrained(resnet_path)
+            self.resnet = ResNetModel.from_pretrained(resnet_path, local_files_only=True)
         else:
             warnings.warn(
                 "VisionEncoder: no resnet_path given, the ResNet is randomly initialised (not pretrained)",

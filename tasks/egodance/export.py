@@ -15,6 +15,7 @@ import torch
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.sampling import tokens_to_motion
+from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
 from skeleton_mamba.tasks.motion.motion_file import save_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
@@ -47,8 +48,8 @@ def write_music_slice(src: str | Path, start_s: float, duration_s: float, out: s
     if audio.size == 0:
         raise ValueError(f"{src}: no audio between {start_s:.2f} s and {start_s + duration_s:.2f} s")
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    sf.write(out, audio, sr, subtype="PCM_16")
+    with atomic_path(out) as tmp:
+        sf.write(tmp, audio, sr, subtype="PCM_16")
     return out
 
 

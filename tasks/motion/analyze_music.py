@@ -21,6 +21,8 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE
 
 __all__ = ["main"]
@@ -84,11 +86,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sm analyze-music: error: {analysis}", file=sys.stderr)
         return 2
     if args.out is not None:
-        from skeleton_mamba.tasks.motion.cache import save_npy_atomic
+        from skeleton_mamba.tasks.motion.atomic import atomic_open
 
         try:
-            args.out.parent.mkdir(parents=True, exist_ok=True)
-            save_npy_atomic(args.out, analysis.features)
+            with atomic_open(args.out, "wb") as f:  # exactly args.out: np.save on a handle adds no suffix
+                np.save(f, np.ascontiguousarray(analysis.features), allow_pickle=False)
         except OSError as err:
             reason = err.strerror or err
             print(f"sm analyze-music: error: {args.out}: cannot write ({reason})", file=sys.stderr)

@@ -23,6 +23,7 @@ import torch
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
 from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
@@ -291,8 +292,8 @@ def save_bvh(path: str | PathLike[str], motion: BvhMotion) -> Path:
     order = [c for j in written for c in columns[j]]
     buf = io.StringIO()
     np.savetxt(buf, motion.values[:, order], fmt="%.6f")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(out) + "\n" + buf.getvalue(), encoding="utf-8")
+    with atomic_open(path, "w", encoding="utf-8") as f:
+        f.write("\n".join(out) + "\n" + buf.getvalue())
     return path
 
 

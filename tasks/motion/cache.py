@@ -15,15 +15,15 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import warnings
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 
-__all__ = ["FeatureCache", "default_cache_root", "file_sha256", "save_npy_atomic", "write_atomic"]
+from skeleton_mamba.tasks.motion.atomic import atomic_open
+
+__all__ = ["FeatureCache", "default_cache_root", "file_sha256"]
 
 _CHUNK = 1 << 20
 
@@ -44,28 +44,6 @@ def file_sha256(path: str | os.PathLike) -> str:
     except OSError as err:
         raise FileNotFoundError(f"{path}: cannot read the file to hash it ({err})") from err
     return digest.hexdigest()
-
-
-def write_atomic(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -> Path:
-    """Call ``write(file)`` on a temporary file in ``path``'s folder, flush it to disk and rename it over
-    ``path``, so an interruption or an error leaves the old file intact. Returns ``path``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def save_npy_atomic(path: str | os.PathLike, array: np.ndarray) -> Path:
-    """``np.save`` to exactly ``path`` (no ``.npy`` appended), atomically (:func:`write_atomic`)."""
-    return write_atomic(path, lambda f: np.save(f, np.ascontiguousarray(array), allow_pickle=False))
 
 
 class FeatureCache:
@@ -113,5 +91,7 @@ class FeatureCache:
         """Write ``array`` atomically under ``key``; returns the entry path (``None`` when disabled)."""
         if not self.enabled:
             return None
-        self.dir.mkdir(parents=True, exist_ok=True)
-        return save_npy_atomic(self.path_for(key), array)
+        final = self.path_for(key)
+        with atomic_open(final, "wb") as f:
+            np.save(f, np.ascontiguousarray(array), allow_pickle=False)
+        return final

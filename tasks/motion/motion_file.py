@@ -28,6 +28,7 @@ import numpy as np
 
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.value_checks import check_fps, non_finite_message
 
 __all__ = ["MotionData", "MotionFileError", "save_motion", "load_motion"]
@@ -127,7 +128,7 @@ class MotionData:
 
 
 def save_motion(path: str | PathLike[str], motion: MotionData) -> Path:
-    """Validate and write ``motion`` as a compressed ``.npz`` (see the module docstring for keys)."""
+    """Validate and write ``motion`` as a compressed ``.npz`` (module docstring for keys), atomically."""
     path = Path(path)
     motion.validate(str(path))
     arrays: dict[str, np.ndarray] = {
@@ -140,8 +141,8 @@ def save_motion(path: str | PathLike[str], motion: MotionData) -> Path:
         arrays["smpl_scaling"] = np.asarray([motion.scaling], dtype=np.float32)
     if motion.joints is not None:
         arrays["joints"] = np.asarray(motion.joints, dtype=np.float32)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(path, **arrays)
+    with atomic_open(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
     return path
 
 

@@ -5,7 +5,7 @@ a floor grid, and the time. The camera looks at the body from a fixed direction,
 smoothed horizontal position, and is placed so that the body's height fills about 60 % of the frame.
 Drawing is done directly with OpenCV (anti-aliased lines, painter's order by depth), frames are
 encoded by the ffmpeg binary that imageio-ffmpeg ships, and music is muxed into the mp4 (AAC),
-cut to the motion's length.
+cut to the motion's length. The file is written under a temporary name and renamed when complete.
 
 Input joints are y-up (the toolkit's convention) in any unit: the floor grid spacing is chosen from
 the body's size (1 m for a human in metres).
@@ -13,10 +13,11 @@ the body's size (1 m for a human in metres).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -25,6 +26,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from skeleton_mamba.tasks.motion.atomic import atomic_path, check_writable
 from skeleton_mamba.tasks.motion.value_checks import check_fps
 
 __all__ = ["RenderStyle", "joint_sides", "render_frames", "render_motion"]
@@ -223,6 +225,21 @@ def _write_gif(out: Path, frames: list[np.ndarray], fps: float) -> None:
     images[0].save(out, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0)
 
 
+def _check_audio(path: Path) -> None:
+    """Fail before rendering when ffmpeg cannot decode ``path`` (rather than a broken pipe mid-video)."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    if not path.is_file():
+        raise FileNotFoundError(2, "No such music file", str(path))
+    probe = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path), "-t", "0.1", "-f", "null", "-"]
+    result = subprocess.run(probe, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    if result.returncode != 0:
+        reason = (result.stderr.strip().splitlines() or ["ffmpeg cannot read it"])[-1]
+        raise ValueError(f"{path}: not a readable audio file ({reason})")
+
+
 def render_motion(
     joints: np.ndarray,
     parents: Sequence[int],
@@ -255,20 +272,30 @@ def render_motion(
     if suffix not in (".mp4", ".gif"):
         raise ValueError(f"{out}: output must end in .mp4 or .gif")
     check_fps(fps, "fps")  # bounds the camera smoothing window (it grows with fps)
-    if music is not None and not Path(music).is_file():
-        raise FileNotFoundError(f"{music}: no such music file")
+    check_writable(out)
+    if music is not None:
+        _check_audio(Path(music))
     style = style or RenderStyle()
     joints = _check_joints(joints, parents)  # fail before an output file is opened
     if suffix == ".mp4" and (style.width % 16 or style.height % 16):
         raise ValueError(f"mp4 width and height must be multiples of 16, got {style.width}x{style.height}")
-    out.parent.mkdir(parents=True, exist_ok=True)
     frames = render_frames(joints, parents, fps, names=names, style=style, title=title)
     frames = tqdm(frames, total=len(joints), desc=f"render {out.name}", unit="frame", disable=not progress)
     if suffix == ".gif":
         if music is not None:
             warnings.warn(f"{out}: GIF has no audio track, music ignored", stacklevel=2)
-        _write_gif(out, list(frames), fps)
+        with atomic_path(out) as tmp:
+            _write_gif(tmp, list(frames), fps)
         return out
+    with atomic_path(out) as tmp:
+        _write_mp4(tmp, frames, fps, style, music)
+    return out
+
+
+def _write_mp4(
+    out: Path, frames: Iterable[np.ndarray], fps: float, style: RenderStyle, music: str | PathLike[str] | None
+) -> None:
+    """Encode RGB frames to an H.264 mp4 with the ffmpeg binary of imageio-ffmpeg (music muxed as AAC)."""
     import imageio_ffmpeg
 
     writer = imageio_ffmpeg.write_frames(
@@ -286,6 +313,8 @@ def render_motion(
     try:
         for image in frames:
             writer.send(np.ascontiguousarray(image))
-    finally:
-        writer.close()
-    return out
+    except BaseException:
+        with contextlib.suppress(Exception):  # ffmpeg may be gone already (Ctrl-C reaches it too)
+            writer.close()
+        raise
+    writer.close()

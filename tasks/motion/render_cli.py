@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
 
 __all__ = ["JointsClip", "load_joints", "render_file", "main"]
@@ -157,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             progress=not args.quiet,
         )
     except (OSError, ValueError, KeyError) as e:
-        print(f"sm render: error: {e}", file=sys.stderr)
+        print(f"sm render: error: {one_line_message(e)}", file=sys.stderr)
         return 2
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0

@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.tasks.errors import SkeletonMambaError
+
 __all__ = [
     "UnsafePickleError",
     "safe_load_pickle",
@@ -45,7 +47,7 @@ __all__ = [
 ]
 
 
-class UnsafePickleError(ValueError):
+class UnsafePickleError(SkeletonMambaError, ValueError):
     """A pickle names a global outside the allow-list (or is not a readable pickle)."""
 
 

@@ -59,7 +59,7 @@ def _read_names(path: Path) -> list[str]:
 
 
 class DanceWindowDataset(Dataset):
-    """Training windows ``{motion, music, target}`` over in-memory sequences (see the module docstring)."""
+    """Training windows ``{motion, music, target, sample_id}`` over in-memory sequences (module docstring)."""
 
     def __init__(
         self,
@@ -92,6 +92,7 @@ class DanceWindowDataset(Dataset):
             "motion": motion[s : s + seed],
             "music": music[s : s + window],
             "target": motion[s + seed : s + seed + predict],
+            "sample_id": f"{name}@{s}",  # sequence and first frame (named in training errors)
         }
 
 

@@ -12,6 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open, atomic_path
+
 __all__ = ["save_confusion_matrix"]
 
 # Beyond this many classes the per-cell counts and tick labels are unreadable and are left out.
@@ -42,7 +44,8 @@ def save_confusion_matrix(
         raise ValueError(f"{len(class_names)} class names for a {k}-class confusion matrix")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(path.with_suffix(".csv"), counts, fmt="%d", delimiter=",")
+    with atomic_open(path.with_suffix(".csv"), "w") as f:
+        np.savetxt(f, counts, fmt="%d", delimiter=",")
 
     totals = counts.sum(axis=1, keepdims=True)
     recall = np.divide(counts, totals, out=np.zeros(counts.shape, dtype=np.float64), where=totals > 0)
@@ -66,6 +69,7 @@ def save_confusion_matrix(
                 color = "white" if recall[i, j] > 0.5 else "black"
                 ax.text(j, i, str(counts[i, j]), ha="center", va="center", color=color, fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
     plt.close(fig)
     return path

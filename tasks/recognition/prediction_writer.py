@@ -15,6 +15,8 @@ from lightning.pytorch import LightningModule, Trainer
 from lightning.pytorch.callbacks import BasePredictionWriter
 from lightning.pytorch.utilities import rank_zero_info
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open
+
 __all__ = ["PredictionCSVWriter"]
 
 COLUMNS = ("sample", "label", "predicted", "predicted_name", "probability", "top5")
@@ -71,10 +73,9 @@ class PredictionCSVWriter(BasePredictionWriter):
         folder.mkdir(parents=True, exist_ok=True)
         name = "predictions.csv" if trainer.world_size == 1 else f"predictions_rank{trainer.global_rank}.csv"
         path = folder / name
-        with path.open("w", newline="") as handle:
+        with atomic_open(path, "w", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow(COLUMNS)
             writer.writerows(self._rows)
         rank_zero_info(f"{len(self._rows)} predictions written to {path}")
         self._rows = []
-

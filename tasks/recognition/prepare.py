@@ -34,6 +34,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from skeleton_mamba.tasks.errors import SkeletonMambaError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,
@@ -49,7 +50,7 @@ KINETICS_PARTS = ("train", "val")
 KINETICS_FRAME_SHAPE = (256, 340)  # ST-GCN resized the videos to 340x256 before OpenPose
 
 
-class PrepareError(RuntimeError):
+class PrepareError(SkeletonMambaError, RuntimeError):
     """A raw file could not be converted (its message names the file and what is wrong)."""
 
 
@@ -109,7 +110,7 @@ def _run(
             return (worker(*job) for job in jobs)
         return pool.imap(_star, [(worker, job) for job in jobs], chunksize=chunksize)
 
-    pool = multiprocessing.Pool(workers) if workers > 1 else None
+    pool = multiprocessing.Pool(workers, initializer=worker_ignores_ctrl_c) if workers > 1 else None
     try:
         progress = tqdm(results(pool), total=len(jobs), desc=desc, unit="file", file=sys.stderr)
         for name, anno, error in progress:
@@ -128,6 +129,13 @@ def _run(
             pool.terminate()
             pool.join()
     return annotations, empty, bad
+
+
+def _check_some_written(count: int, out: Path, **skipped: int) -> None:
+    """Refuse to write an annotation file without samples (``out`` keeps its old content)."""
+    if count == 0:
+        why = ", ".join(f"{v} {k}" for k, v in skipped.items())
+        raise PrepareError(f"no usable sample ({why}); {out} was not written")
 
 
 def _star(item: tuple) -> tuple:
@@ -169,6 +177,7 @@ def prepare_ntu(dataset: str, raw: Path, out: Path, workers: int = 2, skip_bad: 
     jobs = [(str(files[n]), max_bodies) for n in selected]
     annos, empty, bad = _run(_ntu_annotation, jobs, workers, skip_bad, f"prepare {dataset}")
     names = sorted(annos)
+    _check_some_written(len(names), out, empty=len(empty), bad=len(bad))
     split = benchmark_splits(names, dataset)
     save_annotations({"split": split, "annotations": [annos[n] for n in names]}, out, dtype)
     return {"written": len(names), "missing_excluded": len(inside) - len(selected),
@@ -214,6 +223,7 @@ def prepare_kinetics(raw: Path, out: Path, labels: Sequence[Path] | None = None,
         summary["bad"] += len(bad)
     names = {e["label_index"]: e.get("label", "") for e in label_info.values()}
     label_names = [names.get(i, "") for i in range(max(names, default=-1) + 1)]
+    _check_some_written(len(annotations), out, empty=summary["empty"], bad=summary["bad"])
     save_annotations({"split": split, "annotations": annotations, "label_names": label_names}, out, dtype)
     summary["written"] = len(annotations)
     summary["splits"] = {k: len(v) for k, v in split.items()}
@@ -262,7 +272,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
     except (PrepareError, AnnotationFileError) as e:
         print(f"sm prepare {args.dataset}: error: {e}", file=sys.stderr)
-        return 1
+        return 2
     splits = ", ".join(f"{k} {v}" for k, v in summary.pop("splits").items())
     print(f"wrote {summary.pop('written')} samples to {args.out} ({splits})")
     print("; ".join(f"{k.replace('_', ' ')}: {v}" for k, v in summary.items()))

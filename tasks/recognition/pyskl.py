@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from skeleton_mamba.tasks.errors import DataFileError
-from skeleton_mamba.tasks.motion.cache import write_atomic
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
@@ -178,4 +178,6 @@ def save_annotations(data: dict, path: str | PathLike[str], keypoint_dtype: str 
     if keypoint_dtype != "float32":
         data["annotations"] = [_cast(a, keypoint_dtype, str(path)) for a in data["annotations"]]
     path.parent.mkdir(parents=True, exist_ok=True)
-    return write_atomic(path, lambda f: pickle.dump(data, f, protocol=4))
+    with atomic_open(path, "wb") as f:
+        pickle.dump(data, f, protocol=4)
+    return path

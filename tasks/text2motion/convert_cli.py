@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.errors import one_line_message
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 from skeleton_mamba.tasks.text2motion.features import denormalize, recover_from_ric
 from skeleton_mamba.tasks.text2motion.humanml3d import read_features, read_statistics
@@ -40,8 +42,8 @@ def convert_file(
     out = Path(out)
     if out.suffix != ".npy":
         raise ValueError(f"{out}: the output must be a .npy file")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.save(out, joints)
+    with atomic_open(out, "wb") as f:
+        np.save(f, joints)
     return out
 
 
@@ -63,7 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         out = convert_file(args.features, args.out, stats=args.stats if args.normalized else None)
     except (OSError, ValueError) as e:
-        print(f"sm convert: error: {e}", file=sys.stderr)
+        print(f"sm convert: error: {one_line_message(e)}", file=sys.stderr)
         return 2
     print(f"wrote {out}")
     return 0

@@ -61,17 +61,23 @@ class TextMotionDataset(Dataset):
         start = int(rng.integers(clip.length - length + 1))
         motion = (clip.features[start : start + length] - self.mean) / self.std
         motion = torch.from_numpy(motion.astype(np.float32))
-        return {"motion": motion, "caption": caption.text, "length": length}
+        return {"motion": motion, "caption": caption.text, "length": length, "sample_id": clip.motion_id}
 
 
 def collate_text_motion(items: list[dict]) -> dict:
-    """Pad to the longest sample: motion (B, T, 263), mask (B, T) bool, length (B,), caption list."""
+    """Pad to the longest: motion (B, T, 263), mask (B, T) bool, length (B,), caption and sample_id lists."""
     lengths = torch.tensor([item["length"] for item in items])
     motion = torch.zeros(len(items), int(lengths.max()), items[0]["motion"].shape[-1])
     for i, item in enumerate(items):
         motion[i, : item["length"]] = item["motion"]
     mask = torch.arange(motion.shape[1])[None] < lengths[:, None]
-    return {"motion": motion, "mask": mask, "length": lengths, "caption": [item["caption"] for item in items]}
+    return {
+        "motion": motion,
+        "mask": mask,
+        "length": lengths,
+        "caption": [item["caption"] for item in items],
+        "sample_id": [item.get("sample_id", "") for item in items],
+    }
 
 
 class _TextMotionDataModule(LightningDataModule):

@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
 
 __all__ = ["LABEL", "TextToMotionDemo"]
@@ -90,7 +91,8 @@ class TextToMotionDemo(Callback):
             "samples": records,
         }
         out.mkdir(parents=True, exist_ok=True)
-        (out / "demo.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+        with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
+            f.write(json.dumps(summary, indent=2))
         lines = [f"[text2motion demo] {LABEL}", f"[text2motion demo] generated from prompts -> {out}"]
         for record in records:
             lines.append(f"  {record['prompt']!r}: {record.get('video', record['joints'])}")

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import torch
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.metrics import confidence_interval
 
 __all__ = ["METRICS", "COMPARABLE", "NOT_COMPARABLE", "summarize", "format_table", "write_report"]
@@ -69,8 +70,9 @@ def write_report(
     folder.mkdir(parents=True, exist_ok=True)
     json_path, csv_path = folder / "t2m_evaluation.json", folder / "t2m_evaluation.csv"
     report = {"label": label, "comparable": label == COMPARABLE, "protocol": protocol, "rows": summary}
-    json_path.write_text(json.dumps(report, indent=2))
-    with csv_path.open("w", newline="") as f:
+    with atomic_open(json_path, "w", encoding="utf-8") as f:
+        f.write(json.dumps(report, indent=2))
+    with atomic_open(csv_path, "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["row", "metric", "mean", "ci95", "repetitions"])
         for row, metrics in summary.items():

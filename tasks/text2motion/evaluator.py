@@ -24,6 +24,7 @@ import torch
 from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
 
+from skeleton_mamba.tasks.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
 
 __all__ = [
@@ -158,12 +159,13 @@ class T2MEvaluator(nn.Module):
     def from_checkpoint(cls, path: str | PathLike[str], feature_dim: int = 263, **sizes: int) -> T2MEvaluator:
         """Load the official ``finest.tar`` (keys ``text_encoder``, ``movement_encoder``, ``motion_encoder``).
 
-        Read with ``torch.load(weights_only=True)``: tensors and plain values only, nothing executed.
+        Read with :func:`~skeleton_mamba.tasks.checkpoints.load_checkpoint` (``weights_only=True``): tensors
+        and plain values only, nothing executed.
         """
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: T2M evaluator checkpoint not found")
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        checkpoint = load_checkpoint(path)
         model = cls(feature_dim, comparable=True, **sizes)
         for key in ("text_encoder", "movement_encoder", "motion_encoder"):
             if key not in checkpoint:
@@ -182,7 +184,7 @@ class T2MEvaluator(nn.Module):
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: T2M evaluator checkpoint not found")
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        checkpoint = load_checkpoint(path)
         state = checkpoint.get("state_dict", {}) if isinstance(checkpoint, dict) else {}
         prefix = "evaluator."
         weights = {k[len(prefix) :]: v for k, v in state.items() if k.startswith(prefix)}

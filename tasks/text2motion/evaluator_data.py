@@ -52,6 +52,7 @@ class EvaluatorDataset(TextMotionDataset):
             "motion": torch.from_numpy(motion),
             "length": length,
             "caption": caption.text,
+            "sample_id": clip.motion_id,
         }
 
 

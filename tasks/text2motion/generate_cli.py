@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.errors import one_line_message
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 
 __all__ = ["parse_length", "slug", "save_generated", "main"]
@@ -65,8 +67,9 @@ def save_generated(
     features = features.detach().cpu()
     joints = recover_from_ric(features.double()).float().numpy()
     paths = {"joints": stem.with_suffix(".npy"), "features": stem.with_name(stem.name + "_features.npy")}
-    np.save(paths["features"], features.float().numpy())
-    np.save(paths["joints"], joints)
+    for key, array in (("features", features.float().numpy()), ("joints", joints)):
+        with atomic_open(paths[key], "wb") as f:
+            np.save(f, array)
     if render:
         from skeleton_mamba.skeletons import HUMANML3D22
         from skeleton_mamba.tasks.motion.render import render_motion
@@ -110,11 +113,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not checkpoint.is_file():
             raise FileNotFoundError(f"{checkpoint}: no such checkpoint")
     except (OSError, ValueError) as e:
-        print(f"sm generate: error: {e}", file=sys.stderr)
+        print(f"sm generate: error: {one_line_message(e)}", file=sys.stderr)
         return 2
+    from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 
-    module = TextToMotionModule.load_from_checkpoint(checkpoint, map_location="cpu").eval()
+    module = load_module(TextToMotionModule, checkpoint).eval()  # checked (tasks/checkpoints.py)
     captions = [c for c in args.text for _ in range(args.num)]
     features, _ = module.generate(
         captions,

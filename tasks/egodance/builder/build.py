@@ -43,7 +43,7 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
-from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.errors import DataFileError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
@@ -270,8 +270,19 @@ def _pool_context() -> multiprocessing.context.BaseContext:
 
 
 def _init_worker() -> None:
-    """One torch thread per worker process (the processes already share the cores)."""
+    """One torch thread per worker process; Ctrl-C is the parent's to handle (it stops the workers)."""
+    worker_ignores_ctrl_c()
     torch.set_num_threads(1)
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued windows and end the workers now (a window in progress leaves only a temp folder)."""
+    processes = list((pool._processes or {}).values())  # the executor has no public handle on them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=5)
 
 
 # ---------------------------------------------------------------- one window
@@ -443,13 +454,18 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
             record(build_window(task, cfg))
             bar.update()
     else:
-        with ProcessPoolExecutor(
+        pool = ProcessPoolExecutor(
             max_workers=min(cfg.workers, len(todo)), mp_context=_pool_context(), initializer=_init_worker
-        ) as pool:
+        )
+        try:
             futures = [pool.submit(build_window, task, cfg) for task in todo]
             for future in as_completed(futures):
                 record(future.result())
                 bar.update()
+        except BaseException:
+            _stop_pool(pool)  # Ctrl-C or a failed window: do not wait for the queued windows
+            raise
+        pool.shutdown()
     bar.close()
     summary.placed, summary.skipped, summary.rejected = (
         counts["placed"],

@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, read_npy_header
 
@@ -96,9 +97,8 @@ class EgoSample:
 
 def write_json(path: Path, data: dict) -> None:
     """Write JSON through a temporary file and an atomic rename."""
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True), encoding="utf-8")
-    os.replace(tmp, path)
+    with atomic_open(path, "w", encoding="utf-8") as f:
+        f.write(json.dumps(data, indent=2, sort_keys=True))
 
 
 def sample_dir(root: str | Path, sample_id: str) -> Path:

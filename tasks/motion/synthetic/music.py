@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from skeleton_mamba.tasks.motion.atomic import atomic_path
+
 __all__ = ["SyntheticTrack", "synthesize_music", "write_music", "beat_times"]
 
 _PROGRESSIONS = ((55.0, 43.65, 65.41, 49.0), (43.65, 49.0, 55.0, 65.41), (65.41, 55.0, 43.65, 49.0))
@@ -104,10 +106,10 @@ def synthesize_music(bpm: float, duration_s: float, sr: int = 22050, seed: int =
 
 
 def write_music(path: str | PathLike[str], track: SyntheticTrack) -> Path:
-    """Write a track as 16-bit PCM wav."""
+    """Write a track as 16-bit PCM wav (atomically)."""
     import soundfile as sf
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    sf.write(path, track.audio, track.sr, subtype="PCM_16")
+    with atomic_path(path) as tmp:
+        sf.write(tmp, track.audio, track.sr, subtype="PCM_16")
     return path
