@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import lightning.pytorch as pl
 import pytest
 import torch
@@ -103,6 +105,7 @@ def cli_trainer(args: list[str]) -> pl.Trainer:
 
 def test_sm_installs_the_bar_unless_the_recipe_has_one_or_turns_it_off(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["sm"])  # the arguments are passed as args=
     recipe = ["--recipe", "recognition_synthetic.yaml", "--trainer.max_steps", "300"]
     bar = cli_trainer(recipe).progress_bar_callback
     assert type(bar) is type(default_progress_bar())
