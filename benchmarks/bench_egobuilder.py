@@ -1,7 +1,7 @@
 """EgoAIST++ builder benchmark: ray-cast rendering speed and end-to-end build time.
 
     python benchmarks/bench_egobuilder.py [--json] [--workers 2] [--frames 120] [--motion-seconds 20]
-        [--repeats 3] [--smpl-model PATH]
+        [--repeats 3] [--smpl-model PATH] [--only-memory] [--scene MESH] [--rss-window 1] [--rss-timeout S]
 
 1. Rendering: frames per second of egocentric RGB + depth at 224 x 224 along a dancing head trajectory in a
    procedural room, with 1 process and with ``--workers`` processes (frames split between them); the
@@ -12,6 +12,13 @@
    build per minute of motion: with the capsule body, and with an SMPL mesh (``--smpl-model``, or by
    default a synthetic SMPL-format model of SMPL's size, 6890 vertices on capsule surfaces along the
    bones, since the real model cannot be distributed).
+3. Peak memory (``--only-memory`` runs this alone): the peak resident set size of ``sm make-ego`` (its
+   own process, 1 worker; the kernel's ``ru_maxrss`` of that child) with each ray caster
+   (``SKELETON_MAMBA_RAY_CASTER=embree`` and ``trimesh``), on the EgoMusic demo's data (a generated dance
+   in 2 procedural rooms at 64 x 64, as ``egodance_demo.yaml`` builds it) and on a real scene mesh at
+   256 x 256 (``--scene``, default ``../shared/data/scenes/simple_room.glb``, z-up). One motion of
+   ``--rss-window`` seconds keeps the slow fallback short; windows are built one after another, so the
+   peak does not grow with their number.
 """
 
 from __future__ import annotations
@@ -19,8 +26,11 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import os
+import subprocess
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -187,6 +197,66 @@ def bench_build(seconds: float, workers: int, smpl_model: str | None = None) -> 
     }
 
 
+def peak_rss_make_ego(caster: str, args: list[str], timeout_s: float) -> dict:
+    """Runs ``sm make-ego ARGS --workers 1`` with one ray caster: its peak RSS (MB) and wall time.
+
+    The peak is the kernel's ``ru_maxrss`` of that child (``os.wait4``), so every measurement is its own
+    process and later ones do not inherit earlier peaks.
+    """
+    env = dict(os.environ, SKELETON_MAMBA_RAY_CASTER=caster)
+    with tempfile.TemporaryFile() as err:
+        start = time.perf_counter()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "skeleton_mamba", "make-ego", *args, "--workers", "1"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+        )
+        timer = threading.Timer(timeout_s, proc.kill)
+        timer.start()
+        _, status, usage = os.wait4(proc.pid, 0)
+        timer.cancel()
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        elapsed = time.perf_counter() - start
+        err.seek(0)
+        tail = err.read().decode(errors="replace")[-400:]
+    result = {
+        "caster": caster,
+        "exit_code": proc.returncode,
+        "seconds": elapsed,
+        "peak_rss_mb": usage.ru_maxrss / 1024,  # KiB on Linux
+    }
+    if proc.returncode != 0:
+        result["error"] = "killed after the time limit" if proc.returncode == -9 else tail
+    return result
+
+
+def bench_make_ego_memory(scene: str, window_s: float, timeout_s: float) -> list[dict]:
+    """Peak RSS of ``sm make-ego`` with embree and with trimesh's caster, on the demo's data at 64 x 64
+    and on the real scene mesh ``scene`` at 256 x 256 (one motion of ``window_s`` seconds each)."""
+    from skeleton_mamba.tasks.egodance.builder.ray_caster import HAS_EMBREE
+    from skeleton_mamba.tasks.motion.synthetic import make_demo_set
+
+    cases = []
+    with tempfile.TemporaryDirectory() as tmp:
+        make_demo_set(Path(tmp) / "motions", count=1, duration_s=window_s)
+        common = ["--motion", str(Path(tmp) / "motions"), "--window", str(window_s)]
+        setups = [
+            ("demo data, procedural rooms, 64 x 64", ["--scenes", "procedural", "--num-rooms", "2"], 64)
+        ]
+        if Path(scene).is_file():
+            setups.append((f"{Path(scene).name}, 256 x 256", ["--scenes", scene, "--up-axis", "z"], 256))
+        for label, scene_args, size in setups:
+            for caster in ("embree", "trimesh") if HAS_EMBREE else ("trimesh",):
+                out = Path(tmp) / f"ego_{caster}_{size}"
+                size_args = ["--width", str(size), "--height", str(size)]
+                run = peak_rss_make_ego(
+                    caster, [*common, *scene_args, *size_args, "--out", str(out)], timeout_s
+                )
+                cases.append({"case": label, "window_s": window_s, **run})
+    return cases
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -195,21 +265,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="rendering runs (the median is reported)")
     p.add_argument("--motion-seconds", type=float, default=20.0, help="length of the end-to-end motion")
     p.add_argument("--smpl-model", default=None, help="SMPL model file (default: a synthetic SMPL-size one)")
+    p.add_argument("--scene", default="../shared/data/scenes/simple_room.glb", help="real mesh (peak RSS)")
+    p.add_argument("--rss-window", type=float, default=1.0, help="motion seconds built per peak-RSS run")
+    p.add_argument("--rss-timeout", type=float, default=1800.0, help="time limit of one peak-RSS run (s)")
+    p.add_argument("--only-memory", action="store_true", help="run the peak-RSS measurement only")
     args = p.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        model = args.smpl_model or str(synthetic_smpl_npz(Path(tmp) / "synthetic_smpl_6890.npz"))
-        result = {
-            "machine": machine_info(),
-            "resolution": [224, 224],
-            "render": bench_render(args.frames, args.workers, args.repeats),
-            "build": bench_build(args.motion_seconds, args.workers),
-            "build_smpl_mesh": bench_build(args.motion_seconds, args.workers, model),
-        }
+    result = {"machine": machine_info(), "load_average": os.getloadavg()}
+    if not args.only_memory:
+        with tempfile.TemporaryDirectory() as tmp:
+            model = args.smpl_model or str(synthetic_smpl_npz(Path(tmp) / "synthetic_smpl_6890.npz"))
+            result.update(
+                resolution=[224, 224],
+                render=bench_render(args.frames, args.workers, args.repeats),
+                build=bench_build(args.motion_seconds, args.workers),
+                build_smpl_mesh=bench_build(args.motion_seconds, args.workers, model),
+            )
+    result["make_ego_peak_rss"] = bench_make_ego_memory(args.scene, args.rss_window, args.rss_timeout)
     if args.json:
         print(json.dumps(result, indent=2))
-    else:
+        return 0
+    print(f"machine: {result['machine']}")
+    if not args.only_memory:
         r = result["render"]
-        print(f"machine: {result['machine']}")
         print(
             f"render 224x224: {r['fps_1_process']:.1f} fps (1 process), "
             f"{r[f'fps_{args.workers}_processes']:.1f} fps ({args.workers} processes)"
@@ -219,6 +296,11 @@ def main(argv: list[str] | None = None) -> int:
                 f"build ({b['body']}): {b['build_seconds']:.1f} s for {b['windows']} windows of 5 s "
                 f"-> {b['build_seconds_per_motion_minute']:.1f} s per minute of motion"
             )
+    for m in result["make_ego_peak_rss"]:
+        print(
+            f"sm make-ego peak RSS ({m['case']}, {m['caster']}): {m['peak_rss_mb']:.0f} MB, "
+            f"{m['seconds']:.0f} s, exit {m['exit_code']}"
+        )
     return 0
 
 

@@ -34,6 +34,7 @@ from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _get_mo
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.checkpoints import load_checkpoint
+from skeleton_mamba.tasks.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
 from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty, resume_in_run_folder
 from skeleton_mamba.tasks.run_guards import InterruptRecorder, NonFiniteLossGuard, silence_interrupt_notice
@@ -130,8 +131,13 @@ class SkeletonMambaCLI(LightningCLI):
         Recipes log to TensorBoard and CSV under the same ``save_dir/name``; each logger picks the next
         free ``version_N`` lazily, so the second would see the first's new folder and take N + 1.
         Reading all versions up front gives both the same folder. The folders this run creates are
-        recorded so that a run stopping before it wrote anything leaves none behind.
+        recorded so that a run stopping before it wrote anything leaves none behind. The progress bar shows
+        the epoch total (:mod:`skeleton_mamba.tasks.progress_bar`) unless the recipe configures its own.
         """
+        config = {**self._get(self.config_init, "trainer", default={}), **kwargs}
+        kwargs["callbacks"] = with_default_progress_bar(
+            config.get("callbacks"), config.get("enable_progress_bar")
+        )
         trainer = super().instantiate_trainer(**kwargs)
         for logger in trainer.loggers:
             _ = logger.version

@@ -235,21 +235,81 @@ def test_ray_caster_hits_lie_on_the_hit_triangles():
     assert hits.t * np.linalg.norm(directions, axis=1) == pytest.approx(nearest, abs=1e-4)
 
 
-def test_embree_and_trimesh_ray_casters_agree(monkeypatch):
-    from skeleton_mamba.tasks.egodance.builder import ray_caster
+def _spy_trimesh_calls(monkeypatch, caster) -> list[int]:
+    """Records the number of rays of every call the caster makes to trimesh's intersector."""
+    sizes: list[int] = []
+    original = caster._trimesh.intersects_id
+
+    def spy(origins, directions, **kwargs):
+        sizes.append(len(directions))
+        return original(origins, directions, **kwargs)
+
+    monkeypatch.setattr(caster._trimesh, "intersects_id", spy)
+    return sizes
+
+
+def test_trimesh_ray_caster_is_chunked_and_matches_one_call(monkeypatch):
+    from skeleton_mamba.tasks.egodance.builder.ray_caster import RayCaster
 
     pytest.importorskip("rtree", reason="trimesh's numpy ray caster (the fallback) needs rtree")
-    if not ray_caster.HAS_EMBREE:
-        pytest.skip("embreex is not installed: nothing to compare the fallback with")
     scene = procedural_room(2)
     origins, directions = _random_rays()
-    embree = ray_caster.RayCaster(scene.mesh.vertices, scene.mesh.faces).first_hits(origins, directions)
-    monkeypatch.setattr(ray_caster, "HAS_EMBREE", False)
-    fallback = ray_caster.RayCaster(scene.mesh.vertices, scene.mesh.faces).first_hits(origins, directions)
+    faces = len(scene.mesh.faces)
+    chunked = RayCaster(scene.mesh.vertices, scene.mesh.faces, backend="trimesh", pair_budget=37 * faces)
+    assert chunked.chunk_rays == 37
+    sizes = _spy_trimesh_calls(monkeypatch, chunked)
+    hits = chunked.first_hits(origins, directions)
+    # the work is split: no call holds more than chunk_rays rays (at most pair_budget candidate pairs)
+    assert sizes == [37] * (len(origins) // 37) + [len(origins) % 37]
+    whole = RayCaster(scene.mesh.vertices, scene.mesh.faces, backend="trimesh", pair_budget=10**9)
+    once = whole.first_hits(origins, directions)
+    assert (hits.tri >= 0).all()  # a closed room
+    for name in ("tri", "t", "u", "v"):
+        np.testing.assert_array_equal(getattr(hits, name), getattr(once, name))
+    # the hits lie on their triangles
+    point = origins + hits.t[:, None] * directions
+    plane = np.einsum(
+        "ij,ij->i", point - scene.mesh.triangles[hits.tri][:, 0], scene.mesh.face_normals[hits.tri]
+    )
+    assert np.abs(plane).max() < 1e-4
+
+
+def test_embree_and_trimesh_ray_casters_agree(monkeypatch):
+    from skeleton_mamba.tasks.egodance.builder.ray_caster import RayCaster
+
+    pytest.importorskip("rtree", reason="trimesh's numpy ray caster (the fallback) needs rtree")
+    pytest.importorskip("embreex", reason="embreex is not installed: nothing to compare the fallback with")
+    scene = procedural_room(2)
+    origins, directions = _random_rays()
+    embree = RayCaster(scene.mesh.vertices, scene.mesh.faces, backend="embree").first_hits(
+        origins, directions
+    )
+    monkeypatch.setenv("SKELETON_MAMBA_RAY_CASTER", "trimesh")  # the switch `sm make-ego` users have
+    caster = RayCaster(scene.mesh.vertices, scene.mesh.faces, pair_budget=50 * len(scene.mesh.faces))
+    assert caster.backend == "trimesh"
+    sizes = _spy_trimesh_calls(monkeypatch, caster)
+    fallback = caster.first_hits(origins, directions)
+    assert len(sizes) == 8 and max(sizes) == 50
     same = embree.tri == fallback.tri
     assert same.mean() > 0.98
     for name in ("t", "u", "v"):
         assert getattr(embree, name)[same] == pytest.approx(getattr(fallback, name)[same], abs=2e-4)
+    # where the triangles differ (a ray through a shared edge), the distance is the same
+    assert embree.t == pytest.approx(fallback.t, abs=2e-4)
+
+
+def test_ray_caster_choice(monkeypatch):
+    from skeleton_mamba.tasks.egodance.builder import ray_caster
+
+    monkeypatch.setenv(ray_caster.RAY_CASTER_ENV, "trimesh")
+    assert ray_caster.resolve_backend() == "trimesh"
+    assert ray_caster.resolve_backend("auto") == ("embree" if ray_caster.HAS_EMBREE else "trimesh")
+    monkeypatch.setenv(ray_caster.RAY_CASTER_ENV, "optix")
+    with pytest.raises(ValueError, match="optix.*auto, embree or trimesh"):
+        ray_caster.resolve_backend()
+    monkeypatch.setattr(ray_caster, "HAS_EMBREE", False)
+    with pytest.raises(ImportError, match="embreex is not installed"):
+        ray_caster.resolve_backend("embree")
 
 
 def test_head_camera_moves_with_head():

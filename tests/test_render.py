@@ -12,7 +12,13 @@ from scipy.io import wavfile
 
 from skeleton_mamba.skeletons import HUMANML3D22, SMPL24
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.render import RenderStyle, joint_sides, render_frames, render_motion
+from skeleton_mamba.tasks.motion.render import (
+    RenderStyle,
+    fit_cameras,
+    joint_sides,
+    render_frames,
+    render_motion,
+)
 from skeleton_mamba.tasks.motion.render_cli import load_joints, main
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 
@@ -75,6 +81,71 @@ def test_frames_show_the_skeleton_where_it_projects(tmp_path):
     # The camera looks at the body from +z (rotated 30 degrees towards +x): the subject's left
     # (+x in SMPL) appears on the image's right.
     assert np.nonzero(blue)[1].mean() > np.nonzero(red)[1].mean()
+
+
+def smpl_rest() -> np.ndarray:
+    """(24, 3) SMPL rest joints, root at the origin."""
+    rest = np.zeros((24, 3))
+    for j, p in enumerate(SMPL24.parents):
+        if p >= 0:
+            rest[j] = rest[p] + SMPL_REST_OFFSETS[j]
+    return rest
+
+
+def jumping_and_travelling(frames: int = 90, fps: float = 30.0) -> np.ndarray:
+    """(T, 24, 3): a standing body that jumps 1.2 m high, dashes 4 m sideways and raises its arms."""
+    t = np.arange(frames) / fps
+    joints = np.repeat(smpl_rest()[None], frames, axis=0) + [0.0, 0.95, 0.0]
+    joints[:, :, 1] += 1.2 * np.clip(np.sin(2 * np.pi * t / (t[-1] + 1 / fps)), 0, None)[:, None]  # one jump
+    joints[:, :, 0] += 4.0 / (1 + np.exp(-(t - 1.5) * 12))[:, None]  # a quick 4 m step: the camera lags
+    arms = [16, 17, 18, 19, 20, 21, 22, 23]  # shoulders .. hands straight up in the second half
+    up = t > t[-1] / 2
+    joints[np.ix_(up, arms, [1])] += np.linspace(0.3, 0.9, len(arms))[None, :, None]
+    return joints
+
+
+@pytest.mark.parametrize(("width", "height"), [(160, 128), (480, 352), (128, 256)])
+def test_every_joint_of_every_frame_projects_inside_the_image(width, height):
+    joints = jumping_and_travelling()
+    style = RenderStyle(width=width, height=height)
+    cameras = fit_cameras(joints, SMPL24.parents, 30.0, style)
+    margin = style.margin_fraction * height
+    for frame, camera in zip(joints, cameras):
+        # an independent pinhole projection from the camera's eye, target and focal length
+        forward = (camera.target - camera.eye) / np.linalg.norm(camera.target - camera.eye)
+        right = np.cross(forward, [0.0, 1.0, 0.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, forward)
+        rel = frame - camera.eye
+        z = rel @ forward
+        assert (z > 0).all()
+        u = width / 2 + camera.focal * (rel @ right) / z
+        v = height / 2 - camera.focal * (rel @ up) / z
+        assert (u >= margin - 1e-6).all() and (u <= width - margin + 1e-6).all()
+        assert (v >= margin - 1e-6).all() and (v <= height - margin + 1e-6).all()
+    # fitted, not just far away: the farthest joint from the centre, as a fraction of the room to the margin
+    room = np.array([width / 2 - margin, height / 2 - margin])
+    extent = max(
+        (np.abs(c.pixels(c.to_camera(f)) - [width / 2, height / 2]) / room).max()
+        for f, c in zip(joints, cameras)
+    )
+    assert 0.85 < extent <= 1 + 1e-9
+    if width < height:  # the narrow image: the 4 m step binds the fit exactly
+        assert extent == pytest.approx(1.0)
+
+
+def test_rendered_body_never_touches_the_image_border():
+    joints = jumping_and_travelling()
+    background = (255, 255, 255)
+    # grid and shadow in the background colour: only the body (and the time stamp) is drawn
+    style = RenderStyle(width=160, height=128, grid=background, shadow=background, background=background)
+    border = 3
+    for image in render_frames(joints, SMPL24.parents, 30.0, names=SMPL24.joint_names, style=style):
+        drawn = (image != 255).any(axis=2)
+        assert drawn.sum() > 50  # the body is there
+        edge = np.ones_like(drawn)
+        edge[border:-border, border:-border] = False
+        assert not (drawn & edge).any()
 
 
 def test_joint_sides_from_names():

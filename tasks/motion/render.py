@@ -1,8 +1,11 @@
 """Skeleton animation rendering to mp4 (with music) or GIF.
 
 Each frame shows the bones and joints (left side blue, right side red, midline grey), their shadow on
-a floor grid, and the time. The camera looks at the body from a fixed direction, follows the root's
-smoothed horizontal position, and is placed so that the body's height fills about 60 % of the frame.
+a floor grid at the clip's lowest point, and the time. The camera looks at the body from a fixed direction
+and follows the root's smoothed horizontal position at the height of the middle of the clip's vertical
+extent. Its distance is fitted to the whole clip (:func:`fit_cameras`): the body's tallest pose fills
+about 60 % of the frame's height, or less where a joint of any frame (a jump, raised arms, a quick step
+the smoothed camera lags behind) would otherwise come closer than ``margin_fraction`` to an image edge.
 Drawing is done directly with OpenCV (anti-aliased lines, painter's order by depth), frames are
 encoded by the ffmpeg binary that imageio-ffmpeg ships, and music is muxed into the mp4 (AAC),
 cut to the motion's length. The file is written under a temporary name and renamed when complete.
@@ -29,7 +32,7 @@ from tqdm import tqdm
 from skeleton_mamba.tasks.motion.atomic import atomic_path, check_writable
 from skeleton_mamba.tasks.motion.value_checks import check_fps
 
-__all__ = ["RenderStyle", "joint_sides", "render_frames", "render_motion"]
+__all__ = ["RenderStyle", "fit_cameras", "joint_sides", "render_frames", "render_motion"]
 
 _AA = cv2.LINE_AA
 # "left" / "right" in any case, or a capital L / R prefix before a capital (CMU "LHipJoint").
@@ -47,6 +50,7 @@ class RenderStyle:
     azimuth_degrees: float = 30.0
     elevation_degrees: float = 15.0
     body_fraction: float = 0.6
+    margin_fraction: float = 0.08  # every joint of every frame stays this fraction of the height inside
     follow_seconds: float = 0.5
     background: tuple[int, int, int] = (246, 246, 246)
     grid: tuple[int, int, int] = (200, 200, 200)
@@ -91,7 +95,7 @@ class _Camera:
         right /= np.linalg.norm(right)
         up = np.cross(right, forward)
         self.rotation = np.stack([right, up, forward])  # world -> camera axes (x right, y up, z forward)
-        self.eye, self.focal, self.cx, self.cy = eye, focal, cx, cy
+        self.eye, self.target, self.focal, self.cx, self.cy = eye, target, focal, cx, cy
 
     def to_camera(self, points: np.ndarray) -> np.ndarray:
         return (points - self.eye) @ self.rotation.T
@@ -147,6 +151,52 @@ def _check_joints(joints: np.ndarray, parents: Sequence[int]) -> np.ndarray:
     return joints
 
 
+def _clip_size(joints: np.ndarray) -> float:
+    """The tallest vertical extent of one frame (T, J, 3) -> float: the body's size (metres for a human)."""
+    return max(float((joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)).max()), 1e-6)
+
+
+def fit_cameras(
+    joints: np.ndarray, parents: Sequence[int], fps: float, style: RenderStyle | None = None
+) -> list[_Camera]:
+    """One camera per frame of ``joints`` (T, J, 3), y-up, fitted to the whole clip (module docstring).
+
+    All cameras share the viewing direction (azimuth, elevation) and the distance ``d``; they look at
+    ``target_t`` = (smoothed root x, middle of the clip's y range, smoothed root z). In the camera axes a
+    point is ``q + (0, 0, d)`` with ``q = R (p - target_t)``, so it projects inside the frame with a margin
+    of ``m`` pixels when ``f |q_x| / (q_z + d) <= W / 2 - m`` and ``f |q_y| / (q_z + d) <= H / 2 - m``:
+    ``d`` is the largest of these bounds over all joints and frames, the near-plane bound and the
+    distance at which the tallest pose fills ``body_fraction`` of the height.
+    """
+    style = style or RenderStyle()
+    joints = _check_joints(joints, parents)
+    root = list(parents).index(-1) if -1 in parents else 0
+    size = _clip_size(joints)
+    focal = style.height / (2 * math.tan(math.radians(style.fov_degrees) / 2))
+    az, el = math.radians(style.azimuth_degrees), math.radians(style.elevation_degrees)
+    direction = np.array([math.sin(az) * math.cos(el), math.sin(el), math.cos(az) * math.cos(el)])
+    follow = _smooth(joints[:, root, [0, 2]], max(1, round(style.follow_seconds * fps)))
+    middle = 0.5 * (joints[..., 1].min() + joints[..., 1].max())
+    targets = np.stack([follow[:, 0], np.full(len(joints), middle), follow[:, 1]], axis=1)  # (T, 3)
+    rotation = _Camera(direction, np.zeros(3), focal, 0.0, 0.0).rotation  # shared by every frame
+    q = np.einsum("tjc,kc->tjk", joints - targets[:, None], rotation).reshape(-1, 3)  # (T*J, 3)
+    margin = style.margin_fraction * style.height
+    half_w, half_h = style.width / 2 - margin, style.height / 2 - margin
+    if min(half_w, half_h) <= 0:
+        raise ValueError(
+            f"margin_fraction {style.margin_fraction} leaves no room in {style.width}x{style.height}"
+        )
+    near = 0.05 * size
+    distance = max(
+        size / (style.body_fraction * style.height / focal),
+        float(np.max(focal * np.abs(q[:, 0]) / half_w - q[:, 2])),
+        float(np.max(focal * np.abs(q[:, 1]) / half_h - q[:, 2])),
+        float(np.max(2 * near - q[:, 2])),
+    )
+    cx, cy = style.width / 2, style.height / 2
+    return [_Camera(target + distance * direction, target, focal, cx, cy) for target in targets]
+
+
 def render_frames(
     joints: np.ndarray,
     parents: Sequence[int],
@@ -161,27 +211,22 @@ def render_frames(
     sides = joint_sides(names) if names is not None else [0] * len(parents)
     colors = {-1: style.left, 1: style.right, 0: style.middle}
     bones = np.array([(p, j) for j, p in enumerate(parents) if p >= 0], dtype=np.int64).reshape(-1, 2)
-    root = list(parents).index(-1) if -1 in parents else 0
+    cameras = fit_cameras(joints, parents, fps, style)
 
     floor = joints[..., 1].min()
-    size = max(float((joints[..., 1].max(axis=1) - joints[..., 1].min(axis=1)).max()), 1e-6)
+    size = _clip_size(joints)
     spacing = _grid_spacing(size)
-    focal = style.height / (2 * math.tan(math.radians(style.fov_degrees) / 2))
-    distance = size / (style.body_fraction * style.height / focal)
-    az, el = math.radians(style.azimuth_degrees), math.radians(style.elevation_degrees)
-    direction = np.array([math.sin(az) * math.cos(el), math.sin(el), math.cos(az) * math.cos(el)])
-    follow = _smooth(joints[:, root, [0, 2]], max(1, round(style.follow_seconds * fps)))
+    distance = float(np.linalg.norm(cameras[0].eye - cameras[0].target))
     half = 4 * spacing * max(1, round(distance / (4 * spacing)))
     ticks = np.arange(-half, half + spacing / 2, spacing)
     thickness, radius = style.bone_thickness, style.joint_radius * 16
     blank = np.empty((style.height, style.width, 3), dtype=np.uint8)
     blank[:] = np.asarray(style.background, dtype=np.uint8)  # filled once: per-frame tuple fills are slow
 
-    for t in range(len(joints)):
+    near = 0.05 * size
+    for t, camera in enumerate(cameras):
         image = blank.copy()
-        target = np.array([follow[t, 0], floor + size / 2, follow[t, 1]])
-        camera = _Camera(target + distance * direction, target, focal, style.width / 2, style.height / 2)
-        near = 0.05 * size
+        target = camera.target
         # Floor grid on world-aligned lines around the followed root.
         gx = spacing * np.round(target[0] / spacing) + ticks
         gz = spacing * np.round(target[2] / spacing) + ticks

@@ -1,0 +1,119 @@
+"""Progress bars with epoch totals (``tasks/progress_bar.py``) and their installation by ``sm fit``."""
+
+from __future__ import annotations
+
+import sys
+
+import lightning.pytorch as pl
+import pytest
+import torch
+from lightning.pytorch import LightningDataModule, LightningModule
+from lightning.pytorch.callbacks import Callback, TQDMProgressBar
+from torch.utils.data import DataLoader, TensorDataset
+
+from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+from skeleton_mamba.tasks.progress_bar import (
+    EpochTotalRichProgressBar,
+    EpochTotalTQDMProgressBar,
+    default_progress_bar,
+    train_description,
+)
+
+
+class TinyRegression(LightningModule):
+    """A linear model on 12 samples in batches of 4 (3 batches per epoch)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.layer = torch.nn.Linear(2, 1)
+
+    def training_step(self, batch, batch_idx):
+        x, y = batch
+        return torch.nn.functional.mse_loss(self.layer(x), y)
+
+    def configure_optimizers(self):
+        return torch.optim.SGD(self.parameters(), lr=0.01)
+
+    def train_dataloader(self):
+        return DataLoader(TensorDataset(torch.randn(12, 2), torch.randn(12, 1)), batch_size=4)
+
+
+class ShownDescriptions(Callback):
+    """Records the training bar's description at the first batch of every epoch."""
+
+    def __init__(self) -> None:
+        self.shown: list[str] = []
+
+    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:
+        if batch_idx == 0:
+            bar = trainer.progress_bar_callback
+            if isinstance(bar, TQDMProgressBar):
+                self.shown.append(bar.train_progress_bar.desc.removesuffix(": "))
+            else:
+                self.shown.append(bar.progress.tasks[bar.train_progress_bar_id].description.strip())
+
+
+def fit(bar, **trainer_args) -> tuple[pl.Trainer, list[str]]:
+    shown = ShownDescriptions()
+    trainer = pl.Trainer(
+        accelerator="cpu",
+        callbacks=[bar, shown],
+        logger=False,
+        enable_checkpointing=False,
+        enable_model_summary=False,
+        **trainer_args,
+    )
+    trainer.fit(TinyRegression())
+    return trainer, shown.shown
+
+
+@pytest.mark.parametrize("bar_class", [EpochTotalTQDMProgressBar, EpochTotalRichProgressBar])
+@pytest.mark.parametrize(
+    ("trainer_args", "epochs_run"),
+    [
+        ({"max_steps": 10}, 4),  # 3 steps per epoch: epochs 0-3, the last one cut after 1 step
+        ({"max_steps": 5, "accumulate_grad_batches": 2}, 3),  # 2 optimizer steps per epoch of 3 batches
+        ({"max_epochs": 2}, 2),
+    ],
+)
+def test_the_bar_shows_the_number_of_epochs_the_run_takes(bar_class, trainer_args, epochs_run):
+    if bar_class is EpochTotalRichProgressBar:
+        pytest.importorskip("rich")
+    _, shown = fit(bar_class(), **trainer_args)
+    # every epoch that ran was announced as "Epoch e/last" with last the index of the last epoch run
+    assert shown == [f"Epoch {e}/{epochs_run - 1}" for e in range(epochs_run)]
+
+
+def test_a_time_bounded_run_shows_the_time_left():
+    trainer = pl.Trainer(max_time="00:00:02:00", logger=False, enable_checkpointing=False)
+    # no max_epochs (Lightning's fit loop makes it -1: its rich bar read "Epoch 14/-2")
+    assert train_description(trainer, 14) == "Epoch 14 (0:02:00 left)"
+
+
+def cli_trainer(args: list[str]) -> pl.Trainer:
+    import_task_modules()
+    cli = SkeletonMambaCLI(
+        LightningModule,
+        LightningDataModule,
+        subclass_mode_model=True,
+        subclass_mode_data=True,
+        run=False,
+        args=args,
+    )
+    return cli.trainer
+
+
+def test_sm_installs_the_bar_unless_the_recipe_has_one_or_turns_it_off(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["sm"])  # the arguments are passed as args=
+    recipe = ["--recipe", "recognition_synthetic.yaml", "--trainer.max_steps", "300"]
+    bar = cli_trainer(recipe).progress_bar_callback
+    assert type(bar) is type(default_progress_bar())
+    assert cli_trainer([*recipe, "--trainer.enable_progress_bar", "false"]).progress_bar_callback is None
+    own = tmp_path / "own_bar.yaml"
+    own.write_text(
+        "trainer:\n  callbacks:\n    - class_path: lightning.pytorch.callbacks.TQDMProgressBar\n"
+        "      init_args: {refresh_rate: 7}\n"
+    )
+    kept = cli_trainer([*recipe, "--config", str(own)]).progress_bar_callback
+    assert type(kept) is TQDMProgressBar and kept.refresh_rate == 7
