@@ -47,6 +47,7 @@ def _batches(n: int = 2, t: int = 16) -> list[dict]:
             "music": music[i],
             "frames": torch.rand(t, 3, 32, 32, generator=gen),
             "head": torch.zeros(t, 3),
+            "head_rotation": torch.eye(3).expand(t, 3, 3),
         }
         for i in range(n)
     ]
@@ -69,9 +70,14 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module):
     trainer.fit(module, loader, loader)
     assert any(not torch.equal(a, b) for a, b in zip(before, module.ema.module.parameters(), strict=True))
     results = trainer.test(module, loader, verbose=False)[0]
-    for key in ("test/mpjpe_mm", "test/root_error_mm", "test/head_error_mm", "test/pfc", "test/beat_align"):
-        assert key in results and results[key] == results[key]  # present and not NaN
-    assert results["test/mpjpe_mm"] > 0
+    names = ("mpjpe_mm", "root_error_mm", "head_error_mm", "pfc", "beat_align", "mmv", "mm", "mv")
+    for source in ("estimated_head", "oracle_head"):  # the default (estimate) and the oracle comparison
+        for name in names:
+            key = f"test/{source}/{name}"
+            assert key in results and results[key] == results[key]  # present and not NaN
+        assert results[f"test/{source}/mpjpe_mm"] > 0
+    for key in ("test/head_estimator/position_error_mm", "test/head_estimator/rotation_error_deg"):
+        assert key in results and results[key] > 0
     out = trainer.predict(module, loader)[0]
     assert out["tokens"].shape == (2, 16, 24, 10) and out["joints"].shape == (2, 16, 24, 3)
 

@@ -7,8 +7,9 @@ Each complete sample folder gives one training window of ``window`` frames (150 
   yaw is kept: the egocentric view fixes it);
 - ``music`` (T, 35): the 35-d librosa features at 30 fps of the music slice in ``meta.json``;
 - ``frames`` (T, 3, S, S) float in [0, 1]: the egocentric RGB frames resized to ``image_size``;
-- ``head`` (T, 3): head joint targets from the camera trajectory (:func:`.guidance.head_targets_from_camera`),
-  in the same canonical frame, for head guidance and the head error.
+- ``head`` (T, 3): head joint targets from the camera trajectory (:func:`.guidance.head_pose_from_camera`),
+  in the same canonical frame, for oracle head guidance, the head error and training the head estimator;
+- ``head_rotation`` (T, 3, 3): the head joint's rotation (head-to-world) from the camera trajectory.
 
 Splits are by motion *source* so windows of one sequence never straddle splits: an AIST++ sequence in the
 cross-modal test list is test; the other sources, ranked by a stable hash of their name, fill val
@@ -30,7 +31,7 @@ from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
-from skeleton_mamba.tasks.egodance.guidance import head_targets_from_camera
+from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
@@ -114,7 +115,7 @@ class EgoDanceDataset(Dataset):
         t = self.window
         root = motion.trans[:t] / motion.scaling
         with np.load(folder / "camera.npz", allow_pickle=False) as cam:
-            head = head_targets_from_camera(cam["positions"][:t], cam["rotations"][:t])
+            head, head_rotation = head_pose_from_camera(cam["positions"][:t], cam["rotations"][:t])
         shift = np.array([root[0, 0], meta.get("scene", {}).get("floor_height", 0.0), root[0, 2]])
         music_meta = meta.get("music") or {}
         if not music_meta.get("path"):
@@ -133,6 +134,7 @@ class EgoDanceDataset(Dataset):
             "motion": encode_motion(poses, torch.from_numpy((root - shift).astype(np.float32))),
             "music": torch.from_numpy(music.astype(np.float32)),
             "head": torch.from_numpy((head - shift).astype(np.float32)),
+            "head_rotation": torch.from_numpy(head_rotation.astype(np.float32)),
         }
 
     def __len__(self) -> int:
