@@ -55,7 +55,7 @@ class HeadEstimatorConfig:
 
     Attributes:
         input_size: frames are resized to (input_size, input_size).
-        channels: widths of the stride-2 convolutions of the per-frame CNN.
+        channels: widths of the stride-2 convolutions of the per-frame CNN (multiples of 8: GroupNorm).
         dim: per-frame feature and GRU hidden width.
         layers: GRU layers (bidirectional).
         rotation_weight: weight of the squared chordal rotation error in the loss.
