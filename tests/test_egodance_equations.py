@@ -85,7 +85,7 @@ def test_module_trains_the_denoiser_towards_the_clean_motion(tiny_egodance_modul
     assert not torch.allclose(seen["x_t"], batch["motion"])  # the denoiser saw a noised input
 
 
-# ---------------------------------------------------------------------------------------- timestep conditioning
+# --------------------------------------------------------------------------------- timestep conditioning
 def test_sinusoidal_embedding_by_hand():
     t, dim = torch.tensor([0, 3, 999]), 8
     emb = sinusoidal_embedding(t, dim)
@@ -125,7 +125,7 @@ def test_head_guidance_objective_and_step_target_the_head_joint():
     torch.testing.assert_close(head_guidance_objective(x0, target[None], mask)[0], expected)
     assert np.linalg.norm(_rest_offset(15) - _rest_offset(12)) > 0.05  # the neck would give another value
 
-    # one step x0 <- x0 - w grad G: the root moves by -2 w (p_15 - p*) (d p_15 / d root = I); masked frames stay
+    # one step x0 <- x0 - w grad G: the root moves by -2 w (p_15 - p*) (d p_15 / d root = I); masked: kept
     w = 0.05
     guided = HeadGuidance(target[None], weight=w, steps=1, mask=mask, num_steps=10).adjust_x0(
         x0, x0, torch.tensor([3])
