@@ -53,7 +53,7 @@ def _batches(n: int = 2, t: int = 16) -> list[dict]:
     ]
 
 
-def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module):
+def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, capsys):
     torch.manual_seed(0)
     module = tiny_egodance_module(sampling_steps=3, ema_every=1)
     loader = DataLoader(_batches(), batch_size=2)
@@ -113,6 +113,9 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module):
         "--no-render",
     ]
     assert dance_main(args) == 0
+    assert "head trajectory estimated from the video" in capsys.readouterr().out  # the default head source
+    with pytest.raises(SystemExit, match="--head oracle needs the ground-truth camera path"):
+        dance_main([*args, "--head", "oracle"])
     dance = load_motion(tmp_path / "dance.npz")
     assert (tmp_path / "dance.bvh").is_file() and not (tmp_path / "dance.mp4").exists()
     assert dance.poses.shape == (60, 24, 3) and np.isfinite(dance.joints).all()

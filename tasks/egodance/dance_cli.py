@@ -143,7 +143,9 @@ def _head_targets(args, module, frames: torch.Tensor | None, oracle: torch.Tenso
             raise SystemExit(
                 f"sm dance: {args.ckpt} has no head-trajectory estimator (music-only); use --head none"
             )
-        return source, module.estimate_head(frames[None])[0][0]
+        from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
+
+        return source, estimate_long_trajectory(module.head_estimator.eval(), frames, args.window)[0]
     return source, None
 
 

@@ -115,7 +115,10 @@ class EgoDanceDataset(Dataset):
         t = self.window
         root = motion.trans[:t] / motion.scaling
         with np.load(folder / "camera.npz", allow_pickle=False) as cam:
-            head, head_rotation = head_pose_from_camera(cam["positions"][:t], cam["rotations"][:t])
+            positions, rotations = cam["positions"][:t], cam["rotations"][:t]
+        if not (np.isfinite(positions).all() and np.isfinite(rotations).all()):
+            raise ValueError(f"{folder / 'camera.npz'}: camera positions or rotations hold NaN or Inf")
+        head, head_rotation = head_pose_from_camera(positions, rotations)
         shift = np.array([root[0, 0], meta.get("scene", {}).get("floor_height", 0.0), root[0, 2]])
         music_meta = meta.get("music") or {}
         if not music_meta.get("path"):

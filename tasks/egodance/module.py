@@ -228,6 +228,7 @@ class EgoDanceModule(LightningModule):
             batch["head"],
             batch["head_rotation"],
             self.head_estimator.config.rotation_weight,
+            self.head_estimator.config.position_scale,
         )
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
