@@ -76,7 +76,7 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, capsys
             key = f"test/{source}/{name}"
             assert key in results and results[key] == results[key]  # present and not NaN
         assert results[f"test/{source}/mpjpe_mm"] > 0
-    for key in ("test/head_estimator/position_error_mm", "test/head_estimator/rotation_error_deg"):
+    for key in ("test/head_estimator/position_mm", "test/head_estimator/rotation_deg"):
         assert key in results and results[key] > 0
     out = trainer.predict(module, loader)[0]
     assert out["tokens"].shape == (2, 16, 24, 10) and out["joints"].shape == (2, 16, 24, 3)

@@ -15,7 +15,7 @@ window (DDPM, or DDIM ``sampling_steps``; classifier-free guidance weight ``guid
 head source -- ``head_source`` and, with ``test_oracle_head``, the oracle too, from the same noise -- and
 logs for each ``test/<estimated|oracle>_head/``: MPJPE, root and head errors (mm, FK joints in the
 canonical frame), PFC, BeatAlign and MMV ([EgoMusic] supp. 7.1, with its MM and MV terms); plus the
-estimator's own errors ``test/head_estimator/{position_error_mm, rotation_error_deg}``.
+estimator's own errors ``test/head_estimator/{position_mm, rotation_deg}``.
 """
 
 from __future__ import annotations
@@ -343,8 +343,8 @@ class EgoDanceModule(LightningModule):
                 self.test_head_position.update(pos_err)
                 self.test_head_rotation.update(rot_err)
                 b = len(pos_err)
-                self.log("test/head_estimator/position_error_mm", self.test_head_position, batch_size=b)
-                self.log("test/head_estimator/rotation_error_deg", self.test_head_rotation, batch_size=b)
+                self.log("test/head_estimator/position_mm", self.test_head_position, batch_size=b)
+                self.log("test/head_estimator/rotation_deg", self.test_head_rotation, batch_size=b)
         for source in self._test_sources(batch):
             head = estimate[0] if source == "estimate" else None
             pred = motion_joints(self.sample(batch, batch_idx, head_source=source, head=head))
