@@ -59,6 +59,7 @@ def tiny_egodance_module():
         "transformer_ff": 32,
         "diffusion_steps": 20,
         "sampling_steps": 2,
+        "head_estimator": {"input_size": 16, "channels": [8, 8], "dim": 8, "layers": 1},
     }
     return lambda **overrides: EgoDanceModule(**{**tiny, **overrides})
 

@@ -56,6 +56,7 @@ def _batches(song: str, n: int = 2, t: int = 16) -> list[dict]:
             "head": torch.zeros(t, 3),
             "music_path": song,
             "music_start_s": 0.5 * i,
+            "head_rotation": torch.eye(3).expand(t, 3, 3),
         }
         for i in range(n)
     ]
@@ -65,15 +66,16 @@ def test_test_loop_under_the_edge_protocol(tmp_path, tiny_egodance_module, song)
     """Default protocol ``edge``: 150-frame windows, each with its own 5 s music slice; PFC reported."""
     torch.manual_seed(0)
     module = tiny_egodance_module(sampling_steps=2)
-    assert module.test_evaluation.protocol.name == "edge"
+    assert module.test_evaluations["estimated_head"].protocol.name == "edge"
     trainer = Trainer(accelerator="cpu", logger=False, enable_checkpointing=False, enable_progress_bar=False,
                       enable_model_summary=False, default_root_dir=tmp_path)  # fmt: skip
     results = trainer.test(module, DataLoader(_batches(song, t=150), batch_size=2), verbose=False)[0]
-    assert results["test/pfc"] >= 0 and 0 <= results["test/beat_align"] <= 1
-    assert np.isfinite(results["test/FID_k"]) and np.isfinite(results["test/Div_g"])
+    for source in ("estimated_head", "oracle_head"):
+        assert results[f"test/{source}/pfc"] >= 0 and 0 <= results[f"test/{source}/beat_align"] <= 1
+        assert np.isfinite(results[f"test/{source}/FID_k"]) and np.isfinite(results[f"test/{source}/Div_g"])
 
 
-def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song):
+def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song, capsys):
     torch.manual_seed(0)
     module = tiny_egodance_module(sampling_steps=3, ema_every=1, protocol="bailando")  # 16-frame windows
     loader = DataLoader(_batches(song), batch_size=2)
@@ -90,9 +92,14 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song):
     trainer.fit(module, loader, loader)
     assert any(not torch.equal(a, b) for a, b in zip(before, module.ema.module.parameters(), strict=True))
     results = trainer.test(module, loader, verbose=False)[0]
-    for key in ("test/mpjpe_mm", "test/root_error_mm", "test/head_error_mm", "test/beat_align", "test/FID_k"):
-        assert key in results and results[key] == results[key]  # present and not NaN
-    assert results["test/mpjpe_mm"] > 0
+    names = ("mpjpe_mm", "root_error_mm", "head_error_mm", "pfc", "beat_align", "mmv", "mm", "mv", "FID_k")
+    for source in ("estimated_head", "oracle_head"):  # the default (estimate) and the oracle comparison
+        for name in names:
+            key = f"test/{source}/{name}"
+            assert key in results and results[key] == results[key]  # present and not NaN
+        assert results[f"test/{source}/mpjpe_mm"] > 0
+    for key in ("test/head_estimator/position_mm", "test/head_estimator/rotation_deg"):
+        assert key in results and results[key] > 0
     out = trainer.predict(module, loader)[0]
     assert out["tokens"].shape == (2, 16, 24, 10) and out["joints"].shape == (2, 16, 24, 3)
 
@@ -128,6 +135,9 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song):
         "--no-render",
     ]
     assert dance_main(args) == 0
+    assert "head trajectory estimated from the video" in capsys.readouterr().out  # the default head source
+    with pytest.raises(SystemExit, match="--head oracle needs the ground-truth camera path"):
+        dance_main([*args, "--head", "oracle"])
     dance = load_motion(tmp_path / "dance.npz")
     assert (tmp_path / "dance.bvh").is_file() and not (tmp_path / "dance.mp4").exists()
     assert dance.poses.shape == (60, 24, 3) and np.isfinite(dance.joints).all()

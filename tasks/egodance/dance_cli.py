@@ -6,10 +6,13 @@ Examples::
         --sample runs/egodance_demo/data/ego/samples/<id> --out dance/
     sm dance --ckpt last.ckpt --music song.wav --video ego.mp4 --out dance/ --sampler ddpm
 
-``--sample`` reads an EgoAIST++ sample folder (music slice, egocentric frames and the camera trajectory for
-head guidance). ``--music`` (+ ``--video`` for vision models: a video file or a folder of images) dances a
-whole track: tracks longer than the training window are sampled as overlapping windows whose overlaps are
-in-painted at every denoising step (EDGE long-form), so a 60 s song gives one continuous dance.
+``--sample`` reads an EgoAIST++ sample folder (music slice, egocentric frames and the ground-truth camera
+trajectory). ``--head`` chooses the head-guidance targets: ``estimate`` (the default for vision models: the
+checkpoint's head-trajectory estimator on the egocentric frames, what any video allows), ``oracle`` (the
+sample's ground-truth camera path; ``--sample`` only, printed as oracle) or ``none``.
+``--music`` (+ ``--video`` for vision models: a video file or a folder of images) dances a whole track:
+tracks longer than the training window are sampled as overlapping windows whose overlaps are in-painted
+at every denoising step (EDGE long-form), so a 60 s song gives one continuous dance.
 ``--out DIR`` receives ``<name>.npz`` (our motion format), ``<name>.bvh`` and ``<name>.mp4`` (the skeleton
 with the music muxed in; ``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE.
 """
@@ -51,6 +54,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, default=None, help="DDIM steps (default: the checkpoint's)")
     p.add_argument("--guidance", type=float, default=None, help="classifier-free guidance weight")
     p.add_argument("--head-weight", type=float, default=None, help="head guidance step size (0: off)")
+    p.add_argument(
+        "--head",
+        choices=("estimate", "oracle", "none"),
+        default=None,
+        help="head guidance targets: estimated from the video (default for vision models), the ground-truth "
+        "camera path of a --sample (oracle), or none (default for music-only models)",
+    )
     p.add_argument("--window", type=int, default=150, help="frames per window (training length)")
     p.add_argument("--overlap", type=int, default=75, help="overlap of long-form windows")
     p.add_argument("--no-ema", action="store_true", help="use the raw weights instead of the EMA")
@@ -92,7 +102,7 @@ def _music_source(args) -> tuple[str | None, float]:
 
 
 def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
-    """music (T, L), frames (T, 3, S, S) or None, head targets (T, 3) or None."""
+    """music (T, L), frames (T, 3, S, S) or None, ground-truth head targets (T, 3) (--sample) or None."""
     from skeleton_mamba.tasks.egodance.builder.layout import read_frames
     from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 
@@ -122,6 +132,24 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
     return music, frames, None
 
 
+def _head_targets(args, module, frames: torch.Tensor | None, oracle: torch.Tensor | None):
+    """(head source, targets (T, 3) or None) as ``--head`` asks; exits with a message when impossible."""
+    source = args.head or ("estimate" if module.head_estimator is not None else "none")
+    if source == "oracle":
+        if oracle is None:
+            raise SystemExit("sm dance: --head oracle needs the ground-truth camera path of a --sample")
+        return source, oracle
+    if source == "estimate":
+        if module.head_estimator is None or frames is None:
+            raise SystemExit(
+                f"sm dance: {args.ckpt} has no head-trajectory estimator (music-only); use --head none"
+            )
+        from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
+
+        return source, estimate_long_trajectory(module.head_estimator.eval(), frames, args.window)[0]
+    return source, None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
@@ -135,9 +163,10 @@ def main(argv: list[str] | None = None) -> int:
     module = load_module(EgoDanceModule, args.ckpt).eval()  # checked: local, weights_only, project classes
     hp = module.hparams
     try:
-        music, frames, head = _conditions(args, module)
+        music, frames, oracle = _conditions(args, module)
     except ValueError as err:  # the music, video or sample files (their readers name the file)
         raise InputError(str(err)) from err
+    head_source, head = _head_targets(args, module, frames, oracle)
     model = module.model if args.no_ema else module.ema.module
     tokens = sample_long_dance(
         model,
@@ -170,6 +199,12 @@ def main(argv: list[str] | None = None) -> int:
         progress=args.progress,
     )
     seconds = tokens.shape[0] / 30
+    guidance = {
+        "estimate": "head guidance from the head trajectory estimated from the video",
+        "oracle": "head guidance from the ORACLE (ground-truth) camera path",
+        "none": "no head guidance",
+    }[head_source]
+    print(f"sm dance: {guidance}")
     print(f"sm dance: {tokens.shape[0]} frames ({seconds:.1f} s at 30 fps) written to", out_dir)
     print("\n".join(files.lines()))
     return 0

@@ -7,8 +7,9 @@ Each complete sample folder gives one training window of ``window`` frames (150 
   yaw is kept: the egocentric view fixes it);
 - ``music`` (T, 35): the 35-d librosa features at 30 fps of the music slice in ``meta.json``;
 - ``frames`` (T, 3, S, S) float in [0, 1]: the egocentric RGB frames resized to ``image_size``;
-- ``head`` (T, 3): head joint targets from the camera trajectory (:func:`.guidance.head_targets_from_camera`),
-  in the same canonical frame, for head guidance and the head error.
+- ``head`` (T, 3): head joint targets from the camera trajectory (:func:`.guidance.head_pose_from_camera`),
+  in the same canonical frame, for oracle head guidance, the head error and training the head estimator;
+- ``head_rotation`` (T, 3, 3): the head joint's rotation (head-to-world) from the camera trajectory.
 
 Splits are by motion *source* so windows of one sequence never straddle splits: an AIST++ sequence in the
 cross-modal test list is test; the other sources, ranked by a stable hash of their name, fill val
@@ -30,7 +31,7 @@ from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
-from skeleton_mamba.tasks.egodance.guidance import head_targets_from_camera
+from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
@@ -118,7 +119,7 @@ class EgoDanceDataset(Dataset):
             source = str(folder / "camera.npz")
             positions = check_finite(cam["positions"][:t], source, "positions", ("frame",))
             rotations = check_finite(cam["rotations"][:t], source, "rotations", ("frame",))
-        head = head_targets_from_camera(positions, rotations)
+        head, head_rotation = head_pose_from_camera(positions, rotations)
         shift = np.array([root[0, 0], meta.get("scene", {}).get("floor_height", 0.0), root[0, 2]])
         music_meta = meta.get("music") or {}
         if not music_meta.get("path"):
@@ -139,6 +140,7 @@ class EgoDanceDataset(Dataset):
             "head": torch.from_numpy((head - shift).astype(np.float32)),
             "music_path": str(music_meta["path"]),  # for the test loop's protocol beats
             "music_start_s": float(music_meta.get("start_s", 0.0)),
+            "head_rotation": torch.from_numpy(head_rotation.astype(np.float32)),
         }
 
     def __len__(self) -> int:

@@ -4,8 +4,9 @@
   (B, T, Dc). The supplement uses Jukebox (L = 4800); the original code and our default use the 35-d
   librosa feature at 30 fps (``tasks/motion/music.py``); ``music_dim`` selects either.
 - :class:`VisionEncoder`: egocentric frames (B, T, 3, H, W) -> kornia resize + ImageNet normalisation ->
-  ResNet (``transformers.ResNetModel``; pretrained from a local folder, else random init with a warning)
-  -> pooled feature -> MLP -> (B, T, Dc).
+  ResNet (``transformers.ResNetModel``; pretrained from a Hugging Face id such as ``microsoft/resnet-50``
+  or a local folder (:func:`load_resnet`), else random init with a warning) -> pooled feature -> MLP ->
+  (B, T, Dc).
 - :class:`FusionModule`: music and vision tokens (each (B, T, Dc), plus a modality embedding) are joined
   along time, mixed by 2 Transformer encoder layers, and the two tokens of each frame are averaged back to
   (B, T, Dc) (the exact wiring is unpublished; the authors' rewrite lists it as missing).
@@ -22,7 +23,14 @@ import torch
 from torch import nn
 from transformers import ResNetConfig, ResNetModel
 
-__all__ = ["sinusoidal_embedding", "transformer_encoder", "MusicEncoder", "VisionEncoder", "FusionModule"]
+__all__ = [
+    "sinusoidal_embedding",
+    "transformer_encoder",
+    "load_resnet",
+    "MusicEncoder",
+    "VisionEncoder",
+    "FusionModule",
+]
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -45,6 +53,35 @@ def transformer_encoder(
         dim, heads, ff_dim, dropout, activation="gelu", batch_first=True, norm_first=True
     )
     return nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
+
+
+def load_resnet(name_or_path: str) -> ResNetModel:
+    """A pretrained ``transformers`` ResNet from a local ``save_pretrained`` folder or a Hugging Face id.
+
+    A model id is downloaded once into the Hugging Face cache (``HF_HOME``) and read from there afterwards.
+    Offline without a cached copy (or with a wrong id) it raises one ``OSError`` that says how to point at a
+    local copy or to choose a random encoder explicitly.
+    """
+    path = Path(name_or_path).expanduser()
+    if path.is_dir():
+        return ResNetModel.from_pretrained(path)
+    if path.exists() or name_or_path.startswith((".", "/", "~")) or name_or_path.count("/") != 1:
+        raise FileNotFoundError(
+            f"ResNet {name_or_path!r}: not a folder (a `save_pretrained` output) nor a Hugging Face model id "
+            "such as 'microsoft/resnet-50'"
+        )
+    try:
+        return ResNetModel.from_pretrained(name_or_path)
+    except OSError as err:
+        cause = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+        save = f"ResNetModel.from_pretrained('{name_or_path}').save_pretrained('resnet-50')"
+        raise OSError(
+            f"cannot load the pretrained vision encoder {name_or_path!r}: it is not in the Hugging Face "
+            f"cache and the Hub cannot be reached (offline?) [{cause}]. Either save it once where there is "
+            f'network, `python -c "from transformers import ResNetModel; {save}"`, and pass the folder: '
+            "`--model.init_args.resnet_path resnet-50`; or choose a randomly initialised (not pretrained) "
+            "encoder explicitly: `--model.init_args.resnet_path null`"
+        ) from None
 
 
 class MusicEncoder(nn.Module):
@@ -74,8 +111,9 @@ class VisionEncoder(nn.Module):
 
     Args:
         dim: Dc.
-        resnet_path: a local folder with a ``transformers`` ResNet (e.g. ``microsoft/resnet-50`` saved with
-            ``save_pretrained``); ``None`` builds ``resnet_config`` with random weights and warns.
+        resnet_path: a pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``)
+            or a local ``save_pretrained`` folder (:func:`load_resnet`); ``None`` builds ``resnet_config``
+            with random weights and warns.
         resnet_config: the architecture when no path is given (default: ResNet-50).
         image_size: frames are resized to (image_size, image_size).
         freeze: keep the ResNet weights fixed (the original code freezes its pretrained ResNet).
@@ -93,11 +131,7 @@ class VisionEncoder(nn.Module):
     ):
         super().__init__()
         if resnet_path is not None:
-            if not Path(resnet_path).is_dir():
-                raise FileNotFoundError(
-                    f"ResNet folder {resnet_path!r} does not exist (save_pretrained output)"
-                )
-            self.resnet = ResNetModel.from_pretrained(resnet_path, local_files_only=True)
+            self.resnet = load_resnet(resnet_path)
         else:
             warnings.warn(
                 "VisionEncoder: no resnet_path given, the ResNet is randomly initialised (not pretrained)",

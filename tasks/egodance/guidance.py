@@ -16,15 +16,23 @@ from skeleton_mamba.tasks.diffusion.samplers import GuidanceTerm
 from skeleton_mamba.tasks.egodance.builder.camera import HEAD_TO_CAMERA
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
 
-__all__ = ["head_targets_from_camera", "head_guidance_objective", "HeadGuidance"]
+__all__ = ["head_pose_from_camera", "head_targets_from_camera", "head_guidance_objective", "HeadGuidance"]
+
+
+def head_pose_from_camera(
+    positions: np.ndarray, rotations: np.ndarray, forward_offset: float = 0.10, up_offset: float = 0.06
+) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centres (T, 3) and camera-to-world rotations (T, 3, 3) -> the head joint's positions (T, 3)
+    and head-to-world rotations R_15 (T, 3, 3)."""
+    head_rot = rotations @ HEAD_TO_CAMERA.T  # HEAD_TO_CAMERA is its own inverse (diag(-1, -1, 1))
+    return positions - head_rot @ np.array([0.0, up_offset, forward_offset]), head_rot
 
 
 def head_targets_from_camera(
     positions: np.ndarray, rotations: np.ndarray, forward_offset: float = 0.10, up_offset: float = 0.06
 ) -> np.ndarray:
     """Camera centres (T, 3) and camera-to-world rotations (T, 3, 3) -> head joint positions (T, 3)."""
-    head_rot = rotations @ HEAD_TO_CAMERA.T  # HEAD_TO_CAMERA is its own inverse (diag(-1, -1, 1))
-    return positions - head_rot @ np.array([0.0, up_offset, forward_offset])
+    return head_pose_from_camera(positions, rotations, forward_offset, up_offset)[0]
 
 
 def head_guidance_objective(

@@ -1,18 +1,25 @@
-"""LightningModule for EgoMusic dance estimation with EMM (seed 000 sections 6.1-6.2, Table 2).
+"""LightningModule for EgoMusic dance estimation with EMM ([EgoMusic] supp. sections 6.1-6.2, Table 2).
 
 Training: x0-prediction diffusion (cosine, 1000 steps) on motion tokens, condition dropped with
-probability ``cond_drop_prob`` (EDGE: 0.25; learned null condition) for classifier-free guidance,
-loss = reconstruction + L_kin (Eq. 29) + lambda_align L_align (the music-vision alignment loss, our
-interpretation: :func:`.losses.alignment_loss`), AdamW 2e-4, an exponential moving average of the weights
-(original code: 0.995 every 10 steps) used for evaluation and prediction.
+probability ``cond_drop_prob`` (EDGE: 0.25; learned null condition; 0 in the paper's protocol) for
+classifier-free guidance, loss = reconstruction + L_kin ([EgoMusic] supp. Eq. 29) + lambda_align L_align
+(the music-vision alignment loss, our interpretation: :func:`.losses.alignment_loss`), AdamW 2e-4, an
+exponential moving average of the weights (original code: 0.995 every 10 steps) used for evaluation and
+prediction. Vision models also train the head-trajectory estimator (:mod:`.head_estimator`, ours: its own
+parameters, loss ``train/head_traj`` and gradient clipping, so the EMM's training is unchanged).
 
-Validation logs the diffusion loss at seeded timesteps. Test samples every window (DDIM
-``sampling_steps`` or DDPM, guidance weight ``guidance_weight``, head guidance) and reports MPJPE,
-root and head errors (mm, FK joints in the canonical frame) and, under the named dance-evaluation
-``protocol`` (:mod:`~skeleton_mamba.tasks.motion.metrics.protocols`; default ``"edge"``: 5 s windows at
-30 fps, EDGE's per-slice music beats, PFC), BeatAlign, PFC and, over the epoch, FID_k / FID_g / Div_k /
-Div_g of the sampled windows against the ground-truth windows (with at least 2 windows). The music beats
-come from each window's music file (``music_path``, ``music_start_s`` of the batch, which the data module
+Head guidance takes its targets from ``head_source``: ``estimate`` (the default: the estimator on the
+egocentric frames, what a user's video allows), ``oracle`` (the ground-truth camera path of EgoAIST++,
+reported as such) or ``none``. Validation logs the diffusion loss at seeded timesteps. Test samples every
+window (DDPM, or DDIM ``sampling_steps``; classifier-free guidance weight ``guidance_weight``) once per
+head source -- ``head_source`` and, with ``test_oracle_head``, the oracle too, from the same noise -- and
+logs for each ``test/<estimated|oracle>_head/``: MPJPE, root and head errors (mm, FK joints in the
+canonical frame) and MMV ([EgoMusic] supp. 7.1, with its MM and MV terms), and, under the named
+dance-evaluation ``protocol`` (:mod:`~skeleton_mamba.tasks.motion.metrics.protocols`; default ``"edge"``:
+5 s windows at 30 fps, EDGE's per-slice music beats, PFC), BeatAlign, PFC and, over the epoch, FID_k / FID_g /
+Div_k / Div_g of the sampled windows against the ground-truth windows (with at least 2 windows); plus the
+estimator's own errors ``test/head_estimator/{position_mm, rotation_deg}``. The protocol's music beats come
+from each window's music file (``music_path``, ``music_start_s`` of the batch, which the data module
 provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on).
 """
 
@@ -20,6 +27,8 @@ from __future__ import annotations
 
 import torch
 from lightning.pytorch import LightningModule
+from lightning.pytorch.utilities import rank_zero_info
+from torch import nn
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchmetrics import MeanMetric
 from transformers import ResNetConfig
@@ -27,14 +36,35 @@ from transformers import ResNetConfig
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion
+from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
+from skeleton_mamba.tasks.egodance.head_estimator import (
+    HeadEstimatorConfig,
+    HeadTrajectoryEstimator,
+    head_trajectory_errors,
+    head_trajectory_loss,
+)
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM
-from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
+from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 
-__all__ = ["EgoDanceModule"]
+__all__ = ["EgoDanceModule", "HEAD_SOURCES"]
+
+HEAD_SOURCES = {"estimate": "estimated_head", "oracle": "oracle_head", "none": "unguided"}
+"""Head-guidance sources and the name their test metrics are logged under (``test/<name>/...``)."""
+
+
+def _estimator_config(value: HeadEstimatorConfig | dict | None) -> HeadEstimatorConfig:
+    if value is None:
+        return HeadEstimatorConfig()
+    if isinstance(value, HeadEstimatorConfig):
+        return value
+    fields = dict(value)
+    if "channels" in fields:
+        fields["channels"] = tuple(fields["channels"])
+    return HeadEstimatorConfig(**fields)
 
 MOTION_FPS = 30.0  # EMM's motion and music rate ([EgoMusic] supp. Table 2)
 
@@ -53,7 +83,9 @@ class EgoDanceModule(LightningModule):
         context_dim: Dc (256).
         music_dim: per-frame music features (35 librosa; 4800 Jukebox).
         use_vision: condition on egocentric frames.
-        resnet_path: local folder of a pretrained ``transformers`` ResNet (None: random init, warned).
+        resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
+            downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
+            ``resnet_layers`` (an explicit choice, warned).
         resnet_layers: ``ResNetConfig`` keyword arguments when no path is given (None: ResNet-50).
         image_size: ResNet input size (match the data module's ``image_size``).
         freeze_resnet: keep the ResNet fixed.
@@ -74,6 +106,12 @@ class EgoDanceModule(LightningModule):
         sampler: ``ddim`` or ``ddpm`` at test/predict time. sampling_steps: DDIM steps.
         guidance_weight: classifier-free guidance weight w (EDGE: 2).
         head_guidance_weight: G_head step size (0 disables). head_guidance_steps: gradient steps per step.
+        head_source: where head guidance takes its targets: ``estimate`` (from the frames), ``oracle`` (the
+            ground-truth camera path; evaluation only) or ``none``.
+        use_head_estimator: train the head-trajectory estimator (vision models only).
+        head_estimator: its settings (None: :class:`HeadEstimatorConfig` defaults).
+        lambda_head: weight of its loss.
+        test_oracle_head: at test, also sample with the oracle head (logged as ``test/oracle_head/...``).
         seed: seed of the evaluation noise.
         protocol: dance-evaluation protocol of the test loop: ``"edge"`` (default), ``"bailando"`` or
             ``"fact"`` (see the module docstring).
@@ -112,15 +150,30 @@ class EgoDanceModule(LightningModule):
         guidance_weight: float = 2.0,
         head_guidance_weight: float = 0.05,
         head_guidance_steps: int = 1,
+        head_source: str = "estimate",
+        use_head_estimator: bool = True,
+        head_estimator: HeadEstimatorConfig | None = None,
+        lambda_head: float = 1.0,
+        test_oracle_head: bool = True,
         seed: int = 0,
         protocol: str = "edge",
     ) -> None:
         super().__init__()
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+        if head_source not in HEAD_SOURCES:
+            raise ValueError(f"head_source must be one of {sorted(HEAD_SOURCES)}, got {head_source!r}")
+        has_estimator = use_vision and use_head_estimator
+        if head_source == "estimate" and not has_estimator:
+            raise ValueError(
+                "head_source='estimate' needs the head-trajectory estimator, which needs egocentric frames "
+                "(use_vision=True, use_head_estimator=True); choose head_source 'none' (or 'oracle')"
+            )
         config = backbone_config(backbone)
-        self.save_hyperparameters(ignore=["backbone"])
+        estimator_config = _estimator_config(head_estimator)
+        self.save_hyperparameters(ignore=["backbone", "head_estimator"])
         self.hparams["backbone"] = plain_backbone_config(config)
+        self.hparams["head_estimator"] = plain_backbone_config(estimator_config)
         self.model = EMM(
             config,
             context_dim=context_dim,
@@ -140,9 +193,30 @@ class EgoDanceModule(LightningModule):
         self.ema.requires_grad_(False)
         self.diffusion = GaussianDiffusion(diffusion_steps)
         self.weights = KinematicLossWeights(lambda_pos, lambda_vel, lambda_contact)
-        self.test_mpjpe, self.test_root, self.test_head = MeanMetric(), MeanMetric(), MeanMetric()
+        self.head_estimator = HeadTrajectoryEstimator(estimator_config) if has_estimator else None
+        self.test_metrics = nn.ModuleDict({name: DanceMetrics() for name in HEAD_SOURCES.values()})
         scorer = FACTProtocol(seed_frames=0) if protocol == "fact" else get_protocol(protocol)
-        self.test_evaluation = DanceEvaluation(scorer)
+        self.test_evaluations = nn.ModuleDict(
+            {name: DanceEvaluation(scorer) for name in HEAD_SOURCES.values()}
+        )
+        self.test_head_position, self.test_head_rotation = MeanMetric(), MeanMetric()
+
+    def parameter_counts(self) -> dict[str, int]:
+        """Parameters of the EMM (trainable / frozen) and of the head estimator (the EMA copy not counted)."""
+        counts = {"emm_trainable": 0, "emm_frozen": 0, "head_estimator": 0}
+        for p in self.model.parameters():
+            counts["emm_trainable" if p.requires_grad else "emm_frozen"] += p.numel()
+        if self.head_estimator is not None:
+            counts["head_estimator"] = sum(p.numel() for p in self.head_estimator.parameters())
+        return counts
+
+    def on_fit_start(self) -> None:
+        c = {k: v / 1e6 for k, v in self.parameter_counts().items()}
+        rank_zero_info(
+            f"EMM parameters: {c['emm_trainable']:.1f} M trainable + {c['emm_frozen']:.1f} M frozen "
+            f"(ResNet) = {c['emm_trainable'] + c['emm_frozen']:.1f} M ([EgoMusic] supp. Table 3: 47.4 M); "
+            f"head-trajectory estimator (ours): {c['head_estimator']:.2f} M; the EMA copy is not counted"
+        )
 
     # ------------------------------------------------------------------ training
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
@@ -167,8 +241,26 @@ class EgoDanceModule(LightningModule):
             losses["loss"] = losses["loss"] + self.hparams.lambda_align * losses["align"]
         return losses
 
+    def _head_estimator_loss(self, batch: dict) -> torch.Tensor | None:
+        """The estimator's loss on the batch's ground-truth head path (None without estimator or path)."""
+        if self.head_estimator is None or "head_rotation" not in batch or batch.get("frames") is None:
+            return None
+        positions, rotations = self.head_estimator(batch["frames"])
+        return head_trajectory_loss(
+            positions,
+            rotations,
+            batch["head"],
+            batch["head_rotation"],
+            self.head_estimator.config.rotation_weight,
+            self.head_estimator.config.position_scale,
+        )
+
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         losses = self._losses(batch)
+        head_loss = self._head_estimator_loss(batch)
+        if head_loss is not None:  # independent parameters: adding it leaves the EMM's gradients unchanged
+            losses["head_traj"] = head_loss
+            losses["loss"] = losses["loss"] + self.hparams.lambda_head * head_loss
         b = batch["motion"].shape[0]
         self.log_dict({f"train/{k}": v for k, v in losses.items() if k != "loss"}, batch_size=b)
         self.log("train/loss", losses["loss"], prog_bar=True, batch_size=b)
@@ -181,21 +273,74 @@ class EgoDanceModule(LightningModule):
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         gen = torch.Generator().manual_seed(self.hparams.seed + batch_idx)
         losses = self._losses(batch, gen)
-        self.log(
-            "val/loss", losses["loss"], prog_bar=True, batch_size=batch["motion"].shape[0], sync_dist=True
-        )
+        b = batch["motion"].shape[0]
+        self.log("val/loss", losses["loss"], prog_bar=True, batch_size=b, sync_dist=True)
+        head_loss = self._head_estimator_loss(batch)
+        if head_loss is not None:
+            self.log("val/head_traj", head_loss, batch_size=b, sync_dist=True)
+
+    def configure_gradient_clipping(self, optimizer, gradient_clip_val=None, gradient_clip_algorithm=None):
+        """Clip the EMM and the head estimator separately, so the estimator never rescales the EMM's step."""
+        if not gradient_clip_val:
+            return
+        groups = [self.model.parameters()]
+        if self.head_estimator is not None:
+            groups.append(self.head_estimator.parameters())
+        for params in groups:
+            grads = [p for p in params if p.grad is not None]
+            if gradient_clip_algorithm == "value":
+                nn.utils.clip_grad_value_(grads, gradient_clip_val)
+            else:
+                nn.utils.clip_grad_norm_(grads, gradient_clip_val)
 
     # ------------------------------------------------------------------ sampling
-    def sample(self, batch: dict, batch_idx: int = 0, use_ema: bool = True) -> torch.Tensor:
-        """Motion tokens (B, T, 24, 10) for a batch's music, frames and head targets."""
+    @torch.no_grad()
+    def estimate_head(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Head positions (B, T, 3) and rotations (B, T, 3, 3) estimated from frames (B, T, 3, H, W)."""
+        if self.head_estimator is None:
+            raise ValueError("this EgoDanceModule has no head-trajectory estimator (a music-only model?)")
+        was_training = self.head_estimator.training
+        self.head_estimator.eval()
+        try:
+            return self.head_estimator(frames)
+        finally:
+            self.head_estimator.train(was_training)
+
+    def head_targets(self, batch: dict, source: str | None = None) -> torch.Tensor | None:
+        """Head guidance targets (B, T, 3) of ``source`` (default ``head_source``), or None for ``none``."""
+        source = source or self.hparams.head_source
+        if source == "none":
+            return None
+        if source == "oracle":
+            if batch.get("head") is None:
+                raise ValueError("head_source='oracle' needs the ground-truth head path (batch['head'])")
+            return batch["head"]
+        if source == "estimate":
+            if batch.get("frames") is None:
+                raise ValueError("head_source='estimate' needs the egocentric frames (batch['frames'])")
+            return self.estimate_head(batch["frames"])[0]
+        raise ValueError(f"unknown head source {source!r} ({', '.join(HEAD_SOURCES)})")
+
+    def sample(
+        self,
+        batch: dict,
+        batch_idx: int = 0,
+        use_ema: bool = True,
+        head_source: str | None = None,
+        head: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Motion tokens (B, T, 24, 10) for a batch's music and frames, head guidance from ``head_source``
+        (default: the module's ``head_source``) or the given ``head`` targets (B, T, 3)."""
         model = self.ema.module if use_ema else self.model
         hp = self.hparams
+        if head is None:
+            head = self.head_targets(batch, head_source)
         return sample_dance(
             model,
             self.diffusion,
             batch["music"],
             batch.get("frames"),
-            batch.get("head"),
+            head,
             sampler=hp.sampler,
             steps=hp.sampling_steps,
             guidance_weight=hp.guidance_weight,
@@ -204,43 +349,69 @@ class EgoDanceModule(LightningModule):
             generator=torch.Generator().manual_seed(hp.seed + batch_idx),
         )
 
+    def _test_sources(self, batch: dict) -> list[str]:
+        sources = [self.hparams.head_source]
+        if self.hparams.test_oracle_head and "oracle" not in sources and batch.get("head") is not None:
+            sources.append("oracle")
+        return sources
+
     def test_step(self, batch: dict, batch_idx: int) -> None:
-        pred = motion_joints(self.sample(batch, batch_idx))
         true = motion_joints(batch["motion"])
-        err = (pred - true).norm(dim=-1) * 1000.0  # (B, T, 24) mm
-        b = pred.shape[0]
-        self.test_mpjpe.update(err.mean(dim=(1, 2)))
-        self.test_root.update(err[..., 0].mean(dim=1))
-        self.test_head.update(err[..., HEAD_JOINT].mean(dim=1))
         if "music_path" not in batch:
             raise KeyError("EMM test: the batch needs music_path and music_start_s (protocol music beats)")
-        protocol, cache = self.test_evaluation.protocol, _music_cache_dir(self)
-        for i in range(b):
-            start, duration = float(batch["music_start_s"][i]), pred.shape[1] / MOTION_FPS
-            beats = protocol.music_beats(batch["music_path"][i], start, duration, cache)
-            self.test_evaluation.add(true[i].cpu(), MOTION_FPS, beats, real=True)
-            self.test_evaluation.add(pred[i].cpu(), MOTION_FPS, beats)
-        metrics = {
-            "test/mpjpe_mm": self.test_mpjpe,
-            "test/root_error_mm": self.test_root,
-            "test/head_error_mm": self.test_head,
-        }
-        self.log_dict(metrics, batch_size=b)
+        frames = batch.get("frames")
+        beats = video_beats(frames) if frames is not None else None
+        estimate = None
+        if self.head_estimator is not None and frames is not None:
+            estimate = self.estimate_head(frames)
+            if batch.get("head_rotation") is not None:
+                pos_err, rot_err = head_trajectory_errors(*estimate, batch["head"], batch["head_rotation"])
+                self.test_head_position.update(pos_err)
+                self.test_head_rotation.update(rot_err)
+                b = len(pos_err)
+                self.log("test/head_estimator/position_mm", self.test_head_position, batch_size=b)
+                self.log("test/head_estimator/rotation_deg", self.test_head_rotation, batch_size=b)
+        protocol, cache = next(iter(self.test_evaluations.values())).protocol, _music_cache_dir(self)
+        duration = true.shape[1] / MOTION_FPS
+        music_beats = [
+            protocol.music_beats(path, float(start), duration, cache)
+            for path, start in zip(batch["music_path"], batch["music_start_s"])
+        ]
+        for source in self._test_sources(batch):
+            head = estimate[0] if source == "estimate" else None
+            pred = motion_joints(self.sample(batch, batch_idx, head_source=source, head=head))
+            name = HEAD_SOURCES[source]
+            self.test_metrics[name].update(pred, true, batch["music"], beats)
+            for i, window_beats in enumerate(music_beats):
+                self.test_evaluations[name].add(true[i].cpu(), MOTION_FPS, window_beats, real=True)
+                self.test_evaluations[name].add(pred[i].cpu(), MOTION_FPS, window_beats)
 
     def on_test_epoch_end(self) -> None:
-        result = self.test_evaluation.compute()
         names = {"BeatAlign": "beat_align", "PFC": "pfc", "FID_k": "FID_k", "FID_g": "FID_g",
                  "Div_k": "Div_k", "Div_g": "Div_g"}  # fmt: skip
-        for key, name in names.items():
-            if key in result:
-                self.log(f"test/{name}", float(result[key]))
-        self.test_evaluation.reset(keep_real=False)
+        for name, group in self.test_metrics.items():
+            evaluation = self.test_evaluations[name]
+            if group.mpjpe.update_called:
+                values = {k: float(v) for k, v in group.compute().items()}
+                result = evaluation.compute()
+                values.update({short: float(result[key]) for key, short in names.items() if key in result})
+                self.log_dict({f"test/{name}/{k}": v for k, v in values.items()})
+            group.reset()
+            evaluation.reset(keep_real=False)
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
-        """``sample_id``, ``tokens`` (B, T, 24, 10) and FK ``joints`` (B, T, 24, 3) of sampled dances."""
+        """``sample_id``, ``tokens`` (B, T, 24, 10), FK ``joints`` (B, T, 24, 3) of sampled dances, and the
+        ``head_source`` their guidance used."""
         tokens = self.sample(batch, batch_idx)
-        return {"sample_id": batch.get("sample_id"), "tokens": tokens, "joints": motion_joints(tokens)}
+        return {
+            "sample_id": batch.get("sample_id"),
+            "tokens": tokens,
+            "joints": motion_joints(tokens),
+            "head_source": self.hparams.head_source,
+        }
 
     def configure_optimizers(self):
         params = [p for p in self.model.parameters() if p.requires_grad]
+        if self.head_estimator is not None:
+            params += list(self.head_estimator.parameters())
         return torch.optim.AdamW(params, lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
