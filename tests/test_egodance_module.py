@@ -92,7 +92,8 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song, 
     trainer.fit(module, loader, loader)
     assert any(not torch.equal(a, b) for a, b in zip(before, module.ema.module.parameters(), strict=True))
     results = trainer.test(module, loader, verbose=False)[0]
-    names = ("mpjpe_mm", "root_error_mm", "head_error_mm", "pfc", "beat_align", "mmv", "mm", "mv", "FID_k")
+    # (PFC belongs to the edge protocol: tested above)
+    names = ("mpjpe_mm", "root_error_mm", "head_error_mm", "beat_align", "mmv", "mm", "mv", "FID_k")
     for source in ("estimated_head", "oracle_head"):  # the default (estimate) and the oracle comparison
         for name in names:
             key = f"test/{source}/{name}"
