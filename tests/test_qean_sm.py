@@ -123,7 +123,7 @@ def test_sm_test_prints_our_figures_beside_the_seed_table(aistpp, tmp_path, monk
     assert run(["test", "--recipe", "qean.yaml", *_overrides(aistpp, backbone=False)]) == 0
     text = caplog.text
     # default test_split [val, test]: the val list of <root>/splits plus the test list = 3 sequences
-    assert "protocol: 3 generated sequences x 20 frames (seed: 40 x 1200); real set: 5 sequences" in text
+    assert "protocol fact: 3 generated sequences x 20 frames (seed: 40 x 1200); real set: 5 sequences" in text
     assert "NOT COMPARABLE with the seed: synthetic data in the AIST++ layout" in text
     for name, seed in SEED_TABLE1.items():
         match = re.search(rf"^{name}\s+(\S+)\s+(\S+)\s+(\S+)$", text, re.MULTILINE)

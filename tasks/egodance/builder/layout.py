@@ -205,6 +205,9 @@ def _write_frames(folder: Path, rgb: np.ndarray, fps: float, fmt: str) -> None:
             quality=8,
             # half the encoder CPU of x264's default "medium" preset for ~6% larger files (224 x 224)
             ffmpeg_params=["-preset", "veryfast"],
+            # errors only: a worker stopped by Ctrl-C leaves its encoder an empty input, whose warning
+            # would otherwise follow `sm make-ego: interrupted` on the terminal
+            ffmpeg_log_level="error",
         )
     else:
         raise ValueError(f"frame format must be 'png' or 'mp4', got {fmt!r}")
