@@ -6,7 +6,9 @@
                                                      +-> FusionModule -> c (B, T, Dc)
     frames (B, T, 3, H, W) -> VisionEncoder -> ...--+
     x_t (B, T, 24, 10) -> Linear -> + time embedding -> SkeletonMamba(N blocks, cross-attention to
-        [time token; c]) -> Linear -> x0_hat (B, T, 24, 10)
+        [time token; c]) -> Linear -> F -> x0_hat = sqrt(abar_t) x_t + sqrt(1 - abar_t) F (B, T, 24, 10)
+
+(the skip connection from x_t: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`)
 
 ``forward(x_t, t, context)`` is a denoiser for :mod:`skeleton_mamba.tasks.diffusion` (``context=None``:
 the learned null condition, for classifier-free guidance). Defaults are the seed's: D 128, Dc 256, G 5,
@@ -22,6 +24,7 @@ from torch import nn
 from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.encoders import (
     FusionModule,
     MusicEncoder,
@@ -50,6 +53,7 @@ class EMM(nn.Module):
         heads: attention heads of the encoders.
         transformer_ff: feed-forward width of the encoders ("Transformer dim" 512).
         dropout: dropout of the encoders.
+        diffusion_steps: T of the noise schedule (scales the skip connection from x_t).
     """
 
     def __init__(
@@ -67,6 +71,7 @@ class EMM(nn.Module):
         heads: int = 4,
         transformer_ff: int = 512,
         dropout: float = 0.1,
+        diffusion_steps: int = 1000,
     ):
         super().__init__()
         cfg = dataclasses.replace(
@@ -94,6 +99,7 @@ class EMM(nn.Module):
             FusionModule(context_dim, fusion_layers, heads, transformer_ff, dropout) if use_vision else None
         )
         self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
+        self.skip_x0 = SkipX0(diffusion_steps)
 
     def encode_modalities(
         self, music: torch.Tensor, frames: torch.Tensor | None = None
@@ -150,4 +156,4 @@ class EMM(nn.Module):
         temb = self.time_mlp(sinusoidal_embedding(t, self.input_proj.out_features).to(x_t.dtype))
         h = self.input_proj(x_t) + temb[:, None, None, :]
         context = torch.cat([self.time_token(temb)[:, None], context], dim=1)
-        return self.backbone(h, mask=mask, context=context)
+        return self.skip_x0(x_t, self.backbone(h, mask=mask, context=context), t)

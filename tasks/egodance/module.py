@@ -116,6 +116,7 @@ class EgoDanceModule(LightningModule):
             heads=heads,
             transformer_ff=transformer_ff,
             dropout=encoder_dropout,
+            diffusion_steps=diffusion_steps,
         )
         self.ema = AveragedModel(self.model, multi_avg_fn=get_ema_multi_avg_fn(ema_decay), use_buffers=True)
         self.ema.requires_grad_(False)

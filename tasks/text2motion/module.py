@@ -132,7 +132,9 @@ class TextToMotionModule(LightningModule):
         self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
-        self.denoiser = TextToMotionDenoiser(config, self.text_encoder.dim, time_channels)
+        self.denoiser = TextToMotionDenoiser(
+            config, self.text_encoder.dim, time_channels, num_steps=num_steps
+        )
         self.diffusion = GaussianDiffusion(num_steps)
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
         self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
