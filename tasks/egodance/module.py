@@ -127,6 +127,14 @@ class EgoDanceModule(LightningModule):
         self.test_beat_align = BeatAlign(variant="bailando", fps=30.0)
 
     # ------------------------------------------------------------------ training
+    def setup(self, stage: str) -> None:
+        """Fit: the denoiser's preconditioning statistics from the training windows' motion."""
+        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        train = (getattr(datamodule, "datasets", None) or {}).get("train")
+        if stage == "fit" and train is not None and len(train) > 0:
+            self.model.set_data_statistics(torch.stack([item["motion"] for item in train.items]))
+            self.ema.module.skip_x0.load_state_dict(self.model.skip_x0.state_dict())
+
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]
         z_a, z_v = self.model.encode_modalities(batch["music"], batch.get("frames"))

@@ -19,7 +19,7 @@ Conditioning: the timestep (sinusoidal embedding + MLP) is concatenated to every
 channels and also forms the first cross-attention token; the caption's token embeddings follow it
 (projected to ``text_dim``). The unconditional prediction used by classifier-free guidance masks out
 every text token, leaving the timestep token. The denoiser predicts x0 (MDM), as
-``sqrt(abar_t) x_t + sqrt(1 - abar_t) F`` with the backbone's output F
+``sqrt(abar_t) x_t + sqrt(1 - abar_t) F`` with the backbone's output F (the features are standardised)
 (:mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
 """
 
@@ -179,7 +179,8 @@ class TextToMotionDenoiser(nn.Module):
         b, frames, _ = x_t.shape
         emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
         channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
-        tokens = torch.cat([features_to_tokens(x_t), channels], dim=-1)  # (B, T, 22, 13 + C_t)
+        x_in = self.skip_x0.network_input(x_t, t)  # x_t itself: the features are standardised
+        tokens = torch.cat([features_to_tokens(x_in), channels], dim=-1)  # (B, T, 22, 13 + C_t)
         time_token = self.time_to_token(emb)[:, None, :]  # (B, 1, D)
         if cond is None:
             context, context_mask = time_token, torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
