@@ -18,9 +18,9 @@ channels   joint 0 (root)                                       joints 1..21
 Conditioning: the timestep (sinusoidal embedding + MLP) is concatenated to every joint token's input
 channels and also forms the first cross-attention token; the caption's token embeddings follow it
 (projected to ``text_dim``). The unconditional prediction used by classifier-free guidance masks out
-every text token, leaving the timestep token. The denoiser predicts x0 (MDM), as
-``sqrt(abar_t) x_t + sqrt(1 - abar_t) F`` with the backbone's output F (the features are standardised)
-(:mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
+every text token, leaving the timestep token. The denoiser predicts x0 (MDM), preconditioned
+with the per-feature statistics of the normalised training features (``mu + c_skip (x_t - a mu) + c_out F``
+with the backbone's output F: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
 """
 
 from __future__ import annotations
@@ -167,7 +167,13 @@ class TextToMotionDenoiser(nn.Module):
         self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
         self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
         self.text_proj = nn.Linear(text_dim, text_dim)
-        self.skip_x0 = SkipX0(num_steps)
+        self.skip_x0 = SkipX0(num_steps, channels=(FEATURE_DIM,))
+
+    def set_data_statistics(self, features: torch.Tensor) -> None:
+        """Per-feature mean and std of normalised training features (N, 263) for the preconditioning (the
+        group-wise normalisation of HumanML3D leaves them off 0 and 1)."""
+        flat = features.reshape(-1, FEATURE_DIM).double()
+        self.skip_x0.set_statistics(flat.mean(dim=0).float(), flat.std(dim=0, correction=0).float())
 
     def forward(
         self,
@@ -179,7 +185,7 @@ class TextToMotionDenoiser(nn.Module):
         b, frames, _ = x_t.shape
         emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
         channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
-        x_in = self.skip_x0.network_input(x_t, t)  # x_t itself: the features are standardised
+        x_in = self.skip_x0.network_input(x_t, t)
         tokens = torch.cat([features_to_tokens(x_in), channels], dim=-1)  # (B, T, 22, 13 + C_t)
         time_token = self.time_to_token(emb)[:, None, :]  # (B, 1, D)
         if cond is None:
