@@ -17,7 +17,8 @@ per-channel reconstruction loss and the lambdas alone weigh them:
 Why per coordinate: the paper writes plain squared norms, which sum 72 (positions) or 147 (velocities)
 squared errors per frame against the reconstruction term's per-channel mean. Summed, the kinematic terms
 outweighed the reconstruction 100 to 1 (L_pos about 47 m^2 against 0.08 at initialisation on the demo data),
-and a tiny EMM trained for 200 steps fitted x0 about 30 times worse than with the reconstruction alone.
+and the demo's EMM, 200 Adam steps on two 48-frame windows, fitted x0 at t = 1 20 times worse than with the
+reconstruction alone (MSE 0.26 against 0.013).
 """
 
 from __future__ import annotations
