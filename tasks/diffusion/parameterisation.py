@@ -6,7 +6,8 @@ worse than returning ``x_t`` (the demo's EMM, 200 Adam steps on two 48-frame win
 reconstruction loss alone: x0 MSE 0.013 at t = 1 against 0.0018 for ``x_t``), and at large t it starts
 far from the data mean. With the data's per-channel mean ``mu`` and standard deviation ``sigma``
 (``0`` and ``1`` for standardised features), ``a = sqrt(alpha_bar_t)``, ``s = sqrt(1 - alpha_bar_t)`` and
-``d = a^2 sigma^2 + s^2`` (the variance of ``y_t = x_t - a mu``), the network ``F`` sees ``y_t / sqrt(d)`` (unit variance) and the denoiser returns::
+``d = a^2 sigma^2 + s^2`` (the variance of ``y_t = x_t - a mu``), the network ``F`` sees ``y_t / sqrt(d)``
+(unit variance) and the denoiser returns::
 
     x0_hat = mu + (a sigma^2 / d) y_t + (sigma s / sqrt(d)) F
 
