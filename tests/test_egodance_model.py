@@ -76,16 +76,18 @@ def test_losses_against_hand_computation():
     d = torch.tensor([0.1, -0.2, 0.3], dtype=torch.float64)
     x0 = _rest_motion(t)
     shifted = _rest_motion(t, d.expand(t, 3))
-    # every joint moves by d: |FK - FK_hat|^2 = 24 |d|^2 per frame
-    assert position_loss(shifted, x0).item() == pytest.approx(24 * 0.14)
-    # constant offsets have no velocity error; a root drifting by v per frame gives |v|^2 per frame pair
+    # every joint moves by d: |FK - FK_hat|^2 = 24 |d|^2 per frame, over 24 x 3 coordinates
+    assert position_loss(shifted, x0).item() == pytest.approx(24 * 0.14 / 72)
+    # constant offsets have no velocity error; a root drifting by v per frame gives |v|^2 per frame pair,
+    # over the 144 rot6d + 3 root channels
     assert velocity_loss(shifted, x0).item() == pytest.approx(0.0, abs=1e-12)
     v = torch.tensor([0.0, 0.5, 0.0], dtype=torch.float64)
     drift = _rest_motion(t, torch.arange(t, dtype=torch.float64)[:, None] * v)
-    assert velocity_loss(drift, x0).item() == pytest.approx(0.25)
-    # contacts: predicted contact on frame 0 only (> 0.95), feet move by v -> (4 |v|^2 + 0) / (T - 1)
+    assert velocity_loss(drift, x0).item() == pytest.approx(0.25 / 147)
+    # contacts: predicted contact on frame 0 only (> 0.95), feet move by v -> (4 |v|^2 + 0) / (T - 1),
+    # over 4 feet x 3 coordinates
     drift[0, 0, [7, 8, 10, 11], 9] = 1.0
-    assert contact_loss(drift).item() == pytest.approx(4 * 0.25 / 2)
+    assert contact_loss(drift).item() == pytest.approx(4 * 0.25 / 2 / 12)
     drift[0, 0, [7, 8, 10, 11], 9] = 0.9  # below the 0.95 threshold
     assert contact_loss(drift).item() == pytest.approx(0.0)
     # reconstruction: mean over the 151 data channels per frame; unused slots ignored
@@ -95,7 +97,7 @@ def test_losses_against_hand_computation():
     assert reconstruction_loss(noisy, x0, "l2").item() == pytest.approx(4.0 / 151)
     assert reconstruction_loss(noisy, x0, "l1").item() == pytest.approx(2.0 / 151)
     terms = emm_losses(shifted, x0)
-    assert terms["kin"].item() == pytest.approx(24 * 0.14)  # pos only (weights 1 / 0.1 / 1)
+    assert terms["kin"].item() == pytest.approx(24 * 0.14 / 72)  # pos only (weights 1 / 0.1 / 1)
 
 
 def test_head_targets_invert_the_builder_camera():

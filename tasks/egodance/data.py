@@ -79,7 +79,8 @@ def _missing(folder: Path) -> list[str]:
 class EgoDanceDataset(Dataset):
     """Sample folders -> dicts of ``motion``, ``music``, ``head`` (and ``frames``), plus ``sample_id``.
 
-    Motion, music and head targets are read once at construction; frames are decoded per item.
+    Motion, music and head targets are read once at construction; frames are decoded per item, or once and
+    kept in memory with ``cache_frames`` (small sets: 150 frames at 64 px take 7 MB a window).
     """
 
     def __init__(
@@ -90,11 +91,14 @@ class EgoDanceDataset(Dataset):
         load_frames: bool = True,
         image_size: int = 224,
         music_cache_dir: str | None = None,
+        cache_frames: bool = False,
     ):
         self.folders = folders
         self.window = window
         self.load_frames = load_frames
         self.image_size = image_size
+        self.cache_frames = cache_frames
+        self._frames: dict[int, torch.Tensor] = {}
         self.items = [self._read(f, fps, music_cache_dir) for f in folders]
 
     def _read(self, folder: Path, fps: int, cache_dir: str | None) -> dict:
@@ -149,9 +153,14 @@ class EgoDanceDataset(Dataset):
     def __getitem__(self, index: int) -> dict:
         item = dict(self.items[index])
         if self.load_frames:
-            rgb = torch.from_numpy(read_frames(self.folders[index])[: self.window]).permute(0, 3, 1, 2)
-            size = (self.image_size, self.image_size)
-            item["frames"] = kornia.geometry.transform.resize(rgb.float() / 255.0, size, antialias=True)
+            frames = self._frames.get(index)
+            if frames is None:
+                rgb = torch.from_numpy(read_frames(self.folders[index])[: self.window]).permute(0, 3, 1, 2)
+                size = (self.image_size, self.image_size)
+                frames = kornia.geometry.transform.resize(rgb.float() / 255.0, size, antialias=True)
+                if self.cache_frames:
+                    self._frames[index] = frames
+            item["frames"] = frames
         return item
 
 
@@ -169,6 +178,7 @@ class EgoDanceDataModule(LightningDataModule):
         val_fraction: share of motion sources held out for validation.
         test_fraction: share of non-AIST++ sources held out for testing.
         music_cache_dir: cache of music features (default ``~/.cache/skeleton_mamba/music``).
+        cache_frames: keep the decoded frames in memory after their first use (small sets).
     """
 
     def __init__(
@@ -183,6 +193,7 @@ class EgoDanceDataModule(LightningDataModule):
         val_fraction: float = 0.1,
         test_fraction: float = 0.1,
         music_cache_dir: str | None = None,
+        cache_frames: bool = False,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -226,7 +237,7 @@ class EgoDanceDataModule(LightningDataModule):
         hp = self.hparams
         for name, folders in self.split_folders().items():
             self.datasets[name] = EgoDanceDataset(
-                folders, hp.window, hp.fps, hp.load_frames, hp.image_size, hp.music_cache_dir
+                folders, hp.window, hp.fps, hp.load_frames, hp.image_size, hp.music_cache_dir, hp.cache_frames
             )
         if len(self.datasets["train"]) == 0 and stage == "fit":
             raise DatasetNotFoundError(f"{self.root}: every sample fell into val/test; no training windows")
@@ -264,6 +275,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         frame_size: rendered egocentric frame size (pixels, square).
         num_rooms: procedural rooms to place the dances in.
         seed: generator seed.
+        cache_frames: keep decoded frames in memory (default here: the set is small).
         Other arguments as :class:`EgoDanceDataModule`.
     """
 
@@ -284,6 +296,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         val_fraction: float = 0.17,
         test_fraction: float = 0.17,
         music_cache_dir: str | None = None,
+        cache_frames: bool = True,
     ):
         super().__init__(
             str(Path(root) / "ego"),
@@ -296,6 +309,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             val_fraction,
             test_fraction,
             music_cache_dir,
+            cache_frames,
         )
         self.source_root = Path(root).resolve()
 

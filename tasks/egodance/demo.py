@@ -10,7 +10,10 @@ egocentric frames and head-camera trajectory, and writes into ``<log dir>/demo/`
   rendering with the window's music muxed in, and that music slice);
 - ``synthetic_<sample id>_reference.{npz,bvh,mp4,wav}``: the ground-truth dance of the window, for
   comparison (``render_reference``);
-- ``demo.json``: what was done, with ``"synthetic": true`` and the data's provenance.
+- ``demo.json``: what was done, with ``"synthetic": true`` and the data's provenance, and ``scores``: every
+  held-out window's dance scored beside its ground truth and two baselines (:mod:`.demo_scores`: pose
+  plausibility, MPJPE, BeatAlign, foot skating, ground penetration), with ``checks`` against the targets.
+  The same table is printed.
 
 Everything is labelled synthetic (file names, metadata, the printed message and the video title): the
 demo data are procedural dances and synthesised music placed in procedural rooms.
@@ -25,12 +28,15 @@ from pathlib import Path
 import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
+from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
 from skeleton_mamba.tasks.egodance.export import write_dance
+from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.render import RenderStyle
 
 __all__ = ["DanceDemo"]
 
+MUSIC_BEAT_CHANNEL = 34  # the one-hot beat column of the 35-d librosa music features
 LABEL = "SYNTHETIC demo data (procedural dances, synthesised music, procedural rooms)"
 
 
@@ -38,7 +44,8 @@ class DanceDemo(Callback):
     """Sample and render dances for held-out windows at the end of training.
 
     Args:
-        num_samples: held-out windows to dance to.
+        num_samples: held-out windows to dance to and render.
+        score_samples: held-out windows to sample and score (None: all of them).
         out_subdir: folder under the trainer's log dir (``runs/<name>/version_N``).
         render: write the mp4 renderings.
         render_reference: also write the ground-truth dance of each window.
@@ -49,6 +56,7 @@ class DanceDemo(Callback):
     def __init__(
         self,
         num_samples: int = 1,
+        score_samples: int | None = None,
         out_subdir: str = "demo",
         render: bool = True,
         render_reference: bool = True,
@@ -56,6 +64,9 @@ class DanceDemo(Callback):
         height: int = 352,
     ):
         self.num_samples = num_samples
+        if score_samples is not None and score_samples < 1:
+            raise ValueError(f"score_samples must be at least 1 (or None: every window), got {score_samples}")
+        self.score_samples = score_samples
         self.out_subdir = out_subdir
         self.render = render
         self.render_reference = render_reference
@@ -84,13 +95,20 @@ class DanceDemo(Callback):
         out = self.out_dir(trainer)
         was_training = pl_module.training
         pl_module.eval()
-        records = []
-        for index in range(min(self.num_samples, len(dataset))):
+        records, dances, truths, beats = [], [], [], []
+        scored = len(dataset) if self.score_samples is None else min(self.score_samples, len(dataset))
+        for index in range(max(min(self.num_samples, len(dataset)), scored)):
             item = dataset[index]
+            batch = {k: v[None].to(pl_module.device) for k, v in item.items() if torch.is_tensor(v)}
+            with torch.no_grad():
+                tokens = pl_module.sample(batch, index)[0].cpu()
+            dances.append(motion_joints(tokens))
+            truths.append(motion_joints(item["motion"]))
+            beats.append(item["music"][:, MUSIC_BEAT_CHANNEL])
+            if index >= self.num_samples:
+                continue
             meta = json.loads((Path(dataset.folders[index]) / "meta.json").read_text(encoding="utf-8"))
             music = meta.get("music") or {}
-            batch = {k: v[None].to(pl_module.device) for k, v in item.items() if torch.is_tensor(v)}
-            tokens = pl_module.sample(batch, index)[0]
             sid = str(item["sample_id"])
             name = sid if sid.startswith("synthetic") else f"synthetic_{sid}"
             written = {"dance": (tokens, f"{name}_dance", "EMM (synthetic demo)")}
@@ -110,6 +128,9 @@ class DanceDemo(Callback):
                 )
                 record[kind] = {k: str(v) for k, v in vars(files).items() if v is not None}
             records.append(record)
+        train = [motion_joints(item["motion"]) for item in trainer.datamodule.datasets["train"].items]
+        scores = score_held_out(dances[:scored], truths[:scored], beats[:scored], train)
+        checks = target_checks(scores)
         summary = {
             "synthetic": True,
             "label": LABEL,
@@ -119,6 +140,8 @@ class DanceDemo(Callback):
             "guidance_weight": pl_module.hparams.get("guidance_weight"),
             "global_step": trainer.global_step,
             "samples": records,
+            "scores": {"held_out_windows": scored, "training_windows": len(train), **scores},
+            "checks": checks,
         }
         with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
             f.write(json.dumps(summary, indent=2))
@@ -127,4 +150,9 @@ class DanceDemo(Callback):
         lines = [f"[egodance demo] {LABEL}", f"[egodance demo] dance for held-out ({split}) music -> {out}"]
         for record in records:
             lines += [f"  {k}: {v}" for k, v in record["dance"].items()]
+        lines += [
+            f"[egodance demo] scores, mean over {scored} held-out ({split}) windows after "
+            f"{trainer.global_step} steps (baselines from the {len(train)} training windows):",
+            format_scores(scores, checks),
+        ]
         print("\n".join(lines), flush=True)

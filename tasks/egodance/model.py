@@ -5,8 +5,11 @@
     music (B, T, L) -> MusicEncoder -> (B, T, Dc) --+
                                                      +-> FusionModule -> c (B, T, Dc)
     frames (B, T, 3, H, W) -> VisionEncoder -> ...--+
-    x_t (B, T, 24, 10) -> Linear -> + time embedding -> SkeletonMamba(N blocks, cross-attention to
-        [time token; c]) -> Linear -> x0_hat (B, T, 24, 10)
+    x_t (B, T, 24, 10) -> c_in -> Linear -> + time embedding -> SkeletonMamba(N blocks, cross-attention
+        to [time token; c]) -> Linear -> F -> x0_hat = mu + c_skip (x_t - a mu) + c_out F (B, T, 24, 10)
+
+(the preconditioning with the training data's per-channel mean and standard deviation, set by
+:meth:`EMM.set_data_statistics`: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`)
 
 ``forward(x_t, t, context)`` is a denoiser for :mod:`skeleton_mamba.tasks.diffusion` (``context=None``:
 the learned null condition, for classifier-free guidance). Defaults are the seed's: D 128, Dc 256, G 5,
@@ -22,13 +25,14 @@ from torch import nn
 from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.encoders import (
     FusionModule,
     MusicEncoder,
     VisionEncoder,
     sinusoidal_embedding,
 )
-from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS
+from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
 
 __all__ = ["EMM"]
 
@@ -50,6 +54,7 @@ class EMM(nn.Module):
         heads: attention heads of the encoders.
         transformer_ff: feed-forward width of the encoders ("Transformer dim" 512).
         dropout: dropout of the encoders.
+        diffusion_steps: T of the noise schedule (of the preconditioning's scalings).
     """
 
     def __init__(
@@ -67,6 +72,7 @@ class EMM(nn.Module):
         heads: int = 4,
         transformer_ff: int = 512,
         dropout: float = 0.1,
+        diffusion_steps: int = 1000,
     ):
         super().__init__()
         cfg = dataclasses.replace(
@@ -94,6 +100,12 @@ class EMM(nn.Module):
             FusionModule(context_dim, fusion_layers, heads, transformer_ff, dropout) if use_vision else None
         )
         self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
+        self.skip_x0 = SkipX0(diffusion_steps, channels=(NUM_JOINTS, NUM_CHANNELS))
+
+    def set_data_statistics(self, motion: torch.Tensor) -> None:
+        """Per-channel mean and standard deviation of training motion tokens (N, T, 24, 10)."""
+        flat = motion.reshape(-1, NUM_JOINTS, NUM_CHANNELS).double()
+        self.skip_x0.set_statistics(flat.mean(dim=0).float(), flat.std(dim=0, correction=0).float())
 
     def encode_modalities(
         self, music: torch.Tensor, frames: torch.Tensor | None = None
@@ -148,6 +160,6 @@ class EMM(nn.Module):
         if context is None:
             context = self.null_context.to(x_t.dtype).expand(b, n, -1)
         temb = self.time_mlp(sinusoidal_embedding(t, self.input_proj.out_features).to(x_t.dtype))
-        h = self.input_proj(x_t) + temb[:, None, None, :]
+        h = self.input_proj(self.skip_x0.network_input(x_t, t)) + temb[:, None, None, :]
         context = torch.cat([self.time_token(temb)[:, None], context], dim=1)
-        return self.backbone(h, mask=mask, context=context)
+        return self.skip_x0(x_t, self.backbone(h, mask=mask, context=context), t)

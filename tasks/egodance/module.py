@@ -188,6 +188,7 @@ class EgoDanceModule(LightningModule):
             heads=heads,
             transformer_ff=transformer_ff,
             dropout=encoder_dropout,
+            diffusion_steps=diffusion_steps,
         )
         self.ema = AveragedModel(self.model, multi_avg_fn=get_ema_multi_avg_fn(ema_decay), use_buffers=True)
         self.ema.requires_grad_(False)
@@ -219,6 +220,14 @@ class EgoDanceModule(LightningModule):
         )
 
     # ------------------------------------------------------------------ training
+    def setup(self, stage: str) -> None:
+        """Fit: the denoiser's preconditioning statistics from the training windows' motion."""
+        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        train = (getattr(datamodule, "datasets", None) or {}).get("train")
+        if stage == "fit" and train is not None and len(train) > 0:
+            self.model.set_data_statistics(torch.stack([item["motion"] for item in train.items]))
+            self.ema.module.skip_x0.load_state_dict(self.model.skip_x0.state_dict())
+
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]
         z_a, z_v = self.model.encode_modalities(batch["music"], batch.get("frames"))

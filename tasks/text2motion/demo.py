@@ -6,7 +6,10 @@ ends it samples one motion per prompt with the trained module and writes, into `
 - ``synthetic_NN_<words>.npy``: joint positions (T, 22, 3), metres, y-up, 20 fps (``sm render`` reads it);
 - ``synthetic_NN_<words>_features.npy``: the 263-d HumanML3D features (T, 263);
 - ``synthetic_NN_<words>.mp4`` (or ``.gif``): the rendering, titled with the prompt;
-- ``demo.json``: prompts, sampler settings, paths, and ``"synthetic": true``.
+- ``demo.json``: prompts, sampler settings, paths, and ``"synthetic": true``, and ``scores``: motions
+  generated for ``score_captions`` held-out captions (``score_samples`` each) scored against the training
+  poses (:mod:`.demo_scores`: pose plausibility, and whether the caption matters), with ``checks``. The
+  scores are printed too.
 
 The demo model was trained on SYNTHETIC captioned dances; the files, metadata and message say so.
 """
@@ -20,6 +23,8 @@ import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores, format_caption_scores
+from skeleton_mamba.tasks.text2motion.features import recover_from_ric
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
 
 __all__ = ["LABEL", "TextToMotionDemo"]
@@ -37,6 +42,8 @@ class TextToMotionDemo(Callback):
         render: ``"mp4"``, ``"gif"`` or ``None`` (no video).
         sampling_steps: DDIM steps; ``None`` = DDPM; -1 = the module's setting.
         seed: noise seed.
+        score_captions: held-out captions (of the data module's val split) to score (0: no scores).
+        score_samples: motions generated per scored caption (at least 2).
     """
 
     def __init__(
@@ -47,6 +54,8 @@ class TextToMotionDemo(Callback):
         render: str | None = "mp4",
         sampling_steps: int | None = -1,
         seed: int = 0,
+        score_captions: int = 2,
+        score_samples: int = 2,
     ) -> None:
         self.prompts = list(prompts or ["a person waves both arms up and down."])
         self.frames = parse_length(length)
@@ -56,6 +65,10 @@ class TextToMotionDemo(Callback):
         self.render = render
         self.sampling_steps = sampling_steps
         self.seed = seed
+        if score_captions and (score_captions < 2 or score_samples < 2):
+            raise ValueError("scoring needs score_captions >= 2 and score_samples >= 2 (or score_captions 0)")
+        self.score_captions = score_captions
+        self.score_samples = score_samples
 
     def out_dir(self, trainer: Trainer) -> Path:
         return Path(trainer.log_dir or trainer.default_root_dir) / self.out_subdir
@@ -72,6 +85,7 @@ class TextToMotionDemo(Callback):
             generator=torch.Generator().manual_seed(self.seed),
             sampling_steps=self.sampling_steps,
         )
+        scored = self._score(trainer, pl_module)
         if was_training:
             pl_module.train()
         records = []
@@ -90,10 +104,46 @@ class TextToMotionDemo(Callback):
             "global_step": trainer.global_step,
             "samples": records,
         }
+        if scored is not None:
+            summary["scores"], summary["checks"] = scored
         out.mkdir(parents=True, exist_ok=True)
         with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
             f.write(json.dumps(summary, indent=2))
         lines = [f"[text2motion demo] {LABEL}", f"[text2motion demo] generated from prompts -> {out}"]
         for record in records:
             lines.append(f"  {record['prompt']!r}: {record.get('video', record['joints'])}")
+        if scored is not None:
+            scores, checks = scored
+            lines.append(
+                f"[text2motion demo] {self.score_samples} motions for each of {len(scores['captions'])} "
+                f"held-out captions after {trainer.global_step} steps: {scores['captions']}"
+            )
+            lines.append(format_caption_scores(scores, checks))
         print("\n".join(lines), flush=True)
+
+    def _score(self, trainer: Trainer, pl_module: LightningModule) -> tuple[dict, dict] | None:
+        """Generate for held-out captions and score them (:mod:`.demo_scores`); None when not scoring."""
+        datasets = getattr(trainer.datamodule, "datasets", {}) or {}
+        if not self.score_captions or "train" not in datasets or "val" not in datasets:
+            return None
+        captions: list[str] = []
+        for clip in datasets["val"].clips:
+            if clip.captions[0].text not in captions:
+                captions.append(clip.captions[0].text)
+        captions = captions[: self.score_captions]
+        if len(captions) < 2:
+            return None
+        prompts = [c for c in captions for _ in range(self.score_samples)]
+        features, _ = pl_module.generate(
+            prompts,
+            [self.frames] * len(prompts),
+            generator=torch.Generator().manual_seed(self.seed + 1),
+            sampling_steps=self.sampling_steps,
+        )
+        joints = recover_from_ric(features.detach().cpu().double())
+        motions = {c: [joints[i] for i, p in enumerate(prompts) if p == c] for c in captions}
+        train = torch.cat(
+            [recover_from_ric(torch.from_numpy(c.features).double()) for c in datasets["train"].clips]
+        )
+        scores = caption_scores(motions, train)
+        return {"captions": captions, **scores}, caption_checks(scores)

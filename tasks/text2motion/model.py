@@ -18,7 +18,9 @@ channels   joint 0 (root)                                       joints 1..21
 Conditioning: the timestep (sinusoidal embedding + MLP) is concatenated to every joint token's input
 channels and also forms the first cross-attention token; the caption's token embeddings follow it
 (projected to ``text_dim``). The unconditional prediction used by classifier-free guidance masks out
-every text token, leaving the timestep token. The network predicts x0 (MDM).
+every text token, leaving the timestep token. The denoiser predicts x0 (MDM), preconditioned
+with the per-feature statistics of the normalised training features (``mu + c_skip (x_t - a mu) + c_out F``
+with the backbone's output F: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 
 __all__ = [
@@ -137,6 +140,8 @@ class TextToMotionDenoiser(nn.Module):
         text_dim: width of the caption token embeddings (384 MiniLM, 512 CLIP ViT-B/32).
         time_channels: timestep channels appended to every joint token.
         time_embedding_dim: sinusoidal embedding size of the timestep.
+        num_steps: T of the noise schedule (scales the skip connection from x_t,
+            :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
     """
 
     def __init__(
@@ -145,6 +150,7 @@ class TextToMotionDenoiser(nn.Module):
         text_dim: int,
         time_channels: int = 16,
         time_embedding_dim: int = 128,
+        num_steps: int = 1000,
     ) -> None:
         super().__init__()
         config = dataclasses.replace(
@@ -161,6 +167,13 @@ class TextToMotionDenoiser(nn.Module):
         self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
         self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
         self.text_proj = nn.Linear(text_dim, text_dim)
+        self.skip_x0 = SkipX0(num_steps, channels=(FEATURE_DIM,))
+
+    def set_data_statistics(self, features: torch.Tensor) -> None:
+        """Per-feature mean and std of normalised training features (N, 263) for the preconditioning (the
+        group-wise normalisation of HumanML3D leaves them off 0 and 1)."""
+        flat = features.reshape(-1, FEATURE_DIM).double()
+        self.skip_x0.set_statistics(flat.mean(dim=0).float(), flat.std(dim=0, correction=0).float())
 
     def forward(
         self,
@@ -172,7 +185,8 @@ class TextToMotionDenoiser(nn.Module):
         b, frames, _ = x_t.shape
         emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
         channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
-        tokens = torch.cat([features_to_tokens(x_t), channels], dim=-1)  # (B, T, 22, 13 + C_t)
+        x_in = self.skip_x0.network_input(x_t, t)
+        tokens = torch.cat([features_to_tokens(x_in), channels], dim=-1)  # (B, T, 22, 13 + C_t)
         time_token = self.time_to_token(emb)[:, None, :]  # (B, 1, D)
         if cond is None:
             context, context_mask = time_token, torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
@@ -181,7 +195,7 @@ class TextToMotionDenoiser(nn.Module):
             ones = torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
             context_mask = torch.cat([ones, cond.mask.to(x_t.device)], dim=1)
         out = self.backbone(tokens, mask=mask, context=context, context_mask=context_mask)
-        x0 = tokens_to_features(out)
+        x0 = self.skip_x0(x_t, tokens_to_features(out), t)
         if mask is not None:
             x0 = x0 * mask[..., None].to(x0.dtype)
         return x0

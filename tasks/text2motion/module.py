@@ -24,6 +24,7 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import torch
 from lightning.pytorch import LightningModule
 
@@ -47,6 +48,7 @@ from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 
 __all__ = ["TextToMotionModule"]
 
+STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
 _EVAL_ARGS = (
     "eval_repetitions",
     "eval_samples",
@@ -132,7 +134,9 @@ class TextToMotionModule(LightningModule):
         self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
-        self.denoiser = TextToMotionDenoiser(config, self.text_encoder.dim, time_channels)
+        self.denoiser = TextToMotionDenoiser(
+            config, self.text_encoder.dim, time_channels, num_steps=num_steps
+        )
         self.diffusion = GaussianDiffusion(num_steps)
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
         self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
@@ -143,6 +147,11 @@ class TextToMotionModule(LightningModule):
             mean, std = datamodule.statistics()
             self.feature_mean.copy_(mean)
             self.feature_std.copy_(std)
+            train = (getattr(datamodule, "datasets", None) or {}).get("train")
+            if train is not None and len(train) > 0:  # the preconditioning: at most STATISTICS_FRAMES frames
+                frames = np.concatenate([clip.features for clip in train.clips])[:STATISTICS_FRAMES]
+                features = torch.from_numpy(frames.astype(np.float32))
+                self.denoiser.set_data_statistics((features - mean.float()) / std.float())
 
     def encode_text(self, captions: list[str]) -> TextCondition:
         """Frozen text encoding on the module's device: tokens (B, S, D) and mask (B, S)."""
