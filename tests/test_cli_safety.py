@@ -395,6 +395,18 @@ def test_an_interrupted_write_keeps_the_old_file_and_leaves_no_temporary(tmp_pat
     assert np.load(path).tolist() == [0, 1, 2] and sorted(tmp_path.iterdir()) == [path]
 
 
+def test_atomic_writes_get_the_mode_a_plain_open_gives(tmp_path):
+    """A new output file is as readable as one written with open() (umask applies), not mkstemp's 0600."""
+    import os
+    import stat
+
+    (tmp_path / "plain.txt").write_text("x")
+    with atomic_open(tmp_path / "atomic.txt", "w") as f:
+        f.write("x")
+    mode = stat.S_IMODE(os.stat(tmp_path / "atomic.txt").st_mode)
+    assert mode == stat.S_IMODE(os.stat(tmp_path / "plain.txt").st_mode) and mode & stat.S_IROTH
+
+
 def test_ctrl_c_during_render_keeps_the_old_video(tmp_path, monkeypatch):
     from skeleton_mamba.skeletons import SMPL24
 
