@@ -103,10 +103,12 @@ def test_emm_denoiser_is_conditioned_on_the_timestep():
     with torch.no_grad():
         out = model(x_t, t, context)
         # the forward pass by hand: the time embedding is added to every joint token and prepended to the
-        # condition as a cross-attention token
+        # condition as a cross-attention token, inside the x0 preconditioning (tested on its own in
+        # test_demo_scores: scaled input, skip connection from x_t)
         temb = model.time_mlp(sinusoidal_embedding(t, 16))
-        h = model.input_proj(x_t) + temb[:, None, None, :]
-        by_hand = model.backbone(h, context=torch.cat([model.time_token(temb)[:, None], context], dim=1))
+        h = model.input_proj(model.skip_x0.network_input(x_t, t)) + temb[:, None, None, :]
+        inner = model.backbone(h, context=torch.cat([model.time_token(temb)[:, None], context], dim=1))
+        by_hand = model.skip_x0(x_t, inner, t)
         other_t = model(x_t, torch.tensor([500, 10]), context)
     torch.testing.assert_close(out, by_hand)
     assert (out - other_t).abs().amax(dim=(1, 2, 3)).min() > 1e-4  # each sample's output depends on its t
