@@ -26,8 +26,7 @@ from torch import nn
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.resample import resample_smpl
-from skeleton_mamba.tasks.qean.representation import features_to_joints, features_to_smpl, smpl_to_features
+from skeleton_mamba.tasks.qean.representation import features_to_joints, features_to_smpl, motion_to_features
 from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
 
 __all__ = [
@@ -44,15 +43,9 @@ POSE_CHANNELS = 12  # rotation matrix (9) + root position (3) per joint
 
 def motion_to_tokens(motion: MotionData, fps: float = FPS) -> torch.Tensor:
     """SMPL parameters -> (T, 24, 12) float32 joint tokens at ``fps`` (resampled when needed)."""
-    if motion.poses is None or motion.trans is None:
-        raise ValueError("the dance model needs SMPL parameters (smpl_poses, smpl_trans); got joints only")
-    poses = torch.from_numpy(np.asarray(motion.poses, dtype=np.float64))
-    root = torch.from_numpy(np.asarray(motion.root_position(), dtype=np.float64))
-    if motion.fps != fps:
-        poses, root = resample_smpl(poses, root, motion.fps, fps)
-    features = smpl_to_features(poses, root)  # (T, 219) = [root (3) | 24 x rotation (9)]
+    features = motion_to_features(motion, fps)  # (T, 219) = [root (3) | 24 x rotation (9)]
     rot = rearrange(features[:, 3:], "t (j c) -> t j c", j=24)
-    return torch.cat([rot, repeat(features[:, :3], "t c -> t j c", j=24)], dim=-1).float()
+    return torch.cat([rot, repeat(features[:, :3], "t c -> t j c", j=24)], dim=-1)
 
 
 def tokens_to_features(tokens: torch.Tensor) -> torch.Tensor:
