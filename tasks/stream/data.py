@@ -141,11 +141,17 @@ class StreamDanceDataModule(LightningDataModule):
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
         self.datasets: dict[str, Dataset] = {}
+        if not synthetic:  # fail before the model is built
+            self.check_layout()
 
     def prepare_data(self) -> None:
         h = self.hparams
         if h.synthetic and not (self.root / "motions").is_dir():
             write_synthetic_aistpp(self.root, h.synthetic_count, h.synthetic_duration_s)
+        self.check_layout()
+
+    def check_layout(self) -> None:
+        """Raise :class:`DatasetNotFoundError` saying where the motions go when they are missing."""
         if not (self.root / "motions").is_dir():
             raise DatasetNotFoundError(
                 f"AIST++ motions not found: {(self.root / 'motions').resolve()} is not a folder.\n"
