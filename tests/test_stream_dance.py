@@ -145,3 +145,23 @@ def test_joint_tokens_round_trip_an_smpl_dance():
     back = tokens_to_motion(tokens)
     np.testing.assert_allclose(back.root_position(), dance.root_position(), atol=1e-6)
     np.testing.assert_allclose(back.joint_positions(), dance.joint_positions(), atol=1e-4)
+
+
+def test_standard_input_as_wav_stream_or_raw_pcm_gives_the_file_samples(tmp_path, monkeypatch):
+    import io
+
+    import soundfile as sf
+
+    wav = write_music(tmp_path / "song.wav", synthesize_music(100.0, 0.5, sr=22050, seed=0))
+    samples, rate = sf.read(wav, dtype="int16")
+    raw = samples.astype("<i2").tobytes()
+    for data, raw_rate in ((wav.read_bytes(), None), (raw, rate)):
+        monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
+        source = AudioSource("-", chunk_s=0.01, raw_rate=raw_rate)
+        assert source.sample_rate == rate
+        chunks = [c.samples for c in source]
+        assert all(len(c) == round(0.01 * rate) for c in chunks[:-1])
+        np.testing.assert_array_equal(np.concatenate(chunks), samples / 32768.0)
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b"garbage bytes")))
+    with pytest.raises(ValueError, match="not a WAV stream"):
+        AudioSource("-")
