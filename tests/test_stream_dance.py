@@ -165,3 +165,14 @@ def test_standard_input_as_wav_stream_or_raw_pcm_gives_the_file_samples(tmp_path
     monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b"garbage bytes")))
     with pytest.raises(ValueError, match="not a WAV stream"):
         AudioSource("-")
+
+
+def test_sm_stream_explains_missing_inputs(checkpoint, tmp_path, capsys):
+    from skeleton_mamba.tasks.stream.cli import main
+
+    assert main(["--ckpt", str(tmp_path / "none.ckpt"), "--music", "x.wav", "--out", str(tmp_path)]) == 2
+    assert "none.ckpt not found" in capsys.readouterr().err
+    assert main(["--ckpt", str(checkpoint), "--music", str(tmp_path / "none.wav"), "--out", str(tmp_path)]) == 2
+    assert "none.wav: music file not found" in capsys.readouterr().err
+    assert main(["--ckpt", str(checkpoint), "--out", str(tmp_path)]) == 2
+    assert "--music" in capsys.readouterr().err

@@ -151,8 +151,12 @@ def main(argv: list[str] | None = None) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
-    if args.task == "recognition":
-        from skeleton_mamba.tasks.stream.online_recognition import stream_recognition
+    try:
+        if args.task == "recognition":
+            from skeleton_mamba.tasks.stream.online_recognition import stream_recognition
 
-        return stream_recognition(args)
-    return stream_dance(args)
+            return stream_recognition(args)
+        return stream_dance(args)
+    except (FileNotFoundError, ValueError) as err:  # bad input files: one line, no traceback
+        print(f"sm stream: {err}", file=sys.stderr)
+        return 2
