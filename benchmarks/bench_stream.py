@@ -136,6 +136,13 @@ def main() -> int:
     p.add_argument("--window", type=int, default=150, help="frames of the windowed baseline (5 s)")
     p.add_argument("--window-repeats", type=int, default=5)
     p.add_argument("--memory-minutes", default="1,10", help="minutes of music streamed before reading RSS")
+    p.add_argument(
+        "--omp-wait-policy",
+        choices=("inherit", "passive", "active"),
+        default="inherit",
+        help="OMP_WAIT_POLICY of the measuring process (passive: idle threads sleep instead of spinning, "
+        "which keeps 2 threads usable on a loaded machine)",
+    )
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
     minutes = [float(m) for m in args.memory_minutes.split(",")]
@@ -145,12 +152,21 @@ def main() -> int:
         torch.set_num_threads(args.threads)
         print(json.dumps(measure(args.width_only, args.frames, args.window, args.window_repeats, minutes)))
         return 0
-    results = {"machine": machine_info(), "load_before": [round(v, 2) for v in os.getloadavg()], "widths": {}}
+    results = {
+        "machine": machine_info(),
+        "omp_wait_policy": args.omp_wait_policy
+        if args.omp_wait_policy != "inherit"
+        else os.environ.get("OMP_WAIT_POLICY", "default"),
+        "load_before": [round(v, 2) for v in os.getloadavg()],
+        "widths": {},
+    }
     for width in args.widths.split(","):
         cmd = [sys.executable, __file__, "--width-only", width, "--threads", str(args.threads)]
         cmd += ["--frames", str(args.frames), "--window", str(args.window)]
         cmd += ["--window-repeats", str(args.window_repeats), "--memory-minutes", args.memory_minutes]
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
+        if args.omp_wait_policy != "inherit":
+            env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if proc.returncode:
             print(proc.stderr, file=sys.stderr)
