@@ -141,6 +141,7 @@ class StreamDanceDataModule(LightningDataModule):
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
         self.datasets: dict[str, Dataset] = {}
+        self._music: dict[Path, torch.Tensor] = {}  # features per track (AIST++ reuses each track)
         if not synthetic:  # fail before the model is built
             self.check_layout()
 
@@ -182,7 +183,9 @@ class StreamDanceDataModule(LightningDataModule):
             raise FileNotFoundError(f"{pkl}: motion of split sequence {name} not found")
         wav = self.music_dir / f"{music_id(name)}.wav"
         motion = motion_to_tokens(load_aistpp_motion(pkl))
-        music = torch.from_numpy(music_features(load_audio(wav, SR), SR))
+        if wav not in self._music:
+            self._music[wav] = torch.from_numpy(music_features(load_audio(wav, SR), SR))
+        music = self._music[wav]
         n = min(len(motion), len(music))
         return motion[:n], music[:n]
 
