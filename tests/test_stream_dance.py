@@ -172,7 +172,22 @@ def test_sm_stream_explains_missing_inputs(checkpoint, tmp_path, capsys):
 
     assert main(["--ckpt", str(tmp_path / "none.ckpt"), "--music", "x.wav", "--out", str(tmp_path)]) == 2
     assert "none.ckpt not found" in capsys.readouterr().err
-    assert main(["--ckpt", str(checkpoint), "--music", str(tmp_path / "none.wav"), "--out", str(tmp_path)]) == 2
+    missing = str(tmp_path / "none.wav")
+    assert main(["--ckpt", str(checkpoint), "--music", missing, "--out", str(tmp_path)]) == 2
     assert "none.wav: music file not found" in capsys.readouterr().err
     assert main(["--ckpt", str(checkpoint), "--out", str(tmp_path)]) == 2
     assert "--music" in capsys.readouterr().err
+
+
+def test_training_features_are_what_the_live_stream_computes(tmp_path):
+    from skeleton_mamba.tasks.stream.data import StreamDanceDataModule, write_synthetic_aistpp
+
+    names = write_synthetic_aistpp(tmp_path, count=2, duration_s=2.0, val_count=1)
+    data = StreamDanceDataModule(root=str(tmp_path), train_split="train", val_split="val", window_frames=30)
+    assert data.split_names("train") == names[:1] and data.split_names("val") == names[1:]
+    motion, music = data.sequence(names[0])
+    assert motion.shape == (60, 24, 12) and music.shape == (60, 34)
+    source = AudioSource(str(tmp_path / "music" / "mBR0.wav"), chunk_s=0.02)
+    live = CausalMusicFeatures(source.sample_rate)
+    rows = [live.push(c.samples) for c in source] + [live.push(np.zeros(0, np.float32), last=True)]
+    np.testing.assert_array_equal(np.concatenate(rows)[:60], music.numpy())

@@ -27,7 +27,7 @@ from torch.utils.data import DataLoader, Dataset
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.music import load_audio
-from skeleton_mamba.tasks.stream.features import SR, music_features
+from skeleton_mamba.tasks.stream.features import music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
 
 __all__ = ["StreamDanceDataModule", "write_synthetic_aistpp"]
@@ -80,6 +80,18 @@ def write_synthetic_aistpp(
         encoding="utf-8",
     )
     return names
+
+
+def audio_rate(path: Path) -> int:
+    """The sample rate of an audio file (raises naming the file when it is missing or unreadable)."""
+    import soundfile as sf
+
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: music file not found")
+    try:
+        return int(sf.info(path).samplerate)
+    except Exception as err:  # soundfile raises its own error types
+        raise ValueError(f"{path}: cannot read audio ({err})") from err
 
 
 class WindowDataset(Dataset):
@@ -184,7 +196,9 @@ class StreamDanceDataModule(LightningDataModule):
         wav = self.music_dir / f"{music_id(name)}.wav"
         motion = motion_to_tokens(load_aistpp_motion(pkl))
         if wav not in self._music:
-            self._music[wav] = torch.from_numpy(music_features(load_audio(wav, SR), SR))
+            # At the file's own rate through the same streaming resampler as ``sm stream``.
+            rate = audio_rate(wav)
+            self._music[wav] = torch.from_numpy(music_features(load_audio(wav, rate), rate))
         music = self._music[wav]
         n = min(len(motion), len(music))
         return motion[:n], music[:n]
