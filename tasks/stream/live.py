@@ -5,6 +5,9 @@ then one :meth:`StreamDancer.step` per frame, fed its own previous pose. The lat
 the wall time from the delivery of the chunk that completed frame t's audio to its pose (feature
 extraction and the network step); the frame's own audio (33.3 ms, :mod:`.features`) and the chunk
 size come on top of it and are reported beside it.
+
+The network's state is fixed in size; the dance itself (written at the end) is kept, 1.3 kB per frame
+(pose tokens and features: about 24 MB for ten minutes).
 """
 
 from __future__ import annotations
