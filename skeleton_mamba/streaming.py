@@ -19,7 +19,7 @@ The Temporal Scan's forward mixer carries, per block and per joint sequence, the
 inputs of its depthwise convolution, ``conv (B*J, conv_dim, d_conv)``, and the SSD state
 ``ssm (B*J, nheads, headdim, d_state)``, updated in place:
 
-    h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t        ([Mamba-2], the SSD recurrence)
+    h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t     ([Mamba-2] SSD recurrence)
 
 Nothing else is kept, so the state's size is fixed whatever the number of frames seen.
 """
