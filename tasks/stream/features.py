@@ -19,7 +19,7 @@ one window that *ends* at the frame's last sample, and nothing else:
 
 Latency: pose frame t needs the audio up to ``(t + 1) * HOP``, so the algorithmic latency is one hop
 (33.3 ms) after the frame's start (0 ms after its last sample), plus the resampler's delay when the
-input is not at ``SR`` (a low-quality ``soxr`` stream: about 17-19 ms from 22.05 or 44.1 kHz,
+input is not at ``SR`` (a low-quality ``soxr`` stream: 17 to 22 ms from 22.05 or 44.1 kHz,
 reported by :class:`CausalMusicFeatures`), plus the size of the chunks in which the audio arrives.
 :func:`music_features` computes the same features offline (training data) by pushing the whole
 track through the same streaming extractor.
