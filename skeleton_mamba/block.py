@@ -4,7 +4,7 @@
     g = HT(LN(x))                      (B, T, G, E)     Human Tokenizer
     g = g + GS(g)                                       Group Scan (MSSD)
     x = x + HT^-1(JS(LN(g)))           (B, T, J, D)     Joint Scan, Inverse Human Tokenizer
-    x = x + TS(LN(x), mask)                             bidirectional Temporal Scan
+    x = x + TS(LN(x), mask)                             bidirectional Temporal Scan (or forward-only)
     x = x + CA(LN(x), context)                          cross-attention (when a condition is used)
     x = x + MLP(LN(x))
 
@@ -46,6 +46,7 @@ class SkeletonMambaBlock(nn.Module):
         dropout: float = 0.0,
         mixer: MixerConfig | None = None,
         slice_elements: int | None = None,
+        causal: bool = False,
     ):
         super().__init__()
         self.slice_elements = slice_elements
@@ -58,7 +59,9 @@ class SkeletonMambaBlock(nn.Module):
         self.norm_joint = nn.LayerNorm(width)
         self.joint_scan = JointScan(dim, group_size, mixer=mixer)
         self.norm_time = nn.LayerNorm(dim)
-        self.temporal_scan = TemporalScan(dim, mixer=mixer, slice_elements=slice_elements)
+        self.temporal_scan = TemporalScan(
+            dim, mixer=mixer, slice_elements=slice_elements, causal=causal
+        )
         self.cross_attention = None
         if context_dim is not None:
             self.norm_context = nn.LayerNorm(dim)

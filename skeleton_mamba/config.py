@@ -64,6 +64,9 @@ class SkeletonMambaConfig:
         gradient_checkpointing: recompute each block in the backward pass instead of storing its
             activations (the seed size at batch 4 x 150 frames needs about 30 GB in fp32 without it).
         mixer: settings of every Mamba-2 mixer.
+        causal: a forward-only Temporal Scan (no backward direction), so frame t depends on frames
+            <= t only; such a backbone also runs frame by frame (``init_state`` / ``step``,
+            ``skeleton_mamba.streaming``). ``False`` (default): the bidirectional scan of the seed.
         cpu_slice_elements: on a CPU, frame-wise sublayers run on slices of frames and the Temporal
             Scan on slices of joint sequences, each slice holding at most about this many elements
             of its widest intermediate (4 Mi elements: 16 MB in fp32), so intermediates stay in
@@ -85,4 +88,5 @@ class SkeletonMambaConfig:
     dropout: float = 0.0
     gradient_checkpointing: bool = False
     mixer: MixerConfig | None = None
+    causal: bool = False
     cpu_slice_elements: int | None = 4_194_304

@@ -6,10 +6,12 @@ import torch
 from torch import nn
 from torch.utils.checkpoint import checkpoint
 
+from skeleton_mamba import streaming
 from skeleton_mamba.block import SkeletonMambaBlock
 from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.padding import zero_padding
 from skeleton_mamba.skeletons import DEFAULT_GROUP_PATHS, get_skeleton
+from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.temporal_scan import check_prefix_mask
 
 
@@ -60,6 +62,7 @@ class SkeletonMamba(nn.Module):
                 dropout=config.dropout,
                 mixer=config.mixer,
                 slice_elements=config.cpu_slice_elements,
+                causal=config.causal,
             )
             for _ in range(config.depth)
         )
@@ -109,3 +112,23 @@ class SkeletonMamba(nn.Module):
             else:
                 h = block(h, mask=mask, context=context, context_mask=context_mask)
         return self.output_proj(self.norm(h))
+
+    def init_state(
+        self, batch: int, dtype: torch.dtype | None = None, device: torch.device | None = None
+    ) -> StreamState:
+        """Zero recurrent state for ``batch`` streams (causal backbones; see ``skeleton_mamba.streaming``)."""
+        return streaming.init_state(self, batch, dtype, device)
+
+    def step(
+        self,
+        x: torch.Tensor,
+        state: StreamState,
+        context: torch.Tensor | None = None,
+        context_mask: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, StreamState]:
+        """One frame (B, J, C_in) -> (B, J, D or C_out), updating ``state`` in place.
+
+        Stepping through frames 0..T-1 equals ``forward`` on the whole sequence (causal backbones)
+        when every step gets the ``context`` of the batch call. Inference only (no autograd).
+        """
+        return streaming.step(self, x, state, context, context_mask)

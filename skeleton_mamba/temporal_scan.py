@@ -5,6 +5,9 @@ are right-padded; the backward direction reverses only the valid prefix of each 
 starts at the last valid frame and padded frames (which stay at the end in both directions) can
 never reach a valid frame through the causal scans. On a CPU the joint sequences go through in
 slices of at most ``slice_elements`` projected elements (``skeleton_mamba.slicing``).
+
+``causal=True`` keeps only the forward mixer (frame t sees frames <= t), the form that also runs
+frame by frame (``skeleton_mamba.streaming``).
 """
 
 from __future__ import annotations
@@ -45,10 +48,17 @@ def check_prefix_mask(mask: torch.Tensor) -> None:
 class TemporalScan(nn.Module):
     """(B, T, J, D) -> (B, T, J, D), each joint scanned along T in both directions."""
 
-    def __init__(self, dim: int, mixer: MixerConfig | None = None, slice_elements: int | None = None):
+    def __init__(
+        self,
+        dim: int,
+        mixer: MixerConfig | None = None,
+        slice_elements: int | None = None,
+        causal: bool = False,
+    ):
         super().__init__()
+        self.causal = causal
         self.forward_mixer = Mamba2Mixer(dim, mixer)
-        self.backward_mixer = Mamba2Mixer(dim, mixer)
+        self.backward_mixer = None if causal else Mamba2Mixer(dim, mixer)
         self.proj = nn.Linear(dim, dim)
         self.slice_elements = slice_elements
 
@@ -67,7 +77,9 @@ class TemporalScan(nn.Module):
 
     def scan(self, seq: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
         """Both directions over sequences (L, T, D); ``index`` (L, T) reverses each valid prefix."""
-        index = index[..., None].expand_as(seq)
         fwd = self.forward_mixer(seq)
+        if self.backward_mixer is None:
+            return self.proj(fwd)
+        index = index[..., None].expand_as(seq)
         bwd = torch.gather(self.backward_mixer(torch.gather(seq, 1, index)), 1, index)
         return self.proj(fwd + bwd)

@@ -43,7 +43,7 @@ __all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "li
 
 # Task packages whose ``module`` and ``data`` modules are imported before parsing, so recipes may
 # use short class names (``class_path: ActionRecognitionModule``).
-TASK_PACKAGES = ("recognition", "egodance", "qean", "text2motion")
+TASK_PACKAGES = ("recognition", "egodance", "qean", "text2motion", "stream")
 
 # data-module attribute -> model init argument, applied once the data module is instantiated.
 # Linked arguments are not user-settable (jsonargparse overwrites them); set them on the data module.

@@ -17,10 +17,10 @@ from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.sampling import tokens_to_motion
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.motion_file import save_motion
+from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 
-__all__ = ["DanceFiles", "write_music_slice", "write_dance"]
+__all__ = ["DanceFiles", "write_music_slice", "write_dance", "write_motion"]
 
 
 @dataclass
@@ -79,9 +79,29 @@ def write_dance(
         title: text drawn on the video.
         progress: show a rendering progress bar.
     """
+    return write_motion(
+        tokens_to_motion(tokens, fps), out_dir, name, music, music_start_s, render, style, title, progress
+    )
+
+
+def write_motion(
+    motion: MotionData,
+    out_dir: str | Path,
+    name: str,
+    music: str | Path | None = None,
+    music_start_s: float = 0.0,
+    render: bool = True,
+    style: RenderStyle | None = None,
+    title: str | None = None,
+    progress: bool = False,
+) -> DanceFiles:
+    """An SMPL-24 :class:`MotionData` (with joints) -> ``<name>.npz``, ``.bvh`` and ``.mp4`` in ``out_dir``.
+
+    Arguments as :func:`write_dance`.
+    """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    motion = tokens_to_motion(tokens, fps)
+    fps = motion.fps
     files = DanceFiles(
         npz=save_motion(out_dir / f"{name}.npz", motion),
         bvh=save_bvh(out_dir / f"{name}.bvh", smpl_to_bvh(motion.poses, motion.trans, fps)),

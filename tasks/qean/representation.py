@@ -71,12 +71,12 @@ def features_to_joints(features: torch.Tensor) -> torch.Tensor:
     return smpl_forward_kinematics(rot, root)
 
 
-def motion_to_features(motion: MotionData) -> torch.Tensor:
-    """A :class:`MotionData` with SMPL parameters -> (T, 219) float32 at 60 fps (resampled if needed)."""
+def motion_to_features(motion: MotionData, fps: float = FPS) -> torch.Tensor:
+    """A :class:`MotionData` with SMPL parameters -> (T, 219) float32 at ``fps`` (resampled if needed)."""
     if motion.poses is None or motion.trans is None:
         raise ValueError("QEAN needs SMPL parameters (smpl_poses, smpl_trans); the motion has joints only")
     poses = torch.from_numpy(np.asarray(motion.poses, dtype=np.float64))
     root = torch.from_numpy(np.asarray(motion.root_position(), dtype=np.float64))
-    if motion.fps != FPS:
-        poses, root = resample_smpl(poses, root, motion.fps, FPS)
+    if motion.fps != fps:
+        poses, root = resample_smpl(poses, root, motion.fps, fps)
     return smpl_to_features(poses, root).float()

@@ -21,7 +21,7 @@ from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 
-__all__ = ["ActionRecognizer", "body_presence"]
+__all__ = ["ActionRecognizer", "body_presence", "pool_bodies"]
 
 
 def body_presence(x: torch.Tensor) -> torch.Tensor:
@@ -34,6 +34,16 @@ def body_presence(x: torch.Tensor) -> torch.Tensor:
         (B, M) bool.
     """
     return x.flatten(2).ne(0).any(dim=-1)
+
+
+def pool_bodies(pooled: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+    """Mean over the bodies present: pooled (B, M, ..., D), present (B, M, ...) -> (B, ..., D).
+
+    A sample with no body present averages every slot.
+    """
+    present = present | ~present.any(dim=1, keepdim=True)
+    weights = present.to(pooled.dtype).unsqueeze(-1)
+    return (pooled * weights).sum(dim=1) / weights.sum(dim=1)
 
 
 class ActionRecognizer(nn.Module):
@@ -69,10 +79,7 @@ class ActionRecognizer(nn.Module):
         b = x.shape[0]
         features = self.backbone(rearrange(x, "b m t j c -> (b m) t j c"))  # (B*M, T, J, D)
         pooled = rearrange(features.mean(dim=(1, 2)), "(b m) d -> b m d", b=b)
-        present = body_presence(x)
-        present = present | ~present.any(dim=1, keepdim=True)  # no body at all: average every slot
-        weights = present.to(pooled.dtype).unsqueeze(-1)  # (B, M, 1)
-        return (pooled * weights).sum(dim=1) / weights.sum(dim=1)
+        return pool_bodies(pooled, body_presence(x))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Class logits (B, K) for keypoints (B, M, T, J, C)."""

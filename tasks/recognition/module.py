@@ -35,6 +35,12 @@ from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionM
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
+from skeleton_mamba.tasks.recognition.early import (
+    FRACTIONS,
+    EarlyRecognitionCurve,
+    online_probabilities,
+    save_early_curve,
+)
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 from skeleton_mamba.tasks.recognition.prediction_writer import PredictionCSVWriter
 
@@ -92,6 +98,8 @@ class ActionRecognitionModule(LightningModule):
         self.test_metrics = metrics.clone(prefix="test/")
         self.test_mean_class_accuracy = MulticlassAccuracy(num_classes, average="macro")
         self.test_confusion = MulticlassConfusionMatrix(num_classes)
+        # Causal backbones: the early-recognition curve from per-frame probabilities (.early).
+        self.test_early = EarlyRecognitionCurve() if self.model.backbone.config.causal else None
 
     def forward(self, keypoint: torch.Tensor) -> torch.Tensor:
         """Class probabilities (B, K), averaged over clips, for keypoints (B, N, M, T, J, C)."""
@@ -126,6 +134,10 @@ class ActionRecognitionModule(LightningModule):
         self.test_mean_class_accuracy.update(prob, batch[1])
         self.test_confusion.update(prob, batch[1])
         self.log("test/mean_class_accuracy", self.test_mean_class_accuracy, batch_size=batch[1].numel())
+        if self.test_early is not None:
+            keypoint, label = batch
+            online = online_probabilities(self.model, keypoint.flatten(0, 1))  # (B*N, T, K)
+            self.test_early.update(online.unflatten(0, keypoint.shape[:2]).mean(dim=1), label)
 
     def predict_step(self, batch, batch_idx: int) -> torch.Tensor:
         """Class probabilities (B, K)."""
@@ -145,6 +157,21 @@ class ActionRecognitionModule(LightningModule):
                 matrix.cpu(), Path(log_dir) / "confusion_matrix.png", self.hparams.class_names
             )
             rank_zero_info(f"confusion matrix saved to {path} (and {path.with_suffix('.csv').name})")
+        if self.test_early is not None:
+            self._log_early_curve(log_dir)
+
+    def _log_early_curve(self, log_dir: str | None) -> None:
+        """Log top-1 at each observed fraction, print the curve and save it as a PNG + CSV."""
+        accuracy = self.test_early.compute()
+        self.test_early.reset()
+        for fraction, value in zip(self.test_early.fractions, accuracy.tolist()):
+            self.log(f"test/early_top1_at_{int(round(100 * fraction))}", value)
+        pairs = zip(FRACTIONS, accuracy.tolist())
+        rows = "  ".join(f"{int(round(100 * r))}%: {100 * v:.1f}" for r, v in pairs)
+        rank_zero_info(f"early recognition, top-1 (%) against the observed part of the clip: {rows}")
+        if self.trainer.is_global_zero and log_dir is not None:
+            path = save_early_curve(accuracy.cpu(), Path(log_dir) / "early_recognition.png")
+            rank_zero_info(f"early-recognition curve saved to {path} (and {path.with_suffix('.csv').name})")
 
     def effective_lr(self) -> float:
         """``lr * global_batch / base_batch_size`` (see the module docstring)."""

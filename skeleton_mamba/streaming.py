@@ -1,0 +1,192 @@
+"""Frame-by-frame inference of a causal SkeletonMamba in constant memory.
+
+A causal backbone (``SkeletonMambaConfig(causal=True)``: forward-only Temporal Scan) is a recurrence
+over frames. Within a block, only the Temporal Scan mixes time; everything else is frame-local:
+
+- the Human Tokenizer, Group Scan and Joint Scan scan the tokens of one frame (groups, joints),
+  so for frame t they are the frame-wise computation on frame t alone;
+- the LayerNorms, the MLP and the joint embedding act per token;
+- the cross-attention lets every joint token attend over the condition sequence ``context``
+  (B, S, Dc), with no time axis of its own. In a stream, ``context`` is whatever the caller passes
+  for that frame; it equals the batch forward when every step receives the same ``context`` as
+  the batch call (a stream-level condition: a style, genre or text token). A condition that is
+  aligned with the frames (music) must not go through cross-attention in a causal model, as
+  every frame would attend to the whole sequence, future included: feed it as per-frame input
+  features instead (as ``tasks/stream``'s dance model does).
+
+The Temporal Scan's forward mixer carries, per block and per joint sequence, the two states of
+``mamba_ssm.Mamba2.step`` (layout of ``Mamba2.allocate_inference_cache``): the last ``d_conv``
+inputs of its depthwise convolution, ``conv (B*J, conv_dim, d_conv)``, and the SSD state
+``ssm (B*J, nheads, headdim, d_state)``, updated in place:
+
+    h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t     ([Mamba-2] SSD recurrence)
+
+Nothing else is kept, so the state's size is fixed whatever the number of frames seen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from skeleton_mamba.mixer import Mamba2Mixer
+from skeleton_mamba.ssd.discretize import compute_dtype
+
+
+@dataclass
+class StreamState:
+    """Recurrent state of a causal SkeletonMamba for a batch of ``batch`` streams.
+
+    Attributes:
+        batch: number of streams B.
+        conv: per block, the Temporal Scan's convolution window (B*J, conv_dim, d_conv).
+        ssm: per block, the Temporal Scan's SSD state (B*J, nheads, headdim, d_state), in the
+            SSD's compute dtype (fp32, fp64 for fp64 models).
+        frames: frames consumed so far (a counter; not part of the recurrence).
+    """
+
+    batch: int
+    conv: list[torch.Tensor]
+    ssm: list[torch.Tensor]
+    frames: int = 0
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the state tensors (independent of ``frames``)."""
+        return sum(t.numel() * t.element_size() for t in (*self.conv, *self.ssm))
+
+    def reset(self) -> None:
+        """Start a new stream (zero state), in place."""
+        for t in (*self.conv, *self.ssm):
+            t.zero_()
+        self.frames = 0
+
+
+def allocate_mixer_state(
+    mixer: Mamba2Mixer, batch: int, dtype: torch.dtype | None = None, device: torch.device | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Zero ``(conv (batch, conv_dim, d_conv), ssm (batch, nheads, headdim, d_state))`` for ``mixer``.
+
+    ``dtype`` defaults to the mixer's weights; the SSD state is kept in the SSD's compute dtype.
+    """
+    weight = mixer.conv1d.weight
+    dtype = dtype or weight.dtype
+    device = device or weight.device
+    conv_dim, d_conv = weight.shape[0], weight.shape[-1]
+    conv = torch.zeros(batch, conv_dim, d_conv, dtype=dtype, device=device)
+    ssm_dtype = compute_dtype(torch.empty(0, dtype=dtype))
+    ssm = torch.zeros(batch, mixer.nheads, mixer.headdim, mixer.d_state, dtype=ssm_dtype, device=device)
+    return conv, ssm
+
+
+def mixer_step(
+    mixer: Mamba2Mixer, u: torch.Tensor, conv_state: torch.Tensor, ssm_state: torch.Tensor
+) -> torch.Tensor:
+    """One token through ``mixer``: u (B, d_model) -> (B, d_model); both states updated in place.
+
+    Equal to the last output of ``mixer(cat(previous tokens, u))`` (as ``mamba_ssm.Mamba2.step``).
+    """
+    b = u.shape[0]
+    h, p, n, g = mixer.nheads, mixer.headdim, mixer.d_state, mixer.ngroups
+    zxbcdt = mixer.in_proj(u)
+    z0, x0, z, xbc, dt = torch.split(
+        zxbcdt, [mixer.d_mlp, mixer.d_mlp, mixer.d_ssm, mixer.d_ssm + 2 * g * n, h], dim=-1
+    )
+
+    # Causal depthwise convolution over the last d_conv inputs (shift the window left, append).
+    k = conv_state.shape[-1]
+    for s in range(k - 1):
+        conv_state[..., s].copy_(conv_state[..., s + 1])
+    conv_state[..., k - 1].copy_(xbc)
+    weight = mixer.conv1d.weight[:, 0]  # (conv_dim, k)
+    xbc = torch.einsum("bck,ck->bc", conv_state, weight)
+    if mixer.conv1d.bias is not None:
+        xbc = xbc + mixer.conv1d.bias
+    x, B, C = torch.split(F.silu(xbc), [mixer.d_ssm, g * n, g * n], dim=-1)
+
+    ct = ssm_state.dtype
+    delta = F.softplus(dt.to(ct) + mixer.dt_bias.to(ct))  # (B, H)
+    delta = delta.clamp(*mixer.dt_limit)  # as the sequence forward (mamba_ssm's own step skips the limit)
+    decay = torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))  # exp(Δ A), (B, H)
+    xh = x.to(ct).view(b, h, p)
+    # Head i reads B/C group i // (H / G).
+    Bh = B.to(ct).view(b, g, 1, n).expand(b, g, h // g, n).reshape(b * h, 1, n)
+    Ch = C.to(ct).view(b, g, 1, n).expand(b, g, h // g, n).reshape(b * h, n, 1)
+    state = ssm_state.view(b * h, p, n)
+    ssm_state.mul_(decay[:, :, None, None])
+    state.baddbmm_((xh * delta[:, :, None]).reshape(b * h, p, 1), Bh)  # += (Δ x) ⊗ B
+    D = mixer.skip_weight().to(ct)  # (H,) or (H, P)
+    y = torch.bmm(state, Ch).view(b, h, p) + (D[:, None] if D.dim() == 1 else D) * xh
+    y = mixer.gate(y.to(u.dtype).reshape(b, mixer.d_ssm), z)
+    if mixer.d_mlp:
+        y = torch.cat([F.silu(z0) * x0, y], dim=-1)
+    return mixer.out_proj(y)
+
+
+def init_state(model, batch: int, dtype: torch.dtype | None = None, device=None) -> StreamState:
+    """The zero state of ``model`` (a causal :class:`SkeletonMamba`) for ``batch`` streams."""
+    if not model.config.causal:
+        raise ValueError("frame-by-frame inference needs a causal backbone: SkeletonMambaConfig(causal=True)")
+    rows = batch * model.skeleton.num_joints
+    mixers = [block.temporal_scan.forward_mixer for block in model.blocks]
+    states = [allocate_mixer_state(mixer, rows, dtype, device) for mixer in mixers]
+    return StreamState(batch, [c for c, _ in states], [s for _, s in states])
+
+
+def block_step(
+    block,
+    x: torch.Tensor,
+    conv_state: torch.Tensor,
+    ssm_state: torch.Tensor,
+    context: torch.Tensor | None = None,
+    context_mask: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """One frame through a causal :class:`SkeletonMambaBlock`: x (B, J, D) -> (B, J, D)."""
+    if block.cross_attention is not None and context is None:
+        raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
+    b, j, d = x.shape
+    x = block.spatial(x[:, None])  # (B, 1, J, D): Group Scan and Joint Scan of this frame
+    scan = block.temporal_scan
+    seq = block.norm_time(x).reshape(b * j, d)
+    x = x + scan.proj(mixer_step(scan.forward_mixer, seq, conv_state, ssm_state)).view(b, 1, j, d)
+    return block.pointwise(x, context, context_mask)[:, 0]
+
+
+def step(
+    model,
+    x: torch.Tensor,
+    state: StreamState,
+    context: torch.Tensor | None = None,
+    context_mask: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, StreamState]:
+    """One frame through a causal :class:`SkeletonMamba` (inference only: no autograd).
+
+    Args:
+        x: (B, J, C_in) the new frame of every stream.
+        state: from :func:`init_state`; updated in place and returned.
+        context: (B, S, Dc) the condition for this frame (see the module docstring).
+        context_mask: (B, S) bool, True on valid condition tokens.
+
+    Returns:
+        (B, J, D or C_out) the output for this frame, and ``state``.
+    """
+    j = model.skeleton.num_joints
+    if x.dim() != 3 or x.shape[0] != state.batch or x.shape[1] != j:
+        raise ValueError(
+            f"expected one frame (B={state.batch}, {j}, C) for skeleton {model.skeleton.name}, "
+            f"got {tuple(x.shape)}"
+        )
+    with torch.inference_mode():
+        h = model.input_proj(x)
+        if model.joint_embedding is not None:
+            h = h + model.joint_embedding
+        for block, conv, ssm in zip(model.blocks, state.conv, state.ssm):
+            h = block_step(block, h, conv, ssm, context, context_mask)
+        y = model.output_proj(model.norm(h))
+    state.frames += 1
+    return y, state
+
+
+__all__ = ["StreamState", "allocate_mixer_state", "block_step", "init_state", "mixer_step", "step"]

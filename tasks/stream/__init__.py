@@ -1,0 +1,1 @@
+"""Streaming: live music-to-dance and online action recognition on a causal Skeleton Mamba."""

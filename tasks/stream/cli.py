@@ -1,0 +1,162 @@
+"""``sm stream``: run a causal Skeleton Mamba frame by frame on a live input.
+
+Examples::
+
+    sm stream --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --music song.wav --out live/
+    sm stream --ckpt last.ckpt --music song.wav --out live/ --realtime          # paced like live music
+    arecord -f S16_LE -r 44100 -c 1 -t wav | sm stream --ckpt last.ckpt --music - --out live/
+    sox song.mp3 -t raw -r 22050 -e signed -b 16 -c 1 - \\
+        | sm stream --ckpt last.ckpt --music - --raw-rate 22050 --out live/
+    sm stream --task recognition --ckpt best.ckpt --skeleton S001C001P001R001A001.skeleton --out online/
+
+Dance (``--task dance``, default): reads the music in chunks of ``--chunk-ms`` as it arrives, extracts
+causal features (:mod:`skeleton_mamba.tasks.stream.features`: no look-ahead; a pose frame needs
+its own 33.3 ms of audio) and emits one pose per 30 fps frame. At the end (or on Ctrl-C) it writes
+``DIR/<name>.npz`` (our motion format), ``<name>.bvh``, ``<name>.mp4`` (the skeleton with the music)
+and ``<name>_stream.json`` (frame count, latency figures, file paths), and prints
+the audio-to-pose latency: median / p99 / max over frames of the time from the delivery of the audio
+chunk that completes a frame to its pose.
+
+Recognition (``--task recognition``): see :mod:`skeleton_mamba.tasks.stream.online_recognition`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm stream", description=__doc__.split("\n\n")[0])
+    p.add_argument("--task", choices=("dance", "recognition"), default="dance")
+    p.add_argument(
+        "--ckpt", required=True, help="a checkpoint of stream_dance*.yaml or a causal recognition recipe"
+    )
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--name", default=None, help="file stem (default: the music's / skeleton file's stem)")
+    p.add_argument("--music", help="dance: audio file, or - for a WAV stream on standard input")
+    p.add_argument(
+        "--raw-rate", type=int, default=None, help="with --music -: headerless s16le mono PCM at this rate"
+    )
+    p.add_argument("--realtime", action="store_true", help="pace the input at the music's rate")
+    p.add_argument("--chunk-ms", type=float, default=20.0, help="audio chunk length (ms)")
+    p.add_argument("--no-render", action="store_true", help="skip the mp4")
+    p.add_argument("--render-size", default="480x352", help="video WIDTHxHEIGHT (multiples of 16)")
+    p.add_argument(
+        "--skeleton", help="recognition: a skeleton file (NTU .skeleton, PYSKL-style .npy (T, J, C))"
+    )
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    return p
+
+
+def _load_dancer(ckpt: str):
+    from skeleton_mamba.tasks.stream.module import StreamDanceModule
+
+    return StreamDanceModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).model.eval()
+
+
+def stream_dance(args: argparse.Namespace) -> int:
+    import numpy as np
+    import soundfile as sf
+
+    from skeleton_mamba.tasks.egodance.export import write_motion
+    from skeleton_mamba.tasks.motion.render import RenderStyle
+    from skeleton_mamba.tasks.stream.audio_input import AudioSource
+    from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
+    from skeleton_mamba.tasks.stream.live import LiveDancer, latency_summary
+    from skeleton_mamba.tasks.stream.model import tokens_to_motion
+
+    if not args.music:
+        print("sm stream: --music FILE (or -) is required for --task dance", file=sys.stderr)
+        return 2
+    source = AudioSource(args.music, args.chunk_ms / 1e3, args.realtime, args.raw_rate)
+    model = _load_dancer(args.ckpt)
+    dancer = LiveDancer(model, source.sample_rate)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    name = args.name or ("stdin" if args.music == "-" else Path(args.music).stem)
+    # The music as received, for the video (a live input has no file of its own).
+    recording = None if args.music != "-" else Path(tempfile.mkstemp(suffix=".wav", dir=out)[1])
+    writer = None if recording is None else sf.SoundFile(recording, "w", source.sample_rate, 1, "PCM_16")
+    interrupted = False
+    print(
+        f"sm stream: dancing to {args.music} ({source.sample_rate} Hz, chunks of {args.chunk_ms:g} ms"
+        f"{', real time' if args.realtime else ''}); Ctrl-C ends the stream",
+        file=sys.stderr,
+    )
+    try:
+        for chunk in source:
+            if writer is not None:
+                writer.write(chunk.samples)
+            dancer.push(chunk.samples, chunk.arrival)
+        dancer.push(np.zeros(0, np.float32), last=True)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if writer is not None:
+            writer.close()
+    if dancer.num_frames == 0:
+        print(
+            "sm stream: the music ended before one frame (33 ms) was complete; nothing written",
+            file=sys.stderr,
+        )
+        return 130 if interrupted else 2
+    width, height = (int(v) for v in args.render_size.lower().split("x"))
+    files = write_motion(
+        tokens_to_motion(dancer.tokens(), FPS),
+        out,
+        name,
+        music=recording or args.music,
+        render=not args.no_render,
+        style=RenderStyle(width=width, height=height),
+        title=f"live {Path(args.ckpt).name}",
+    )
+    if recording is not None:
+        recording.unlink(missing_ok=True)
+    latency = latency_summary(dancer.latency_ms)
+    report = {
+        "frames": dancer.num_frames,
+        "fps": FPS,
+        "seconds": dancer.num_frames / FPS,
+        "realtime": args.realtime,
+        "chunk_ms": args.chunk_ms,
+        "frame_audio_ms": 1e3 * HOP / SR,
+        "resampler_delay_ms": 1e3 * dancer.features.resampler_delay_s,
+        "audio_to_pose_latency": latency,
+        "interrupted": interrupted,
+        "files": {k: str(v) for k, v in vars(files).items() if v is not None},
+    }
+    (out / f"{name}_stream.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
+    print(f"sm stream: {dancer.num_frames} poses ({report['seconds']:.1f} s at {FPS} fps) written to {out}")
+    print("\n".join(files.lines()))
+    print(
+        f"  audio-to-pose latency: median {latency['median_ms']:.1f} ms, p99 {latency['p99_ms']:.1f} ms, "
+        f"max {latency['max_ms']:.1f} ms (after the frame's own {report['frame_audio_ms']:.1f} ms of audio, "
+        f"chunks of {args.chunk_ms:g} ms, resampler delay {report['resampler_delay_ms']:.1f} ms)"
+    )
+    return 130 if interrupted else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if not Path(args.ckpt).is_file():
+        print(f"sm stream: checkpoint {args.ckpt} not found", file=sys.stderr)
+        return 2
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    try:
+        if args.task == "recognition":
+            from skeleton_mamba.tasks.stream.online_recognition import stream_recognition
+
+            return stream_recognition(args)
+        return stream_dance(args)
+    except (FileNotFoundError, ValueError) as err:  # bad input files: one line, no traceback
+        print(f"sm stream: {err}", file=sys.stderr)
+        return 2

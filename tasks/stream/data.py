@@ -1,0 +1,234 @@
+"""Training data of the live dance model: AIST++-layout motions and music, 30 fps, causal features.
+
+Layout read (as QEAN's ``AISTPPDanceDataModule``; ``root`` = the AIST++ annotations folder)::
+
+    <root>/motions/<name>.pkl      SMPL motions (smpl_poses, smpl_trans, smpl_scaling), 60 fps
+    <music_dir>/<music id>.wav     the music (default <root>/music)
+    <root>/splits/crossmodal_<split>.txt   name lists (else the packaged AIST++ crossmodal lists)
+
+Every sequence becomes joint tokens (T, 24, 12) at 30 fps (:func:`~.model.motion_to_tokens`) and the
+causal music features (T, 34) of its track (:func:`~.features.music_features`), cut to the shorter of
+the two; a training item is a window ``{motion (W, 24, 12), music (W, 34)}`` taken every
+``window_stride`` frames. ``synthetic: true`` writes a SYNTHETIC demo set in this layout on first use
+(the toolkit's beat-synchronised procedural dances and drum tracks, one music id per dance, names
+``g<genre>_sBM_cAll_d<k>_m<genre><i>_ch01``) when ``<root>/motions`` does not exist.
+"""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+import torch
+from lightning.pytorch import LightningDataModule
+from torch.utils.data import DataLoader, Dataset
+
+from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.stream.features import music_features
+from skeleton_mamba.tasks.stream.model import motion_to_tokens
+
+__all__ = ["StreamDanceDataModule", "write_synthetic_aistpp"]
+
+GENRES = ("BR", "PO", "LO", "MH", "LH", "WA", "KR", "JS", "JB", "HO")
+SCALING = 93.0  # AIST++ stores smpl_trans in units of smpl_scaling
+
+
+def write_synthetic_aistpp(
+    root: str | Path, count: int = 8, duration_s: float = 12.0, val_count: int = 2, seed: int = 0
+) -> list[str]:
+    """Write ``count`` SYNTHETIC dances + music in the AIST++ layout under ``root``; returns their names.
+
+    The last ``val_count`` names go to ``splits/crossmodal_val.txt``, the others to ``crossmodal_train.txt``.
+    """
+    from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
+    from skeleton_mamba.tasks.motion.synthetic.dance import STYLES
+
+    if not 0 <= val_count < count <= 10 * len(GENRES):
+        raise ValueError(f"need 0 <= val_count < count <= {10 * len(GENRES)}, got {val_count}, {count}")
+    root = Path(root)
+    for folder in ("motions", "music", "splits"):
+        (root / folder).mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    styles = sorted(STYLES)
+    names = []
+    for k in range(count):
+        genre, index = GENRES[k % len(GENRES)], k // len(GENRES)
+        name = f"g{genre}_sBM_cAll_d{k:02d}_m{genre}{index}_ch01"
+        bpm = float(rng.integers(90, 141))
+        motion = synthesize_dance(bpm, duration_s, fps=60.0, style=styles[k % len(styles)], seed=seed + k)
+        data = {
+            "smpl_poses": motion.poses.reshape(-1, 72).astype(np.float32),
+            "smpl_trans": (motion.root_position() * SCALING).astype(np.float32),
+            "smpl_scaling": np.array([SCALING], dtype=np.float32),
+        }
+        tmp = root / "motions" / f".{name}.pkl.tmp"
+        with open(tmp, "wb") as f:
+            pickle.dump(data, f)
+        tmp.replace(root / "motions" / f"{name}.pkl")
+        write_music(
+            root / "music" / f"{music_id(name)}.wav", synthesize_music(bpm, duration_s, seed=seed + k)
+        )
+        names.append(name)
+    train, val = names[: count - val_count], names[count - val_count :]
+    (root / "splits" / "crossmodal_train.txt").write_text("\n".join(train) + "\n", encoding="utf-8")
+    (root / "splits" / "crossmodal_val.txt").write_text("\n".join(val) + "\n", encoding="utf-8")
+    (root / "SYNTHETIC.txt").write_text(
+        "SYNTHETIC demo data: procedural dances and synthesised drum tracks in the AIST++ layout.\n",
+        encoding="utf-8",
+    )
+    return names
+
+
+def audio_rate(path: Path) -> int:
+    """The sample rate of an audio file (raises naming the file when it is missing or unreadable)."""
+    import soundfile as sf
+
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: music file not found")
+    try:
+        return int(sf.info(path).samplerate)
+    except Exception as err:  # soundfile raises its own error types
+        raise ValueError(f"{path}: cannot read audio ({err})") from err
+
+
+class WindowDataset(Dataset):
+    """``{motion (W, 24, 12), music (W, 34)}`` windows over in-memory sequences."""
+
+    def __init__(self, sequences: dict[str, tuple[torch.Tensor, torch.Tensor]], window: int, stride: int):
+        self.sequences = sequences
+        self.window = window
+        self.index = [
+            (name, s)
+            for name, (motion, _) in sequences.items()
+            for s in range(0, len(motion) - window + 1, stride)
+        ]
+        if not self.index:
+            raise ValueError(f"no sequence holds a window of {window} frames ({len(sequences)} sequences)")
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        name, s = self.index[i]
+        motion, music = self.sequences[name]
+        return {"motion": motion[s : s + self.window], "music": music[s : s + self.window]}
+
+
+class StreamDanceDataModule(LightningDataModule):
+    """AIST++-layout dances for the causal dance model (see the module docstring).
+
+    Args:
+        root: the AIST++ annotations folder (holding ``motions/``).
+        music_dir: folder of ``<music id>.wav`` (default ``<root>/music``).
+        train_split: ``"train"`` or a name-list file.
+        val_split: a split validated with the teacher-forced loss, or ``None``.
+        window_frames: frames per training window at 30 fps.
+        window_stride: frames between window starts.
+        batch_size: windows per batch.
+        num_workers: DataLoader workers.
+        synthetic: write a SYNTHETIC demo set under ``root`` when it holds no ``motions/``.
+        synthetic_count: dances in the demo set.
+        synthetic_duration_s: length of each demo dance.
+    """
+
+    def __init__(
+        self,
+        root: str = "data/aistpp",
+        music_dir: str | None = None,
+        train_split: str = "train",
+        val_split: str | None = None,
+        window_frames: int = 90,
+        window_stride: int = 10,
+        batch_size: int = 16,
+        num_workers: int = 0,
+        synthetic: bool = False,
+        synthetic_count: int = 8,
+        synthetic_duration_s: float = 12.0,
+    ) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.root = Path(root).expanduser()
+        self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
+        self.datasets: dict[str, Dataset] = {}
+        self._music: dict[Path, torch.Tensor] = {}  # features per track (AIST++ reuses each track)
+        if not synthetic:  # fail before the model is built
+            self.check_layout()
+
+    def prepare_data(self) -> None:
+        h = self.hparams
+        if h.synthetic and not (self.root / "motions").is_dir():
+            write_synthetic_aistpp(self.root, h.synthetic_count, h.synthetic_duration_s)
+        self.check_layout()
+
+    def check_layout(self) -> None:
+        """Raise :class:`DatasetNotFoundError` saying where the motions go when they are missing."""
+        if not (self.root / "motions").is_dir():
+            raise DatasetNotFoundError(
+                f"AIST++ motions not found: {(self.root / 'motions').resolve()} is not a folder.\n"
+                "Download the AIST++ annotations (https://google.github.io/aistplusplus_dataset) and pass "
+                "--data.init_args.root PATH, or train on the synthetic demo set: sm fit --recipe "
+                "stream_dance_demo.yaml"
+            )
+
+    def split_names(self, split: str) -> list[str]:
+        """Names of a split (a list file, ``<root>/splits/crossmodal_<split>.txt``, or the packaged list)."""
+        path = Path(split).expanduser()
+        local = self.root / "splits" / f"crossmodal_{split}.txt"
+        if path.suffix == ".txt":
+            source = path
+        elif local.is_file():
+            source = local
+        else:
+            return [n for n in load_split(split) if n not in ignore_list()]
+        if not source.is_file():
+            raise FileNotFoundError(f"split list {source} not found")
+        lines = source.read_text(encoding="utf-8").splitlines()
+        return [Path(n.strip()).stem for n in lines if n.strip() and not n.startswith("#")]
+
+    def sequence(self, name: str) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(motion (T, 24, 12), music (T, 34))`` of one sequence at 30 fps."""
+        pkl = self.root / "motions" / f"{name}.pkl"
+        if not pkl.is_file():
+            raise FileNotFoundError(f"{pkl}: motion of split sequence {name} not found")
+        wav = self.music_dir / f"{music_id(name)}.wav"
+        motion = motion_to_tokens(load_aistpp_motion(pkl))
+        if wav not in self._music:
+            # At the file's own rate through the same streaming resampler as ``sm stream``.
+            rate = audio_rate(wav)
+            self._music[wav] = torch.from_numpy(music_features(load_audio(wav, rate), rate))
+        music = self._music[wav]
+        n = min(len(motion), len(music))
+        return motion[:n], music[:n]
+
+    def setup(self, stage: str) -> None:
+        h = self.hparams
+        splits = {"train": h.train_split} if stage == "fit" else {}
+        if stage in ("fit", "validate") and h.val_split:
+            splits["val"] = h.val_split
+        for key, split in splits.items():
+            if key not in self.datasets:
+                self.prepare_data()
+                sequences = {n: self.sequence(n) for n in self.split_names(split)}
+                self.datasets[key] = WindowDataset(sequences, h.window_frames, h.window_stride)
+
+    def train_music(self) -> torch.Tensor:
+        """Every training music frame (N, 34), for the model's feature normalisation."""
+        return torch.cat([music for _, music in self.datasets["train"].sequences.values()])
+
+    def train_dataloader(self) -> DataLoader:
+        data = self.datasets["train"]
+        return DataLoader(
+            data,
+            batch_size=self.hparams.batch_size,
+            shuffle=True,
+            drop_last=len(data) >= self.hparams.batch_size,
+            num_workers=self.hparams.num_workers,
+        )
+
+    def val_dataloader(self) -> DataLoader:
+        if "val" not in self.datasets:
+            return []
+        return DataLoader(self.datasets["val"], batch_size=self.hparams.batch_size)

@@ -1,0 +1,137 @@
+"""A causal music-to-dance network on Skeleton Mamba that runs frame by frame. Pure torch.
+
+Pose frame t is predicted from the poses before it and the music up to frame t (teacher forcing at
+training time, as QEAN [QEAN] trains its autoregressive decoder; its own outputs at inference)::
+
+    prev_t  = pose_{t-1} joint tokens (24, 12), zeros at t = 0 (the start token)
+    music_t = normalised causal music features of frame t (34,), copied onto every joint
+    pose_t  = SkeletonMamba_causal([prev_t | music_t])_t               (B, T, 24, 46) -> (B, T, 24, 12)
+
+A joint token is the joint's local rotation matrix (9, row-major) and the root position (3, repeated
+on every joint), the per-joint form of the 219-d [QEAN] / [FACT] vector
+(``tasks.qean.representation``). The music is a per-frame input, not a cross-attention context, so
+nothing can attend to future music: the network is causal end to end, and :meth:`step` (one frame,
+constant memory) equals :meth:`forward` (a whole sequence).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import torch
+from einops import rearrange, repeat
+from torch import nn
+
+from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.streaming import StreamState
+from skeleton_mamba.tasks.motion.motion_file import MotionData
+from skeleton_mamba.tasks.qean.representation import features_to_joints, features_to_smpl, motion_to_features
+from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
+
+__all__ = [
+    "POSE_CHANNELS",
+    "StreamDancer",
+    "motion_to_tokens",
+    "teacher_forcing_inputs",
+    "tokens_to_features",
+    "tokens_to_motion",
+]
+
+POSE_CHANNELS = 12  # rotation matrix (9) + root position (3) per joint
+
+
+def motion_to_tokens(motion: MotionData, fps: float = FPS) -> torch.Tensor:
+    """SMPL parameters -> (T, 24, 12) float32 joint tokens at ``fps`` (resampled when needed)."""
+    features = motion_to_features(motion, fps)  # (T, 219) = [root (3) | 24 x rotation (9)]
+    rot = rearrange(features[:, 3:], "t (j c) -> t j c", j=24)
+    return torch.cat([rot, repeat(features[:, :3], "t c -> t j c", j=24)], dim=-1)
+
+
+def tokens_to_features(tokens: torch.Tensor) -> torch.Tensor:
+    """(..., 24, 12) joint tokens -> the (..., 219) vector; the root is the mean of the joints' copies."""
+    root = tokens[..., 9:].mean(dim=-2)
+    return torch.cat([root, tokens[..., :9].flatten(-2)], dim=-1)
+
+
+def tokens_to_motion(tokens: torch.Tensor, fps: float = FPS) -> MotionData:
+    """(T, 24, 12) predicted tokens -> :class:`MotionData` (rotations projected to the nearest rotation)."""
+    features = tokens_to_features(tokens.detach().cpu().double())
+    poses, root = features_to_smpl(features)
+    return MotionData(
+        fps=fps,
+        skeleton="smpl24",
+        poses=poses.numpy().astype(np.float32),
+        trans=root.numpy(),
+        scaling=1.0,
+        joints=features_to_joints(features).numpy().astype(np.float32),
+    )
+
+
+def teacher_forcing_inputs(motion: torch.Tensor) -> torch.Tensor:
+    """Target poses (B, T, 24, 12) -> previous poses (B, T, 24, 12): the start token, then pose t - 1."""
+    return torch.cat([torch.zeros_like(motion[:, :1]), motion[:, :-1]], dim=1)
+
+
+class StreamDancer(nn.Module):
+    """Causal Skeleton Mamba from previous pose and music to the next pose.
+
+    Args:
+        backbone: the backbone size (``skeleton``, ``in_channels``, ``out_channels``, ``causal`` and
+            ``context_dim`` are set here).
+        music_dim: music features per frame (:data:`~skeleton_mamba.tasks.stream.features.NUM_FEATURES`).
+    """
+
+    def __init__(self, backbone: SkeletonMambaConfig | None = None, music_dim: int = NUM_FEATURES) -> None:
+        super().__init__()
+        cfg = dataclasses.replace(
+            backbone or SkeletonMambaConfig(),
+            skeleton="smpl24",
+            in_channels=POSE_CHANNELS + music_dim,
+            out_channels=POSE_CHANNELS,
+            causal=True,
+            context_dim=None,
+        )
+        self.music_dim = music_dim
+        self.backbone = SkeletonMamba(cfg)
+        # Music feature statistics of the training set (set by the Lightning module before training).
+        self.register_buffer("music_mean", torch.zeros(music_dim))
+        self.register_buffer("music_std", torch.ones(music_dim))
+
+    def set_music_statistics(self, music: torch.Tensor) -> None:
+        """Per-feature mean and standard deviation of training music (N, music_dim)."""
+        self.music_mean.copy_(music.mean(dim=0))
+        self.music_std.copy_(music.std(dim=0).clamp_min(1e-3))
+
+    def _inputs(self, prev: torch.Tensor, music: torch.Tensor) -> torch.Tensor:
+        """(..., 24, 12) previous poses and (..., music_dim) music -> (..., 24, 12 + music_dim)."""
+        if music.shape[-1] != self.music_dim:
+            raise ValueError(f"expected {self.music_dim} music features per frame, got {music.shape[-1]}")
+        music = (music - self.music_mean) / self.music_std
+        music = music.unsqueeze(-2).expand(*prev.shape[:-1], self.music_dim)
+        return torch.cat([prev, music.to(prev.dtype)], dim=-1)
+
+    def forward(self, prev: torch.Tensor, music: torch.Tensor) -> torch.Tensor:
+        """Previous poses (B, T, 24, 12) and music (B, T, music_dim) -> poses (B, T, 24, 12)."""
+        return self.backbone(self._inputs(prev, music))
+
+    def init_state(self, batch: int = 1) -> StreamState:
+        """Zero recurrent state for ``batch`` streams."""
+        return self.backbone.init_state(batch)
+
+    def step(
+        self, prev: torch.Tensor, music: torch.Tensor, state: StreamState
+    ) -> tuple[torch.Tensor, StreamState]:
+        """One frame: previous pose (B, 24, 12) and music (B, music_dim) -> pose (B, 24, 12)."""
+        return self.backbone.step(self._inputs(prev, music), state)
+
+    @torch.inference_mode()
+    def rollout(self, music: torch.Tensor) -> torch.Tensor:
+        """Dance to a whole feature sequence (B, T, music_dim), frame by frame -> (B, T, 24, 12)."""
+        state = self.init_state(music.shape[0])
+        prev = music.new_zeros(music.shape[0], 24, POSE_CHANNELS)
+        poses = []
+        for t in range(music.shape[1]):
+            prev, state = self.step(prev, music[:, t], state)
+            poses.append(prev)
+        return torch.stack(poses, dim=1)

@@ -1,0 +1,95 @@
+"""Online recognition with a causal backbone: per-frame probabilities and the early-recognition curve."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.tasks.recognition.early import EarlyRecognitionCurve, online_probabilities
+from skeleton_mamba.tasks.recognition.model import ActionRecognizer
+from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
+from skeleton_mamba.tasks.stream.online_recognition import OnlineRecognizer
+
+
+def _recognizer(causal=True) -> ActionRecognizer:
+    torch.manual_seed(0)
+    cfg = SkeletonMambaConfig(skeleton="ntu25", in_channels=3, dim=16, depth=2, mlp_dim=32, causal=causal,
+                              mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16))  # fmt: skip
+    return ActionRecognizer(cfg, num_classes=4).double().eval()
+
+
+def _two_bodies() -> torch.Tensor:
+    torch.manual_seed(1)
+    x = torch.randn(2, 2, 20, 25, 3, dtype=torch.float64)
+    x[0, 1, :7] = 0  # the second body of sample 0 enters at frame 7
+    x[1, 1] = 0  # sample 1 has one body
+    return x
+
+
+def test_online_probabilities_end_at_the_clip_prediction_and_ignore_the_future():
+    model, x = _recognizer(), _two_bodies()
+    with torch.no_grad():
+        online = online_probabilities(model, x)
+        torch.testing.assert_close(online[:, -1], model(x).softmax(-1), rtol=0, atol=1e-12)
+        # Frame t from the clip cut after t (an independent computation: the clip-level model).
+        for t in (0, 6, 7, 13):
+            torch.testing.assert_close(online[:, t], model(x[:, :, : t + 1]).softmax(-1), rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="causal"):
+        online_probabilities(_recognizer(causal=False), x)
+
+
+def test_frame_by_frame_recognizer_equals_the_batch_online_probabilities():
+    model, x = _recognizer(), _two_bodies()
+    stream = OnlineRecognizer(model, batch=2, bodies=2)
+    steps = torch.stack([stream.push(x[:, :, t]) for t in range(x.shape[2])], dim=1)
+    with torch.no_grad():
+        torch.testing.assert_close(steps, online_probabilities(model, x), rtol=0, atol=1e-10)
+
+
+def test_early_curve_counts_the_prediction_at_each_observed_fraction():
+    curve = EarlyRecognitionCurve(fractions=(0.25, 0.5, 1.0))
+    prob = torch.zeros(2, 8, 3)
+    prob[0, :, 0] = 1  # sample 0: class 0 throughout
+    prob[1, :4, 2] = 1  # sample 1: class 2 for frames 0-3, then class 1
+    prob[1, 4:, 1] = 1
+    curve.update(prob, torch.tensor([0, 1]))
+    # Frames ceil(r * 8) - 1 = 1, 3, 7: sample 1 is right only at the last.
+    torch.testing.assert_close(curve.compute(), torch.tensor([0.5, 0.5, 1.0]))
+    assert [math.ceil(r * 8) - 1 for r in (0.25, 0.5, 1.0)] == [1, 3, 7]
+
+
+def _sm(args, cwd) -> subprocess.CompletedProcess:
+    proc = subprocess.run([sys.executable, "-m", "skeleton_mamba.cli", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc
+
+
+def test_causal_recipe_tests_with_an_early_curve_and_streams_a_skeleton(tmp_path):
+    data = ["--data.init_args.train_per_class=4", "--data.init_args.val_per_class=2"]
+    _sm(["fit", "--recipe", "recognition_synthetic_causal.yaml", "--trainer.max_epochs=1",
+         "--trainer.enable_progress_bar=false", *data], tmp_path)  # fmt: skip
+    ckpt = tmp_path / "runs/recognition_synthetic_causal/version_0/checkpoints/last.ckpt"
+    proc = _sm(["test", "--recipe", "recognition_synthetic_causal.yaml", f"--ckpt_path={ckpt}",
+                "--trainer.enable_progress_bar=false", *data], tmp_path)  # fmt: skip
+    assert "early recognition, top-1" in proc.stdout + proc.stderr
+    run = tmp_path / "runs/recognition_synthetic_causal/version_1"
+    assert (run / "early_recognition.png").stat().st_size > 0
+    rows = (run / "early_recognition.csv").read_text().splitlines()
+    assert rows[0] == "observed_fraction,top1" and len(rows) == 11
+
+    keypoint = make_synthetic_annotations(num_classes=3)["annotations"][0]["keypoint"][0]  # (T, 25, 3)
+    np.save(tmp_path / "clip.npy", keypoint)
+    args = ["stream", "--task", "recognition", "--ckpt", str(ckpt), "--skeleton", str(tmp_path / "clip.npy")]
+    _sm([*args, "--out", str(tmp_path / "online")], tmp_path)
+    lines = (tmp_path / "online" / "clip_online.csv").read_text().splitlines()
+    assert len(lines) == 1 + keypoint.shape[0]
+    probs = np.array([[float(v) for v in line.split(",")[2:]] for line in lines[1:]])
+    np.testing.assert_allclose(probs.sum(axis=1), 1.0, atol=1e-5)
+    assert (tmp_path / "online" / "clip_online.png").is_file()

@@ -1,0 +1,193 @@
+"""Live music-to-dance: causal features, a tiny trained checkpoint streamed by ``sm stream``.
+
+``sm fit --recipe stream_dance_demo.yaml`` (a few steps on a tiny SYNTHETIC AIST++-layout set) -> a
+checkpoint -> ``sm stream`` on a short generated wav (from a file and from standard input) writes the
+dance (.npz, .bvh, .mp4) with one pose per complete 30 fps frame of the music; the streamed poses equal
+the batch causal forward of the same model on the same features with its own poses teacher-forced.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import librosa
+import numpy as np
+import pytest
+import torch
+
+from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.synthetic import synthesize_music, write_music
+from skeleton_mamba.tasks.stream.audio_input import AudioSource
+from skeleton_mamba.tasks.stream.features import HOP, N_FFT, SR, CausalMusicFeatures, music_features
+from skeleton_mamba.tasks.stream.live import LiveDancer
+from skeleton_mamba.tasks.stream.model import teacher_forcing_inputs
+from skeleton_mamba.tasks.stream.module import StreamDanceModule
+
+
+def _sm(args, cwd, stdin=None) -> subprocess.CompletedProcess:
+    proc = subprocess.run(
+        [sys.executable, "-m", "skeleton_mamba.cli", *args], cwd=cwd, capture_output=True, timeout=600,
+        input=stdin,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr.decode()[-3000:]
+    return proc
+
+
+def test_features_match_librosa_on_windows_that_end_at_each_frame():
+    y = np.random.default_rng(0).standard_normal(SR * 2).astype(np.float32) * 0.1
+    ours = music_features(y, SR)
+    # Independent: librosa's non-centred STFT of the left-padded signal, then its feature functions.
+    power = np.abs(librosa.stft(np.pad(y, (N_FFT - HOP, 0)), n_fft=N_FFT, hop_length=HOP, center=False)) ** 2
+    logmel = librosa.power_to_db(librosa.feature.melspectrogram(S=power, sr=SR, n_mels=128), top_db=None)
+    assert ours.shape == (len(y) // HOP, 34) == (power.shape[1], 34)
+    onset = librosa.onset.onset_strength(S=logmel, lag=1, max_size=1, center=False, aggregate=np.mean)
+    np.testing.assert_allclose(ours[:, 0], onset, atol=1e-4)
+    np.testing.assert_allclose(ours[:, 1:21], librosa.feature.mfcc(S=logmel, n_mfcc=20).T, atol=1e-3)
+    chroma = librosa.feature.chroma_stft(S=power, sr=SR, n_fft=N_FFT, tuning=0.0).T
+    np.testing.assert_allclose(ours[:, 21:33], chroma, atol=1e-5)
+    frames = np.lib.stride_tricks.sliding_window_view(np.pad(y, (N_FFT - HOP, 0)), N_FFT)[::HOP]
+    np.testing.assert_allclose(ours[:, 33], np.log(np.sqrt((frames.astype(np.float64) ** 2).mean(1)) + 1e-5),
+                               rtol=1e-5)  # fmt: skip
+
+
+@pytest.mark.parametrize("rate", [SR, 22050])
+def test_features_are_causal_and_independent_of_the_chunking(rate):
+    y = np.random.default_rng(1).standard_normal(rate * 2).astype(np.float32) * 0.1
+    whole = music_features(y, rate, chunk=len(y))
+    np.testing.assert_array_equal(music_features(y, rate, chunk=333), whole)
+    cut = len(y) // 2
+    changed = y.copy()
+    changed[cut:] = np.random.default_rng(2).standard_normal(len(y) - cut) * 0.5
+    other = music_features(changed, rate)
+    # Frames whose window ends before the change do not see it (a 2-frame margin for the resampler's
+    # filter, whose half-length is far shorter than 1024 samples).
+    safe = int(cut * SR / rate) // HOP - (0 if rate == SR else 2)
+    np.testing.assert_array_equal(other[:safe], whole[:safe])
+    assert not np.allclose(other[safe + 3 :], whole[safe + 3 :])
+
+
+def test_bad_audio_is_explained(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not found"):
+        AudioSource(str(tmp_path / "missing.wav"))
+    bad = tmp_path / "bad.wav"
+    bad.write_bytes(b"not audio")
+    with pytest.raises(ValueError, match="bad.wav"):
+        AudioSource(str(bad))
+    with pytest.raises(ValueError, match="NaN"):
+        CausalMusicFeatures().push(np.array([0.0, np.nan], np.float32))
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    """A tiny stream-dance checkpoint trained for 3 steps on a tiny synthetic AIST++-layout set."""
+    cwd = tmp_path_factory.mktemp("stream_fit")
+    _sm([
+        "fit", "--recipe", "stream_dance_demo.yaml", "--trainer.max_steps=3", "--trainer.logger=false",
+        "--trainer.enable_progress_bar=false", f"--trainer.default_root_dir={cwd}",
+        f"--data.init_args.root={cwd / 'data'}", "--data.init_args.synthetic_count=3",
+        "--data.init_args.synthetic_duration_s=3.0", "--data.init_args.window_frames=30",
+        "--data.init_args.batch_size=2",
+    ], cwd)  # fmt: skip
+    ckpts = sorted(cwd.rglob("*.ckpt"))
+    assert ckpts, "sm fit wrote no checkpoint"
+    return ckpts[0]
+
+
+def test_sm_stream_writes_the_dance_and_equals_the_batch_forward(checkpoint, tmp_path):
+    wav = write_music(tmp_path / "song.wav", synthesize_music(120.0, 2.0, sr=22050, seed=3))
+    expected = len(music_features(load_audio(wav, 22050), 22050))
+    assert expected == 2 * 30  # two seconds at 30 fps (the resampler flushes at the end)
+    args = ["stream", "--ckpt", str(checkpoint), "--music", str(wav)]
+    proc = _sm([*args, "--out", str(tmp_path / "live")], tmp_path)
+    assert b"audio-to-pose latency" in proc.stdout
+    live = tmp_path / "live"
+    for suffix in (".npz", ".bvh", ".mp4", "_stream.json"):
+        assert (live / f"song{suffix}").is_file(), suffix
+    motion = load_motion(live / "song.npz")
+    assert motion.num_frames == expected and motion.fps == 30
+    report = json.loads((live / "song_stream.json").read_text())
+    assert report["frames"] == expected and report["audio_to_pose_latency"]["p99_ms"] > 0
+
+    # In process: the same stream, then the batch causal forward on the streamed inputs.
+    model = StreamDanceModule.load_from_checkpoint(checkpoint, map_location="cpu", weights_only=True).model
+    source = AudioSource(str(wav), chunk_s=0.02)
+    dancer = LiveDancer(model, source.sample_rate)
+    for chunk in source:
+        dancer.push(chunk.samples, chunk.arrival)
+    dancer.push(np.zeros(0, np.float32), last=True)
+    tokens, music = dancer.tokens()[None], dancer.music_features()[None]
+    np.testing.assert_array_equal(music[0].numpy(), music_features(load_audio(wav, 22050), 22050))
+    with torch.no_grad():
+        batch = model(teacher_forcing_inputs(tokens), music)
+    torch.testing.assert_close(tokens, batch, rtol=1e-4, atol=1e-5)
+    assert dancer.state.nbytes == model.init_state(1).nbytes
+
+    # The same music as a WAV stream on standard input gives the same dance.
+    args = ["stream", "--ckpt", str(checkpoint), "--music", "-", "--no-render"]
+    _sm([*args, "--out", str(tmp_path / "stdin")], tmp_path, stdin=wav.read_bytes())
+    piped = load_motion(tmp_path / "stdin" / "stdin.npz")
+    assert piped.num_frames == expected
+    np.testing.assert_allclose(piped.joints, motion.joints, atol=1e-4)
+
+
+def test_joint_tokens_round_trip_an_smpl_dance():
+    from skeleton_mamba.tasks.motion.synthetic import synthesize_dance
+    from skeleton_mamba.tasks.stream.model import motion_to_tokens, tokens_to_motion
+
+    dance = synthesize_dance(120.0, 1.0, fps=30.0, style="bounce", seed=0)
+    tokens = motion_to_tokens(dance)
+    assert tokens.shape == (30, 24, 12)
+    # Every joint token carries the root position (metres) in its last three channels.
+    np.testing.assert_allclose(tokens[:, 5, 9:].numpy(), dance.root_position(), atol=1e-6)
+    back = tokens_to_motion(tokens)
+    np.testing.assert_allclose(back.root_position(), dance.root_position(), atol=1e-6)
+    np.testing.assert_allclose(back.joint_positions(), dance.joint_positions(), atol=1e-4)
+
+
+def test_standard_input_as_wav_stream_or_raw_pcm_gives_the_file_samples(tmp_path, monkeypatch):
+    import io
+
+    import soundfile as sf
+
+    wav = write_music(tmp_path / "song.wav", synthesize_music(100.0, 0.5, sr=22050, seed=0))
+    samples, rate = sf.read(wav, dtype="int16")
+    raw = samples.astype("<i2").tobytes()
+    for data, raw_rate in ((wav.read_bytes(), None), (raw, rate)):
+        monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
+        source = AudioSource("-", chunk_s=0.01, raw_rate=raw_rate)
+        assert source.sample_rate == rate
+        chunks = [c.samples for c in source]
+        assert all(len(c) == round(0.01 * rate) for c in chunks[:-1])
+        np.testing.assert_array_equal(np.concatenate(chunks), samples / 32768.0)
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b"garbage bytes")))
+    with pytest.raises(ValueError, match="not a WAV stream"):
+        AudioSource("-")
+
+
+def test_sm_stream_explains_missing_inputs(checkpoint, tmp_path, capsys):
+    from skeleton_mamba.tasks.stream.cli import main
+
+    assert main(["--ckpt", str(tmp_path / "none.ckpt"), "--music", "x.wav", "--out", str(tmp_path)]) == 2
+    assert "none.ckpt not found" in capsys.readouterr().err
+    missing = str(tmp_path / "none.wav")
+    assert main(["--ckpt", str(checkpoint), "--music", missing, "--out", str(tmp_path)]) == 2
+    assert "none.wav: music file not found" in capsys.readouterr().err
+    assert main(["--ckpt", str(checkpoint), "--out", str(tmp_path)]) == 2
+    assert "--music" in capsys.readouterr().err
+
+
+def test_training_features_are_what_the_live_stream_computes(tmp_path):
+    from skeleton_mamba.tasks.stream.data import StreamDanceDataModule, write_synthetic_aistpp
+
+    names = write_synthetic_aistpp(tmp_path, count=2, duration_s=2.0, val_count=1)
+    data = StreamDanceDataModule(root=str(tmp_path), train_split="train", val_split="val", window_frames=30)
+    assert data.split_names("train") == names[:1] and data.split_names("val") == names[1:]
+    motion, music = data.sequence(names[0])
+    assert motion.shape == (60, 24, 12) and music.shape == (60, 34)
+    source = AudioSource(str(tmp_path / "music" / "mBR0.wav"), chunk_s=0.02)
+    live = CausalMusicFeatures(source.sample_rate)
+    rows = [live.push(c.samples) for c in source] + [live.push(np.zeros(0, np.float32), last=True)]
+    np.testing.assert_array_equal(np.concatenate(rows)[:60], music.numpy())
