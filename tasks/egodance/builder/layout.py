@@ -205,10 +205,14 @@ def _write_frames(folder: Path, rgb: np.ndarray, fps: float, fmt: str) -> None:
             quality=8,
             # half the encoder CPU of x264's default "medium" preset for ~6% larger files (224 x 224)
             ffmpeg_params=["-preset", "veryfast"],
-            # errors only: a worker stopped by Ctrl-C leaves its encoder an empty input, whose warning
-            # would otherwise follow `sm make-ego: interrupted` on the terminal
-            ffmpeg_log_level="error",
+            # fatal messages only: a worker stopped by Ctrl-C leaves its encoder a cut input, whose warnings
+            # and decoder errors would otherwise follow `sm make-ego: interrupted` on the terminal
+            ffmpeg_log_level="fatal",
         )
+        video = folder / "rgb.mp4"
+        if not video.is_file() or video.stat().st_size == 0:  # imageio does not raise on every ffmpeg failure
+            size = f"{rgb.shape[2]}x{rgb.shape[1]}"
+            raise OSError(f"{video}: ffmpeg wrote no video ({len(rgb)} frames of {size})")
     else:
         raise ValueError(f"frame format must be 'png' or 'mp4', got {fmt!r}")
 
