@@ -100,24 +100,26 @@ def stream_dance(args: argparse.Namespace) -> int:
     finally:
         if writer is not None:
             writer.close()
-    if dancer.num_frames == 0:
-        print(
-            "sm stream: the music ended before one frame (33 ms) was complete; nothing written",
-            file=sys.stderr,
+    try:
+        if dancer.num_frames == 0:
+            print(
+                "sm stream: the music ended before one frame (33 ms) was complete; nothing written",
+                file=sys.stderr,
+            )
+            return 130 if interrupted else 2
+        width, height = (int(v) for v in args.render_size.lower().split("x"))
+        files = write_motion(
+            tokens_to_motion(dancer.tokens(), FPS),
+            out,
+            name,
+            music=recording or args.music,
+            render=not args.no_render,
+            style=RenderStyle(width=width, height=height),
+            title=f"live {Path(args.ckpt).name}",
         )
-        return 130 if interrupted else 2
-    width, height = (int(v) for v in args.render_size.lower().split("x"))
-    files = write_motion(
-        tokens_to_motion(dancer.tokens(), FPS),
-        out,
-        name,
-        music=recording or args.music,
-        render=not args.no_render,
-        style=RenderStyle(width=width, height=height),
-        title=f"live {Path(args.ckpt).name}",
-    )
-    if recording is not None:
-        recording.unlink(missing_ok=True)
+    finally:  # the received music is only needed for the video; none stays behind in the out folder
+        if recording is not None:
+            recording.unlink(missing_ok=True)
     latency = latency_summary(dancer.latency_ms)
     report = {
         "frames": dancer.num_frames,
