@@ -1,4 +1,4 @@
-"""One Skeleton Mamba block (seed 000 Eq. 11 and supplementary Table 1).
+"""One Skeleton Mamba block ([EgoMusic] supp. Eq. 11 and Table 1).
 
     x (B, T, J, D)
     g = HT(LN(x))                      (B, T, G, E)     Human Tokenizer

@@ -1,4 +1,4 @@
-"""Typed configuration of the Skeleton Mamba backbone (defaults: seed 000, supplementary Table 2)."""
+"""Typed configuration of the Skeleton Mamba backbone (defaults: [EgoMusic] supp. Table 2)."""
 
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ class SkeletonMambaConfig:
         depth: N, the number of blocks.
         group_paths: the group orders of the Group Scan (``None``: the authors' 8 paths for
             5 groups, else all groups in index order).
-        group_scan_shared: ``False`` scans the concatenated paths as one sequence (seed Eq. 13);
+        group_scan_shared: ``False`` scans the concatenated paths as one sequence ([EgoMusic] supp. Eq. 13);
             ``True`` scans each path separately with shared weights (the frame-averaging F, Eq. 18).
         heads: attention heads of the optional cross-attention.
         mlp_dim: hidden width of the per-joint MLP.
@@ -62,11 +62,11 @@ class SkeletonMambaConfig:
         joint_embedding: add a learned embedding per joint before the first block.
         dropout: dropout in the MLP and attention.
         gradient_checkpointing: recompute each block in the backward pass instead of storing its
-            activations (the seed size at batch 4 x 150 frames needs about 30 GB in fp32 without it).
+            activations (the paper's size at batch 4 x 150 frames needs about 30 GB in fp32 without it).
         mixer: settings of every Mamba-2 mixer.
         causal: a forward-only Temporal Scan (no backward direction), so frame t depends on frames
             <= t only; such a backbone also runs frame by frame (``init_state`` / ``step``,
-            ``skeleton_mamba.streaming``). ``False`` (default): the bidirectional scan of the seed.
+            ``skeleton_mamba.streaming``). ``False`` (default): the paper's bidirectional scan.
         cpu_slice_elements: on a CPU, frame-wise sublayers run on slices of frames and the Temporal
             Scan on slices of joint sequences, each slice holding at most about this many elements
             of its widest intermediate (4 Mi elements: 16 MB in fp32), so intermediates stay in

@@ -1,4 +1,4 @@
-"""Cross-attention from joint tokens to a condition sequence (seed 000 Table 1, row 9)."""
+"""Cross-attention from joint tokens to a condition sequence ([EgoMusic] supp. Table 1, row 9)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Group Scan (MSSD, seed 000 supplementary section 2, Eq. 13 and Eq. 18).
+"""Group Scan (MSSD, [EgoMusic] supp. Sec. 2, Eq. 13 and Eq. 18).
 
 For every frame the G group tokens are read in n orders (paths). Two variants:
 

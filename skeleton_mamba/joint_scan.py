@@ -1,4 +1,4 @@
-"""Joint Scan (seed 000 supplementary Eq. 15): a shared-weight SSD over the joints of each group.
+"""Joint Scan ([EgoMusic] supp. Eq. 15): a shared-weight SSD over the joints of each group.
 
 Each group token (E = P * D) is mapped to P joint tokens of width D by a Linear and a rearrange;
 one mixer, shared by all G groups, scans the P joints of every group.

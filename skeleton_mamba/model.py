@@ -24,7 +24,7 @@ class SkeletonMamba(nn.Module):
         y = SkeletonMamba(cfg)(torch.randn(2, 100, 25, 3))          # (2, 100, 25, 64)
 
     Args:
-        config: a :class:`SkeletonMambaConfig` (defaults: the seed's D 128, G 5, P 6, N 8).
+        config: a :class:`SkeletonMambaConfig` (defaults: [EgoMusic] supp. Table 2, D 128, G 5, P 6, N 8).
     """
 
     def __init__(self, config: SkeletonMambaConfig | None = None, **overrides):

@@ -1,10 +1,10 @@
 """Skeleton definitions: joint names, kinematic parents, left/right mirror maps and tokenizer groups.
 
 Every skeleton groups its joints into ``G = 5`` groups of ``P = 6`` joints for the Human Tokenizer,
-ordered as in the seed (supplementary section 4): 0 spine and head, 1 right arm, 2 left arm,
+ordered as in [EgoMusic] supp. Sec. 4: 0 spine and head, 1 right arm, 2 left arm,
 3 right leg, 4 left leg. The arm and leg groups are mirror images of each other position by
 position, so the group permutation 1<->2, 3<->4 is the body's left/right symmetry and the default
-group-scan path set (:data:`DEFAULT_GROUP_PATHS`) is closed under it (seed Eq. 20).
+group-scan path set (:data:`DEFAULT_GROUP_PATHS`) is closed under it ([EgoMusic] supp. Eq. 20).
 
 Only SMPL-24's grouping is published; the others follow the same pattern (a hub joint, then the
 chain outwards) and are this project's choice.
@@ -26,7 +26,7 @@ __all__ = [
     "get_skeleton",
 ]
 
-# The authors' eight group orders: arms, spine, legs or legs, spine, arms (ssd_backbone.md 9.4).
+# The authors' eight group orders: arms, spine, legs or legs, spine, arms (EgoMusic code, Fsoft-AIC/SkeletonMamba ``model/skeleton_scans.py``).
 DEFAULT_GROUP_PATHS: tuple[tuple[int, ...], ...] = (
     (1, 2, 0, 3, 4),
     (2, 1, 0, 3, 4),
@@ -149,7 +149,7 @@ SMPL24 = Skeleton(
     mirror=_mirror_from_pairs(
         24, [(1, 2), (4, 5), (7, 8), (10, 11), (13, 14), (16, 17), (18, 19), (20, 21), (22, 23)]
     ),
-    # Seed supplementary section 4 (published).
+    # [EgoMusic] supp. Sec. 4 (published).
     groups=(
         (0, 3, 6, 9, 12, 15),
         (9, 14, 17, 19, 21, 23),

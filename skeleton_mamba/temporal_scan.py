@@ -1,4 +1,4 @@
-"""Temporal Scan: a bidirectional SSD along time for every joint (seed 000, supplementary Table 1).
+"""Temporal Scan: a bidirectional SSD along time for every joint ([EgoMusic] supp. Table 1).
 
 Independent forward and backward mixers, summed and projected by a Linear. Variable-length batches
 are right-padded; the backward direction reverses only the valid prefix of each sequence, so it

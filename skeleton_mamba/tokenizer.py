@@ -1,4 +1,4 @@
-"""Human Tokenizer and its inverse (seed 000, supplementary section 4 and Table 1).
+"""Human Tokenizer and its inverse ([EgoMusic] supp. Sec. 4 and Table 1).
 
 The tokenizer gathers the joints of each group and concatenates their features:
 (B, T, J, D) -> (B, T, G, E = P * D). Groups may overlap (SMPL-24: joints 0, 3 and 9 appear three

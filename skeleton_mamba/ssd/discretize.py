@@ -1,4 +1,6 @@
-"""Input validation and the Mamba-2 discretisation of the step size Δ (reference §2, step 1).
+"""Input validation and the Mamba-2 discretisation of the step size Δ.
+
+As in ``mamba_ssm/modules/mamba2.py``: Δ = clamp(softplus(dt + dt_bias), dt_limit).
 
 Shapes (batch b, length L, heads H, head dim P, B/C groups G, state N):
 x (b, L, H, P); dt (b, L, H); A (H,); B, C (b, L, G, N); D (H,) or (H, P); dt_bias (H,);

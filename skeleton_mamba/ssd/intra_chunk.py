@@ -1,6 +1,6 @@
 """The quadratic ("attention-like") SSD form inside chunks, with a hand-written backward.
 
-For each chunk (reference §2 item 4, §3 step 1), per head h of B/C group g:
+For each chunk (step 1, diagonal blocks, of ``mamba_ssm/modules/ssd_minimal.py``), per head h of B/C group g:
 
     Y = (Lmask ∘ C Bᵀ)(Δ ⊙ X) + Y_off + D ⊙ X,      Lmask_ij = exp(cs_i - cs_j) for i ≥ j, else 0,
 

@@ -1,4 +1,4 @@
-"""The quadratic SSD form for short sequences (reference §2 item 4, §3 "Short sequences").
+"""The quadratic SSD form for short sequences ([Mamba-2]'s quadratic, attention-like form).
 
 Y = (Lmask ∘ C Bᵀ)(Δ ⊙ X) + D ⊙ X over the whole sequence, with no chunk states. The L×L matrix is
 evaluated in blocks of q ≈ ``block_size`` positions (the length is right-padded with Δ = 0 to K

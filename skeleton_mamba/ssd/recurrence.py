@@ -1,4 +1,4 @@
-"""The sequential SSD recurrence (reference §2): the test oracle for the matrix forms.
+"""The sequential SSD recurrence ([Mamba-2] SSD recurrence): the test oracle for the matrix forms.
 
 h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t.
 
