@@ -1,7 +1,7 @@
 """Gaussian diffusion with x0 prediction: forward noising, the training target, the true posterior.
 
-Notation of Ho et al. (2020) with the *cumulative product* ``alpha_bar_t = prod_{s<=t} (1 - beta_s)``;
-seed 000 Eq. 7 (posterior mean with "alpha-hat = sum of alpha_s") is garbled and is NOT followed.
+Notation of [DDPM] with the *cumulative product* ``alpha_bar_t = prod_{s<=t} (1 - beta_s)``;
+[EgoMusic] supp. Eq. 7 (posterior mean with "alpha-hat = sum of alpha_s") is garbled and is NOT followed.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ class GaussianDiffusion(nn.Module):
     """Holds a :class:`NoiseSchedule` as buffers (they follow ``.to(device)``) and its Gaussian maths.
 
     Args:
-        num_steps: diffusion steps T (seed 000 Table 2: 1000).
+        num_steps: diffusion steps T ([EgoMusic] supp. Table 2: 1000).
         schedule: ``"cosine"`` (EDGE, EMM).
         cosine_s: the offset s of the cosine schedule.
     """

@@ -1,7 +1,7 @@
-"""Noise schedules: the cosine schedule of Nichol & Dhariwal (2021), as used by EDGE and EMM.
+"""Noise schedules: the cosine schedule of [IDDPM], as used by EDGE and EMM.
 
-Seed 000 Eq. 5/7 write ``alpha_t`` for the cumulative product and then define ``alpha-hat`` as a *sum*;
-that is a misprint (seed README). We use standard DDPM (Ho et al. 2020) notation:
+[EgoMusic] supp. Eqs. 5 and 7 write ``alpha_t`` for the cumulative product and then define ``alpha-hat`` as a
+*sum*; that is a misprint. We use standard [DDPM] notation:
 ``alpha_t = 1 - beta_t`` and ``alpha_bar_t = prod_{s<=t} alpha_s`` (the cumulative product).
 """
 
@@ -19,7 +19,7 @@ def cosine_betas(num_steps: int = 1000, s: float = 0.008, max_beta: float = 0.99
     """Betas (num_steps,) float64 of the cosine schedule.
 
     ``f(u) = cos^2((u + s) / (1 + s) * pi / 2)``, ``beta_i = min(1 - f((i + 1) / T) / f(i / T), max_beta)``
-    (EDGE ``model/diffusion.py``; reference dance.md section 6).
+    (EDGE ``model/diffusion.py``).
     """
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")

@@ -169,7 +169,7 @@ class EgoDanceDataModule(LightningDataModule):
 
     Args:
         root: the dataset folder (holding ``samples/``).
-        window: frames per window T (seed 000: 150 at 30 fps).
+        window: frames per window T ([EgoMusic] supp. Table 2: 150 at 30 fps).
         fps: motion and music frame rate (30).
         batch_size: per-device batch (linked to the model).
         num_workers: DataLoader workers.

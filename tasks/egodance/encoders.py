@@ -1,4 +1,4 @@
-"""EMM condition encoders (seed 000 Table 1 rows 1-3, section 6.2).
+"""EMM condition encoders ([EgoMusic] supp. Table 1 rows 1-3, Sec. 6.2).
 
 - :class:`MusicEncoder`: per-frame music features (B, T, L) -> Linear -> 2 Transformer encoder layers ->
   (B, T, Dc). The supplement uses Jukebox (L = 4800); the original code and our default use the 35-d

@@ -1,4 +1,4 @@
-"""EMM training losses: the x0 reconstruction loss and the kinematic losses of seed 000 Eqs. 26-29.
+"""EMM training losses: the x0 reconstruction loss and the kinematic losses of [EgoMusic] supp. Eqs. 26-29.
 
 All inputs are motion tokens (B, T, 24, 10) (:mod:`.representation`); FK maps them to joint positions.
 Every squared norm is taken *per coordinate* (the mean over the coordinates it sums, EDGE's reduction in
@@ -100,7 +100,7 @@ def contact_loss(x0_hat: torch.Tensor, threshold: float = 0.95) -> torch.Tensor:
 def alignment_loss(z_a: torch.Tensor, z_v: torch.Tensor, temperature: float = 0.07) -> torch.Tensor:
     """Music-vision alignment loss, a symmetric InfoNCE over time steps (OUR INTERPRETATION).
 
-    The seed's supplement (section 6.3) adds "an alignment loss as proposed in our method to improve the
+    [EgoMusic] supp. Sec. 6.3 adds "an alignment loss as proposed in our method to improve the
     consistency between the modalities" to every baseline and calls the fused embeddings "aligned", but
     defines the loss only in the (unavailable) main paper. We read it as a contrastive (CLIP / InfoNCE)
     alignment of the music embedding z_a and the vision embedding z_v *per time step*: the music and

@@ -1,4 +1,4 @@
-"""EMM, the EgoMusic Motion network (seed 000 Tables 1-2, section 6.2): a conditional x0 denoiser.
+"""EMM, the EgoMusic Motion network ([EgoMusic] supp. Tables 1-2, Sec. 6.2): a conditional x0 denoiser.
 
 ::
 
@@ -12,7 +12,7 @@
 :meth:`EMM.set_data_statistics`: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`)
 
 ``forward(x_t, t, context)`` is a denoiser for :mod:`skeleton_mamba.tasks.diffusion` (``context=None``:
-the learned null condition, for classifier-free guidance). Defaults are the seed's: D 128, Dc 256, G 5,
+the learned null condition, for classifier-free guidance). Defaults are [EgoMusic]'s: D 128, Dc 256, G 5,
 P 6, E 768, N 8, 4 heads, MLP 1024, Transformer feed-forward 512.
 """
 

@@ -1,6 +1,6 @@
 """The EMM motion representation: per-joint tokens of rot6d + root position + foot contact at 30 fps.
 
-EDGE's 151-d frame vector (reference dance.md section 4) is [4 foot contacts | 3 root position |
+EDGE's 151-d frame vector (EDGE ``dataset/dance_dataset.py``) is [4 foot contacts | 3 root position |
 24 x 6 rot6d]; the backbone works on joint tokens, so each frame is packed as (24, C = 10):
 
 =========  ==============================================================================

@@ -1,8 +1,8 @@
 """AIST++ motions: reading the annotation pickles, splits, music pairing and 5 s windows.
 
-Facts (reference dance.md section 3): ``motions/<name>.pkl`` holds ``smpl_poses`` (N, 72) or
-(N, 24, 3) axis-angle, ``smpl_trans`` (N, 3) and ``smpl_scaling`` (1,) at exactly 60 fps, y-up; the root
-position in metres is ``smpl_trans / smpl_scaling``. The pickles are read with
+Facts (google/aistplusplus_api ``aist_plusplus/loader.py``, the [AIST++] site): ``motions/<name>.pkl``
+holds ``smpl_poses`` (N, 72) or (N, 24, 3) axis-angle, ``smpl_trans`` (N, 3) and ``smpl_scaling`` (1,) at
+exactly 60 fps, y-up; the root position in metres is ``smpl_trans / smpl_scaling``. The pickles are read with
 :func:`~skeleton_mamba.tasks.motion.safe_pickle.safe_load_pickle` (numpy arrays and plain values only).
 
 Splits ship as package data (``aistpp_splits/*.txt``, copied from Stanford-TML/EDGE

@@ -1,8 +1,9 @@
 """A pluggable pretrained audio encoder (transformers, local checkpoint) as the stand-in for Jukebox.
 
-EgoMusic and EDGE condition on Jukebox layer-66 features (4800-d at 30 fps, dance.md section 5), which
-need the multi-GB Jukebox weights and "~24 hrs and ~50 GB" to precompute AIST++: far too large here. This
-module runs any *encoder-only* transformers audio model saved in a local folder (``AutoModel`` +
+[EgoMusic] and [EDGE] condition on [Jukebox] layer-66 features (4800-d at 30 fps, EDGE
+``data/audio_extraction/jukebox_features.py``), which need the multi-GB Jukebox weights and "~24 hrs and
+~50 GB" to precompute AIST++ (EDGE README): far too large here. This module runs any *encoder-only*
+transformers audio model saved in a local folder (``AutoModel`` +
 ``AutoFeatureExtractor``: wav2vec2, HuBERT, WavLM, data2vec-audio, MERT with ``trust_remote_code``) and
 returns per-motion-frame embeddings ``(T, D)``: the model's hidden states (last layer, or ``layer``) are
 linearly resampled in time from the model's frame rate (50 Hz for wav2vec2-style models) to the motion fps.

@@ -1,7 +1,7 @@
 """The 35-d librosa music feature of FACT (60 fps) and EDGE (30 fps), with tempo and beats.
 
 Recipe (google-research/mint tools/preprocessing.py; Stanford-TML/EDGE data/audio_extraction/
-baseline_features.py; dance.md section 5): the audio is loaded at ``SR = fps * 512`` Hz so one STFT hop of
+baseline_features.py): the audio is loaded at ``SR = fps * 512`` Hz so one STFT hop of
 512 samples is one motion frame, then per frame
 
 ========  =======================================================================

@@ -1,7 +1,7 @@
 """SMPL-24 forward kinematics without the SMPL model file.
 
 Joint order and parents are :data:`skeleton_mamba.skeletons.SMPL24`; the rest offsets (metres, y-up,
-mean body shape) are the table of Stanford-TML/EDGE ``vis.py`` (reference dance.md section 4).
+mean body shape) are the table of Stanford-TML/EDGE ``vis.py``.
 Offset-table FK puts the pelvis at the root translation; the SMPL body model adds a shape-dependent
 pelvis offset ``J_0(beta)`` and slightly different bone lengths, so positions are close to, not equal
 to, those of the SMPL model (metrics computed from them are close, not identical).

@@ -1,4 +1,4 @@
-"""The EgoAIST++ dataset builder (``sm make-ego``), seed supplement section 5.
+"""The EgoAIST++ dataset builder (``sm make-ego``), [EgoMusic] supp. Sec. 5.
 
 One module per concept: :mod:`.scene` (loading, up axis, floor), :mod:`.procedural_scene` (furnished
 rooms), :mod:`.placement` (random floor location and heading, feet on the floor), :mod:`.penetration`

@@ -1,10 +1,10 @@
-"""The resumable, multi-process EgoAIST++ build (seed supplement section 5).
+"""The resumable, multi-process EgoAIST++ build ([EgoMusic] supp. Sec. 5).
 
 For every motion file, the motion is resampled to ``fps`` and cut into ``window_s`` windows (5 s,
 non-overlapping by default: "we divide the motion sequences into multiple 5-second subsequences"). Each
 window gets a scene (scene files round-robin, or procedural rooms) and up to ``max_attempts`` random
 placements (:mod:`.placement`); the first whose penetration score ``S_p`` (:mod:`.penetration`) is at
-most ``threshold`` (2, the seed's value) is kept, the window is skipped with a logged reason otherwise.
+most ``threshold`` (2, [EgoMusic]'s value) is kept, the window is skipped with a logged reason otherwise.
 The body scored is the capsule body, or the SMPL mesh when ``smpl_model`` names a model file
 (:mod:`.body_mesh`; its lowest vertex then touches the floor, and the mesh score stops at the first
 frames above the threshold, so the scores of rejected placements are lower bounds).
@@ -16,7 +16,7 @@ and a complete sample whose files do not agree with its ``meta.json`` (a truncat
 ``depth.npz``: :func:`.layout.sample_problem`) is rebuilt. A corrupt motion file stops the build with its
 name, or with ``skip_bad`` is passed over and listed in the summary (``bad_inputs``).
 
-The manual verification step of the seed is left to the user (``meta.json`` keeps the score).
+The manual verification step of [EgoMusic] supp. Sec. 5 is left to the user (``meta.json`` keeps the score).
 """
 
 from __future__ import annotations

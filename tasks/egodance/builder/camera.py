@@ -1,4 +1,4 @@
-"""The egocentric head camera (seed supplement section 5: "the camera is positioned at the mesh index
+"""The egocentric head camera ([EgoMusic] supp. Sec. 5: "the camera is positioned at the mesh index
 located between the eyes, simulating a forward-facing egocentric perspective").
 
 Without the SMPL mesh the eye midpoint is the head joint (15) plus an offset in the head joint's frame:

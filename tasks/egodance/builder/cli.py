@@ -1,4 +1,4 @@
-"""``sm make-ego``: build an EgoAIST++-style egocentric dance dataset (seed supplement section 5).
+"""``sm make-ego``: build an EgoAIST++-style egocentric dance dataset ([EgoMusic] supp. Sec. 5).
 
 Examples::
 

@@ -1,12 +1,12 @@
-"""Body-scene penetration score ``S_p`` (seed supplement section 5: reject a placement when ``S_p > 2``).
+"""Body-scene penetration score ``S_p`` ([EgoMusic] supp. Sec. 5: reject a placement when ``S_p > 2``).
 
-The seed scores the SMPL body mesh "using a method by [34]" (Wang et al., CVPR 2021) without giving the
+The paper scores the SMPL body mesh "using a method by [34]" ([SceneMotion]) without giving the
 formula; this module's definition, the project's choice, is
 
     S_p = 100 * max over frames t and body spheres i of max(0, r_i - sdf(c_i(t)))      [centimetres]
 
 i.e. the deepest intrusion of the body into the scene over the whole subsequence, in centimetres, so the
-seed's threshold 2 means "no body part goes more than 2 cm into the scene in any frame". It does not
+paper's threshold 2 means "no body part goes more than 2 cm into the scene in any frame". It does not
 depend on how densely the body is sampled.
 
 * The body, by default: capsules along the 23 SMPL-24 bones (:data:`BONE_RADII`, rough adult

@@ -1,4 +1,4 @@
-"""Placing a motion window in a scene (seed supplement section 5, step 2).
+"""Placing a motion window in a scene ([EgoMusic] supp. Sec. 5, step 2).
 
 A placement is a rigid motion of the whole window: a heading ``yaw`` about the y (up) axis and a
 translation. The window's mean root position (x, z) goes to a point drawn uniformly over the floor

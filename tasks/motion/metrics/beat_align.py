@@ -1,6 +1,6 @@
 """BeatAlign: how well kinematic beats (velocity minima) meet music beats, in both published variants.
 
-The two published definitions disagree (dance.md section 7.4), so the variant is always named:
+The two published definitions ([FACT] and [Bailando]) disagree, so the variant is always named:
 
 ``"fact"`` (liruilong940607/mint tools/calculate_beat_scores.py; FACT, QEAN):
     envelope ``e_t = sum_joints |p_t - p_(t-1)|`` with ``e_0 = 0``; motion beats are strict local minima

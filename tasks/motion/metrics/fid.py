@@ -1,7 +1,6 @@
 """FID_k / FID_g and Div_k / Div_g of generated dance, with the reference normalisation protocol.
 
-Protocol (liruilong940607/mint tools/calculate_fid_scores.py; lisiyao21/Bailando utils/metrics_new.py;
-dance.md section 7.3):
+Protocol (liruilong940607/mint tools/calculate_fid_scores.py; lisiyao21/Bailando utils/metrics_new.py):
 
 1. One 72-d kinetic (:func:`kinetic_features`) or 32-d geometric (:func:`geometric_features`) vector per
    sequence, for the real (reference) set and the generated set.

@@ -1,7 +1,7 @@
 """The 32-d geometric ("manual") motion feature of AIST++ (FID_g, Div_g), vectorised in torch.
 
 Port of google/aistplusplus_api ``aist_plusplus/features/manual.py`` + ``utils.py`` at the fixed version
-(SMPL name-order and extraction-range fixes; Bailando's ``manual_new.py`` matches), dance.md section 7.2.
+(SMPL name-order and extraction-range fixes; Bailando's ``manual_new.py`` matches).
 Boolean relational predicates (Mueller et al.'s relational features, as in fairmotion) are evaluated on
 frames ``1 .. T-1`` (with frame ``t-1`` as the previous frame) and averaged over frames, so each value is
 the fraction of frames on which the predicate holds. Input is y-up SMPL-24 joint positions in metres.

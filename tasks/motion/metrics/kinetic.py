@@ -1,7 +1,7 @@
 """The 72-d kinetic motion feature of AIST++ (FID_k, Div_k), vectorised in torch.
 
 Port of google/aistplusplus_api ``aist_plusplus/features/kinetic.py`` + ``utils.py`` (also copied in
-lisiyao21/Bailando ``utils/features``), dance.md section 7.1. For joint positions ``p`` (T, J, 3) at
+lisiyao21/Bailando ``utils/features``). For joint positions ``p`` (T, J, 3) at
 ``dt = 1 / fps`` and a sliding window ``w = 2``, per joint and frame ``i = 1 .. T-1``:
 
 * windowed velocity ``v_i = sum_k (p[i+k] - p[i+k-1]) / (n dt)`` over ``k in [-w, w]`` with

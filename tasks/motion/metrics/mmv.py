@@ -1,4 +1,4 @@
-"""MMV, the Motion-Music-Vision score of EgoMusic (seed supplementary section 7.1, dance.md section 1.6).
+"""MMV, the Motion-Music-Vision score of EgoMusic ([EgoMusic] supp. Sec. 7.1).
 
 ``MMV = 1/2 MM(B_x, B_y) + 1/2 MV(B_x', B_z)`` with
 

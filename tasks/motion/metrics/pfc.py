@@ -1,6 +1,6 @@
 """PFC, EDGE's Physical Foot Contact score (lower is better).
 
-Port of Stanford-TML/EDGE ``eval/eval_pfc.py`` (dance.md section 7.5). For FK joint positions
+Port of Stanford-TML/EDGE ``eval/eval_pfc.py`` ([EDGE]'s metric). For FK joint positions
 ``(S, 24, 3)``, z-up, 30 fps (``dt = 1/30``):
 
 1. root acceleration ``a_t = (p_(t+2) - 2 p_(t+1) + p_t) / dt^2`` of joint 0 (``S - 2`` values), its up
