@@ -26,7 +26,8 @@ __all__ = [
     "get_skeleton",
 ]
 
-# The authors' eight group orders: arms, spine, legs or legs, spine, arms (EgoMusic code, Fsoft-AIC/SkeletonMamba ``model/skeleton_scans.py``).
+# The authors' eight group orders: arms, spine, legs or legs, spine, arms ([EgoMusic] code,
+# Fsoft-AIC/SkeletonMamba ``model/skeleton_scans.py``).
 DEFAULT_GROUP_PATHS: tuple[tuple[int, ...], ...] = (
     (1, 2, 0, 3, 4),
     (2, 1, 0, 3, 4),

@@ -67,8 +67,9 @@ def defined_keys() -> set[str]:
 
 def test_references_define_the_keys_the_brief_names():
     keys = defined_keys()
-    for key in ["EgoMusic", "QEAN", "Mamba-2", "EDGE", "FACT", "Bailando", "MDM", "PYSKL", "HumanML3D", "T2M",
-                "DDPM", "DDIM", "EDM", "SMPL", "AIST++", "NTU RGB+D", "Kinetics", "ST-GCN", "GMD", "PhysDiff"]:
+    named = ["EgoMusic", "QEAN", "Mamba-2", "EDGE", "FACT", "Bailando", "MDM", "PYSKL", "HumanML3D", "T2M"]
+    named += ["DDPM", "DDIM", "EDM", "SMPL", "AIST++", "NTU RGB+D", "Kinetics", "ST-GCN", "GMD", "PhysDiff"]
+    for key in named:
         assert key in keys, f"docs/references.md does not define [{key}]"
 
 

@@ -114,16 +114,16 @@ def test_test_splits_come_from_the_annotations_val_plus_test(aistpp, tmp_path):
     assert [item["name"] for item in limited.datasets["test"]] == NAMES[:2]
 
 
-def test_results_table_says_whether_it_is_the_seed_protocol():
+def test_results_table_says_whether_it_is_the_paper_protocol():
     module = QEANModule(**(TINY_MODEL | {"generate_frames": 1200}))
     values = {"FID_k": 1.0, "FID_g": 2.0, "Dist_k": 3.0, "Dist_g": 4.0, "BeatAlign": 0.25}
     module._generated_count, module._reference_count = 40, 1363
     table = module.results_table(values)
-    assert "seed protocol" in table and "NOT COMPARABLE" not in table
+    assert "the paper's protocol" in table and "NOT COMPARABLE" not in table
     assert "FID_k           1.000         30.1          -" in table
     assert "BeatAlign       0.250        0.239      0.292" in table
     module._generated_count = 20
-    assert "NOT COMPARABLE with the seed: 20 sequences instead of 40" in module.results_table(values)
+    assert "NOT COMPARABLE with [QEAN] Table 1: 20 sequences instead of 40" in module.results_table(values)
 
 
 def test_test_metrics_and_predict(aistpp, tmp_path):
@@ -180,6 +180,6 @@ def test_test_loop_under_the_bailando_protocol(aistpp, caplog):
         results = trainer.test(module, datamodule=_data(aistpp), verbose=False)[0]
     assert 0.0 <= results["test/BeatAlign"] <= 1.0 and np.isfinite(results["test/FID_k"])
     table = module.results_table({"FID_k": 1.0, "BeatAlign": 0.2})
-    assert "protocol bailando:" in table and "protocol bailando (the seed's Table 1 follows FACT's)" in table
+    assert "protocol bailando:" in table and "protocol bailando ([QEAN] Table 1 follows FACT's)" in table
     with pytest.raises(ValueError, match="fact, bailando, edge"):
         QEANModule(**TINY_MODEL, protocol="lodge")

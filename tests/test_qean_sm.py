@@ -2,7 +2,7 @@
 
 ``sm fit --recipe qean_mamba.yaml`` (one step, tiny SkeletonMamba backbone) -> a checkpoint ->
 ``sm predict`` from it writes the dance (.npz) and its video with the music (.mp4); ``sm test --recipe
-qean.yaml`` prints our figures beside the seed's Table 1, labelled not comparable. The data are the toolkit's
+qean.yaml`` prints our figures beside [QEAN] Table 1, labelled not comparable. The data are the toolkit's
 beat-synchronised synthetic dances and drum tracks, saved as AIST++ motion pickles and ``<music id>.wav``;
 the val / test lists sit in ``<root>/splits/`` as in the AIST++ annotations.
 """
@@ -34,7 +34,7 @@ MODEL = {
     "num_periods": 2, "dropout": 0.0, "output_dir": "predictions",
 }  # fmt: skip
 LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
-SEED_TABLE1 = {"FID_k": 30.1, "FID_g": 11.5, "Dist_k": 7.82, "Dist_g": 9.37, "BeatAlign": 0.239}  # seed text
+QEAN_TABLE1 = {"FID_k": 30.1, "FID_g": 11.5, "Dist_k": 7.82, "Dist_g": 9.37, "BeatAlign": 0.239}  # [QEAN] Table 1
 
 
 @pytest.fixture(scope="module")
@@ -117,17 +117,17 @@ def test_sm_fit_qean_mamba_then_predict_from_the_checkpoint(aistpp, tmp_path):
     assert re.search(r"Stream .*Audio:", probe.stderr), probe.stderr[-2000:]  # the music is muxed
 
 
-def test_sm_test_prints_our_figures_beside_the_seed_table(aistpp, tmp_path, monkeypatch, caplog):
+def test_sm_test_prints_our_figures_beside_the_paper_table(aistpp, tmp_path, monkeypatch, caplog):
     monkeypatch.chdir(tmp_path)
     caplog.set_level("INFO")
     assert run(["test", "--recipe", "qean.yaml", *_overrides(aistpp, backbone=False)]) == 0
     text = caplog.text
     # default test_split [val, test]: the val list of <root>/splits plus the test list = 3 sequences
-    assert "protocol fact: 3 generated sequences x 20 frames (seed: 40 x 1200); real set: 5 sequences" in text
-    assert "NOT COMPARABLE with the seed: synthetic data in the AIST++ layout" in text
-    for name, seed in SEED_TABLE1.items():
+    assert "protocol fact: 3 generated sequences x 20 frames (paper: 40 x 1200); real set: 5 sequences" in text
+    assert "NOT COMPARABLE with [QEAN] Table 1: synthetic data in the AIST++ layout" in text
+    for name, paper in QEAN_TABLE1.items():
         match = re.search(rf"^{name}\s+(\S+)\s+(\S+)\s+(\S+)$", text, re.MULTILINE)
         assert match, f"{name} row missing:\n{text[-2000:]}"
-        ours, seed_value = float(match.group(1)), float(match.group(2))
-        assert np.isfinite(ours) and seed_value == seed
+        ours, paper_value = float(match.group(1)), float(match.group(2))
+        assert np.isfinite(ours) and paper_value == paper
     assert 0.0 <= float(re.search(r"^BeatAlign\s+(\S+)", text, re.MULTILINE).group(1)) <= 1.0

@@ -1,1 +1,1 @@
-"""QEAN: Quaternion-Enhanced Attention Network for music-to-dance generation (seed 003)."""
+"""QEAN: Quaternion-Enhanced Attention Network for music-to-dance generation ([QEAN])."""

@@ -1,6 +1,6 @@
 """Attention layers of QEAN: self-attention with Spin Position Embedding, and Quaternion Rotary Attention.
 
-Quaternion Rotary Attention (seed 003 section 3.4, Eqs. 25-28), per head of width ``d``:
+Quaternion Rotary Attention ([QEAN] Sec. 3.4, Eqs. 25-28), per head of width ``d``:
 
 1. ``Q = chi W^Q``, ``K = gamma W^K``, ``V = gamma W^V``.
 2. P latent frequencies ``omega = ReLU(Conv1d(.))`` in ``[0, inf)`` and phases ``theta = pi tanh(Conv1d(.))``
@@ -16,7 +16,7 @@ Quaternion Rotary Attention (seed 003 section 3.4, Eqs. 25-28), per head of widt
 With P = 1, omega = 0, theta = 0 the rotations are identities and QRA is canonical attention.
 Deviation: a head width that is not a multiple of 4 (800 / 16 heads = 50) leaves ``d mod 4`` channels that
 form no quaternion; they enter the dot product unrotated (instead of being dropped) so that the reduction to
-canonical attention holds exactly. Convolution kernel size and P are not given by the seed (defaults 3, 4).
+canonical attention holds exactly. Convolution kernel size and P are not given by [QEAN] (defaults 3, 4).
 """
 
 from __future__ import annotations

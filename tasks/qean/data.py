@@ -1,4 +1,4 @@
-"""LightningDataModule for QEAN on AIST++ (seed 003 section 4; dance.md section 3).
+"""LightningDataModule for QEAN on [AIST++] ([QEAN] Sec. 4).
 
 Layout read (``root`` = the AIST++ annotations folder)::
 
@@ -10,8 +10,9 @@ A split is a name or a path to a text file with one sequence name per line. A na
 list (``"train"``, ``"test"``; 980 / 20 names; no ``"val"`` ships). The 45 sequences of the AIST++ ignore
 list are dropped.
 
-Test protocol (seed 003 section 4.3: "40 generated motion sequences" of 1200 frames "from the AIST++ test
-set"). The seed's text is FACT's, and FACT's evaluation code (dance.md section 7.3) generates for the
+Test protocol ([QEAN] Sec. 4.3: "40 generated motion sequences" of 1200 frames "from the AIST++ test
+set"). The paper's text is [FACT]'s, and FACT's evaluation code (google-research/mint
+``tools/preprocessing.py``, liruilong940607/mint ``tools/calculate_fid_scores.py``) generates for the
 crossmodal **val + test** lists: 20 + 20 = 40 sequences, which share the 10 AIST++ test music pieces (each
 piece danced by 4 sequences, i.e. 4 different seed motions per music). That reading is the default
 (``test_split: [val, test]``); ``val`` comes from ``<root>/splits/crossmodal_val.txt`` of the annotations.
@@ -117,7 +118,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         music_dir: folder of ``<music id>.wav|.mp3`` files (default ``<root>/music``).
         train_split: ``"train"`` (crossmodal list) or a text file of names.
         test_split: one split or a list of splits generated at test time (default ``[val, test]``, the
-            seed's 40 sequences; see the module docstring).
+            paper's 40 sequences; see the module docstring).
         reference_splits: splits whose full motions form the real set of FID and the normalisation of
             Dist (FACT/Bailando code: every AIST++ sequence minus the ignore list = train + val + test).
         seed_frames: seed motion frames (120).
@@ -132,7 +133,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         music_cache_dir: cache folder for music features (default: the toolkit's).
         test_max_sequences: generate for only the first N test sequences (``None``: all; for quick checks).
         synthetic: the files are generated stand-ins in the AIST++ layout, not AIST++: the test table says
-            that its figures are not comparable with the seed's.
+            that its figures are not comparable with [QEAN] Table 1.
         predict_seed: seed motion file for ``sm predict`` (AIST++ ``.pkl`` or ``.npz``).
         predict_music: music file for ``sm predict``.
     """
@@ -206,7 +207,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         elif split == "val":
             raise DatasetNotFoundError(
                 f"AIST++ crossmodal val list not found: {annotated} (the annotations download ships it; "
-                "skeleton_mamba does not). The seed's 40 test sequences are val + test; for the 20 test "
+                "skeleton_mamba does not). [QEAN]'s 40 test sequences are val + test; for the 20 test "
                 "sequences only pass --data.init_args.test_split test"
             )
         else:

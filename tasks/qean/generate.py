@@ -1,4 +1,4 @@
-"""Autoregressive dance generation with QEAN (seed 003 section 4.2), plain and fast.
+"""Autoregressive dance generation with QEAN ([QEAN] Sec. 4.2), plain and fast.
 
 Step ``i`` (0-based) sees the last ``seed_frames`` motion frames (the seed, then generated frames) and the
 music window ``[i, i + music_frames)`` (aligned at their first frame, FACT's inference), predicts the next
@@ -19,7 +19,7 @@ floating-point rounding) with less work, reusing what does not change between st
   ``predict_frames`` (attention, MLP and head), which is exact since rows do not interact after it;
 * no autograd graph is recorded.
 
-Every encoder attends bidirectionally within its sliding window (the seed's design), so from the first
+Every encoder attends bidirectionally within its sliding window ([QEAN]'s design), so from the first
 attention on, the hidden states of all three transformers change for every token when the window moves one
 frame; a key/value cache of deeper layers would change the model, and is not used. With learned absolute
 positions (the ablation baseline) or the SkeletonMamba motion encoder the per-token reuse does not apply

@@ -1,4 +1,4 @@
-"""QEAN network (seed 003 sections 3.1 and 4.2), pure torch.
+"""QEAN network ([QEAN] Secs. 3.1 and 4.2), pure torch.
 
 Data flow for a seed motion Y (B, 120, 219) and music features Z (B, 240, 35), aligned at frame 0::
 
@@ -11,8 +11,8 @@ Data flow for a seed motion Y (B, 120, 219) and music features Z (B, 240, 35), a
     out = Linear 800 -> 219 of the first 20 tokens: the next 20 frames (L2 loss).
 
 All transformers: pre-LayerNorm blocks, 16 heads, hidden 800, MLP 3072 with GELU (FACT). Layer counts are not
-given by the seed; the defaults are FACT's (audio 2, motion 2, cross-modal 12). The seed's learnable absolute
-position embeddings are the ablation baseline that Spin Position Embedding replaces; ``learned_positions``
+given by [QEAN]; the defaults are FACT's (audio 2, motion 2, cross-modal 12). The learnable absolute
+position embeddings are [QEAN] Table 2's ablation baseline that Spin Position Embedding replaces; ``learned_positions``
 adds them back (default off).
 """
 
@@ -41,7 +41,7 @@ MUSIC_DIM = 35
 
 @dataclasses.dataclass
 class QEANConfig:
-    """Sizes of QEAN (defaults: seed 003 section 4.2; layer counts, MLP width, P: FACT / our choice)."""
+    """Sizes of QEAN (defaults: [QEAN] Sec. 4.2; layer counts, MLP width, P: FACT / our choice)."""
 
     motion_dim: int = MOTION_DIM
     music_dim: int = MUSIC_DIM
@@ -179,7 +179,7 @@ class QEAN(nn.Module):
 
     Args:
         config: sizes (:class:`QEANConfig`).
-        backbone: a SkeletonMamba config to use as the motion encoder (``None``: the seed's transformer).
+        backbone: a SkeletonMamba config to use as the motion encoder (``None``: [QEAN]'s transformer).
     """
 
     def __init__(self, config: QEANConfig | None = None, backbone: SkeletonMambaConfig | None = None) -> None:

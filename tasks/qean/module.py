@@ -1,6 +1,6 @@
 """LightningModule for QEAN: L2 training on 20-frame futures, AIST++ evaluation, dance generation.
 
-Training (seed 003 section 4.2): Adam, lr 1e-4 decayed by 10 at 90k and 150k optimizer steps
+Training ([QEAN] Sec. 4.2): Adam, lr 1e-4 decayed by 10 at 90k and 150k optimizer steps
 (``MultiStepLR`` stepped per step), L2 (mean squared error) between the predicted and true next 20 frames.
 
 Test: each test sequence's first 120 frames seed an autoregressive generation of 1200 frames
@@ -10,8 +10,8 @@ default ``"fact"``, the [QEAN] paper's (FACT's metric code): FID_k / FID_g of th
 seed against the full-length real set (the data module's ``reference_joints``), Dist_k / Dist_g of the
 generated set (both normalised by the real statistics), and BeatAlign in FACT's form from frame 120 against
 every beat of the track. ``"bailando"`` and ``"edge"`` score the same generations the other papers' ways.
-They are logged as ``test/FID_k`` ... and printed beside the seed's Table 1, headed by the protocol actually
-run (name, sequences x frames, size of the real set). The seed's 40 sequences are the crossmodal val + test
+They are logged as ``test/FID_k`` ... and printed beside [QEAN] Table 1, headed by the protocol actually
+run (name, sequences x frames, size of the real set). The paper's 40 sequences are the crossmodal val + test
 lists (the data module's default, see :mod:`.data`); another protocol, count or length, or data marked
 ``synthetic``, is labelled NOT COMPARABLE in the table.
 
@@ -41,18 +41,18 @@ from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.qean.representation import FPS, features_to_joints, features_to_smpl
 
-__all__ = ["QEANModule", "SEED_TABLE1"]
+__all__ = ["QEANModule", "QEAN_TABLE1"]
 
-# Seed 003 Table 1 (QEAN row and the AIST++ ground-truth row), printed beside our test figures.
-SEED_TABLE1 = {
+# [QEAN] Table 1 (QEAN row and the AIST++ ground-truth row), printed beside our test figures.
+QEAN_TABLE1 = {
     "FID_k": (30.1, None),
     "FID_g": (11.5, None),
     "Dist_k": (7.82, 9.057),
     "Dist_g": (9.37, 7.556),
     "BeatAlign": (0.239, 0.292),
 }
-SEED_SEQUENCES = 40  # generated sequences of the seed's protocol (crossmodal val + test)
-SEED_FRAMES = 1200  # frames generated after each seed motion (20 s at 60 fps)
+PAPER_SEQUENCES = 40  # generated sequences of [QEAN]'s protocol (crossmodal val + test)
+PAPER_FRAMES = 1200  # frames generated after each seed motion (20 s at 60 fps)
 
 
 class QEANModule(LightningModule):
@@ -60,18 +60,18 @@ class QEANModule(LightningModule):
 
     Args:
         backbone: a SkeletonMamba config (``backbones/skeleton_mamba.yaml``) used as the motion encoder;
-            ``None`` uses the seed's motion transformer.
+            ``None`` uses [QEAN]'s motion transformer.
         hidden: width of all transformers (800).
         heads: attention heads (16).
-        motion_layers: motion-transformer blocks (not in the seed; FACT 2).
-        audio_layers: audio-transformer blocks (not in the seed; FACT 2).
-        cross_layers: cross-modal QRA blocks (not in the seed; FACT 12).
-        mlp_dim: MLP width of every block (not in the seed; FACT 3072).
-        dropout: dropout of attention, MLP and residual branches (value not in the seed).
-        num_periods: P of Quaternion Rotary Attention (not in the seed).
-        conv_kernel: kernel of the frequency/phase convolutions (not in the seed).
+        motion_layers: motion-transformer blocks (not in [QEAN]; FACT 2).
+        audio_layers: audio-transformer blocks (not in [QEAN]; FACT 2).
+        cross_layers: cross-modal QRA blocks (not in [QEAN]; FACT 12).
+        mlp_dim: MLP width of every block (not in [QEAN]; FACT 3072).
+        dropout: dropout of attention, MLP and residual branches (value not in [QEAN]).
+        num_periods: P of Quaternion Rotary Attention (not in [QEAN]).
+        conv_kernel: kernel of the frequency/phase convolutions (not in [QEAN]).
         rotary_base: Spin Position Embedding base (RoFormer's 10000).
-        learned_positions: add learnable absolute position embeddings (the seed's ablation baseline).
+        learned_positions: add learnable absolute position embeddings ([QEAN] Table 2's ablation baseline).
         seed_frames: seed motion frames (120; must equal the data module's).
         music_frames: music window frames (240; must equal the data module's).
         predict_frames: predicted frames per step (20; must equal the data module's).
@@ -82,7 +82,7 @@ class QEANModule(LightningModule):
         audio_chunk: music windows encoded per batched call in fast generation.
         output_dir: folder for ``sm predict`` outputs.
         render: also render an mp4 at predict time.
-        protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, the seed's), ``"bailando"``
+        protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, [QEAN]'s), ``"bailando"``
             or ``"edge"`` (see :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`).
     """
 
@@ -208,27 +208,27 @@ class QEANModule(LightningModule):
         rank_zero_info(self.results_table(values))
 
     def results_table(self, values: dict[str, float]) -> str:
-        """Our test figures beside the seed's Table 1, headed by the protocol run and its comparability."""
+        """Our test figures beside [QEAN] Table 1, headed by the protocol run and its comparability."""
         sequences, frames = self._generated_count, self.hparams.generate_frames
         synthetic = bool(getattr(getattr(self._trainer, "datamodule", None), "synthetic", False))
         reasons = ["synthetic data in the AIST++ layout, not AIST++"] if synthetic else []
         protocol = self.hparams.get("protocol", "fact")
         if protocol != "fact":
-            reasons.append(f"protocol {protocol} (the seed's Table 1 follows FACT's)")
-        if sequences != SEED_SEQUENCES:
-            reasons.append(f"{sequences} sequences instead of {SEED_SEQUENCES}")
-        if frames != SEED_FRAMES:
-            reasons.append(f"{frames} frames instead of {SEED_FRAMES}")
+            reasons.append(f"protocol {protocol} ([QEAN] Table 1 follows FACT's)")
+        if sequences != PAPER_SEQUENCES:
+            reasons.append(f"{sequences} sequences instead of {PAPER_SEQUENCES}")
+        if frames != PAPER_FRAMES:
+            reasons.append(f"{frames} frames instead of {PAPER_FRAMES}")
         lines = [
-            "QEAN test vs seed 003 Table 1",
+            "QEAN test vs [QEAN] Table 1",
             f"protocol {protocol}: {sequences} generated sequences x {frames} frames "
-            f"(seed: {SEED_SEQUENCES} x {SEED_FRAMES}); real set: {self._reference_count} sequences",
-            f"NOT COMPARABLE with the seed: {'; '.join(reasons)}" if reasons else "seed protocol",
-            f"{'metric':<10} {'ours':>10} {'QEAN (seed)':>12} {'AIST++ GT':>10}",
+            f"(paper: {PAPER_SEQUENCES} x {PAPER_FRAMES}); real set: {self._reference_count} sequences",
+            f"NOT COMPARABLE with [QEAN] Table 1: {'; '.join(reasons)}" if reasons else "the paper's protocol",
+            f"{'metric':<10} {'ours':>10} {'QEAN (paper)':>12} {'AIST++ GT':>10}",
         ]
         for name, value in values.items():
-            seed, gt = SEED_TABLE1.get(name, ("-", None))
-            lines.append(f"{name:<10} {value:>10.3f} {seed:>12} {'-' if gt is None else gt:>10}")
+            paper, gt = QEAN_TABLE1.get(name, ("-", None))
+            lines.append(f"{name:<10} {value:>10.3f} {paper:>12} {'-' if gt is None else gt:>10}")
         return "\n".join(lines)
 
     # ----- predict -----

@@ -1,11 +1,11 @@
-"""Quaternion algebra of QEAN (seed 003 section 3.2): Hamilton product, conjugate, parameterisation.
+"""Quaternion algebra of QEAN ([QEAN] Sec. 3.2): Hamilton product, conjugate, parameterisation.
 
 A quaternion ``Q = e + f i + g j + h k`` is stored as the last axis ``(..., 4) = (e, f, g, h)`` (real part
-first, the toolkit's ``(w, x, y, z)`` order). The Hamilton product is the standard one; the seed's Eq. 5
-prints ``Q_h R_e`` in the **j** component, a misprint for ``Q_h R_f`` (seeds/README.md), corrected here.
+first, the toolkit's ``(w, x, y, z)`` order). The Hamilton product is the standard one; [QEAN] Eq. 5
+prints ``Q_h R_e`` in the **j** component, a misprint for ``Q_h R_f``, corrected here.
 
 Quaternion parameterisation: a feature vector of ``C`` reals is read as ``C // 4`` consecutive quaternions;
-the last ``C mod 4`` values do not form a complete quaternion and are dropped (the seed's 35 music + 219
+the last ``C mod 4`` values do not form a complete quaternion and are dropped ([QEAN] Sec. 3.2: 35 music + 219
 motion = 254 values -> 63 quaternions, "disregarding the last two dimensions").
 """
 
@@ -25,7 +25,7 @@ def hamilton_product(q: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         [
             qe * re - qf * rf - qg * rg - qh * rh,
             qf * re + qe * rf - qh * rg + qg * rh,
-            qg * re + qh * rf + qe * rg - qf * rh,  # the seed prints "Q_h R_e" for "Q_h R_f"
+            qg * re + qh * rf + qe * rg - qf * rh,  # [QEAN] Eq. 5 prints "Q_h R_e" for "Q_h R_f"
             qh * re - qg * rf + qf * rg + qe * rh,
         ],
         dim=-1,

@@ -2,7 +2,7 @@
 
 Per frame: ``[root translation (3) | 24 local rotation matrices, row-major (216)]``; the translation is
 ``smpl_trans / smpl_scaling`` (metres, y-up), 60 fps. This is FACT's 225-d vector without its six leading
-zeros (dance.md section 2.6; seed 003 section 4.2 gives "9-d rotation matrices of 24 joints + 3-d
+zeros (google-research/mint; [QEAN] Sec. 4.2 gives "9-d rotation matrices of 24 joints + 3-d
 translation"). Rotations use the toolkit's kornia conversions. Decoding projects each predicted 3x3 block
 to the nearest rotation (``U diag(1, 1, det(U V^T)) V^T`` from its SVD), as the FACT metric scripts do.
 """

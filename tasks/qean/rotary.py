@@ -1,4 +1,4 @@
-"""Spin Position Embedding (seed 003 section 3.3) = rotary position embedding (RoFormer, Su et al.).
+"""Spin Position Embedding ([QEAN] Sec. 3.3) = rotary position embedding ([RoFormer]).
 
 Query and key of the token at position ``s`` are rotated pairwise, consecutive coordinates
 ``(x_(2i), x_(2i+1))`` by the angle ``s theta_i`` (Eqs. 21-22)::
@@ -6,7 +6,7 @@ Query and key of the token at position ``s`` are rotated pairwise, consecutive c
     (x1, x2) -> (x1 cos(s theta) - x2 sin(s theta), x2 cos(s theta) + x1 sin(s theta))
 
 so ``<O_q(x_s, s), O_k(x_t, t)>`` depends on ``s - t`` only (Eqs. 11, 24). The frequencies are not given
-by the seed; RoFormer's ``theta_i = base^(-2 i / d)``, ``base = 10000`` is used. An odd last channel is
+by [QEAN]; RoFormer's ``theta_i = base^(-2 i / d)``, ``base = 10000`` is used. An odd last channel is
 left unrotated.
 """
 
