@@ -1,5 +1,5 @@
 """Citations can be followed: every ``[Key]`` in the repository's text is defined in ``docs/references.md``,
-and nothing cites documents that are not in the repository (the working notes the code was first written from).
+and nothing cites documents that are not in the repository (the notes the code was first written from).
 
 Scanned: ``.py`` (comments and string literals, so ``list[Path]`` or ``[None] * n`` in code are not
 citations), ``.md`` (outside code blocks and inline code) and ``.yaml`` files, except virtual environments,
@@ -18,8 +18,20 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCES = ROOT / "docs" / "references.md"
-SKIP_DIRS = {".git", ".venv", ".venv-ci", "build", "dist", "runs", "lightning_logs", "__pycache__",
-             ".pytest_cache", ".ruff_cache", ".hypothesis", "node_modules"}
+SKIP_DIRS = {
+    ".git",
+    ".venv",
+    ".venv-ci",
+    "build",
+    "dist",
+    "runs",
+    "lightning_logs",
+    "__pycache__",
+    ".pytest_cache",
+    ".ruff_cache",
+    ".hypothesis",
+    "node_modules",
+}
 SUFFIXES = {".py", ".md", ".yaml", ".yml"}
 
 # Documents outside the repository. Written so that this file does not match itself.
@@ -30,11 +42,9 @@ UNFOLLOWABLE = [
     re.compile(r"\breference\s+§"),
     re.compile(r"\bseeds/READM[E]"),
 ]
-# A citation key: starts with an upper-case letter, first part at least two characters (so regex classes such
-# as [A-Z] and one-letter placeholders are not keys), parts joined by a space or a hyphen: [NTU RGB+D], [Mamba-2].
-CITATION = re.compile(
-    r"(?<![\w\]\)\[`'\"])\[([A-Z][A-Za-z0-9+]+(?:[ -][A-Za-z0-9+]+)*)\](?![(\[:\w])"
-)
+# A citation key: an upper-case letter, first part at least two characters (so regex classes such as [A-Z]
+# and one-letter placeholders are not keys), parts joined by a space or a hyphen: [NTU RGB+D], [Mamba-2].
+CITATION = re.compile(r"(?<![\w\]\)\[`'\"])\[([A-Z][A-Za-z0-9+]+(?:[ -][A-Za-z0-9+]+)*)\](?![(\[:\w])")
 KEY_DEFINITION = re.compile(r"^- \*\*\[([^\]]+)\]\*\*", re.M)
 FENCE = re.compile(r"^```.*?^```", re.M | re.S)
 INLINE_CODE = re.compile(r"``.+?``|`[^`\n]+`")

@@ -34,7 +34,8 @@ MODEL = {
     "num_periods": 2, "dropout": 0.0, "output_dir": "predictions",
 }  # fmt: skip
 LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
-QEAN_TABLE1 = {"FID_k": 30.1, "FID_g": 11.5, "Dist_k": 7.82, "Dist_g": 9.37, "BeatAlign": 0.239}  # [QEAN] Table 1
+# [QEAN] Table 1
+QEAN_TABLE1 = {"FID_k": 30.1, "FID_g": 11.5, "Dist_k": 7.82, "Dist_g": 9.37, "BeatAlign": 0.239}
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +124,8 @@ def test_sm_test_prints_our_figures_beside_the_paper_table(aistpp, tmp_path, mon
     assert run(["test", "--recipe", "qean.yaml", *_overrides(aistpp, backbone=False)]) == 0
     text = caplog.text
     # default test_split [val, test]: the val list of <root>/splits plus the test list = 3 sequences
-    assert "protocol fact: 3 generated sequences x 20 frames (paper: 40 x 1200); real set: 5 sequences" in text
+    header = "protocol fact: 3 generated sequences x 20 frames (paper: 40 x 1200); real set: 5 sequences"
+    assert header in text
     assert "NOT COMPARABLE with [QEAN] Table 1: synthetic data in the AIST++ layout" in text
     for name, paper in QEAN_TABLE1.items():
         match = re.search(rf"^{name}\s+(\S+)\s+(\S+)\s+(\S+)$", text, re.MULTILINE)

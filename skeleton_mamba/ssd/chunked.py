@@ -1,4 +1,4 @@
-"""Chunked SSD ([Mamba-2] Listing 1, ``mamba_ssm/modules/ssd_minimal.py``) for any length, with initial and final states.
+"""Chunked SSD for any length, with initial and final states ([Mamba-2] Listing 1, ``ssd_minimal.py``).
 
 The length is right-padded to a multiple of the chunk size Q with Δ = 0 (so X = Δ·x = 0 and the
 decay exp(Δ·A) = 1: padding injects nothing and does not change the state) and cropped afterwards.

@@ -1,4 +1,4 @@
-"""Segment sums and the causal decay mask exp(segsum) of one chunk (``segsum`` of ``mamba_ssm/modules/ssd_minimal.py``).
+"""Segment sums and the causal decay mask exp(segsum) of one chunk (``mamba_ssm/modules/ssd_minimal.py``).
 
 segsum(a)_ij = Σ_{k=j+1}^{i} a_k for i ≥ j and -inf for i < j, so that
 Lmask = exp(segsum(a)) is the 1-semiseparable causal decay matrix.

@@ -12,8 +12,8 @@ Data flow for a seed motion Y (B, 120, 219) and music features Z (B, 240, 35), a
 
 All transformers: pre-LayerNorm blocks, 16 heads, hidden 800, MLP 3072 with GELU (FACT). Layer counts are not
 given by [QEAN]; the defaults are FACT's (audio 2, motion 2, cross-modal 12). The learnable absolute
-position embeddings are [QEAN] Table 2's ablation baseline that Spin Position Embedding replaces; ``learned_positions``
-adds them back (default off).
+position embeddings are [QEAN] Table 2's ablation baseline that Spin Position Embedding replaces;
+``learned_positions`` adds them back (default off).
 """
 
 from __future__ import annotations

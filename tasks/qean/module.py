@@ -223,7 +223,7 @@ class QEANModule(LightningModule):
             "QEAN test vs [QEAN] Table 1",
             f"protocol {protocol}: {sequences} generated sequences x {frames} frames "
             f"(paper: {PAPER_SEQUENCES} x {PAPER_FRAMES}); real set: {self._reference_count} sequences",
-            f"NOT COMPARABLE with [QEAN] Table 1: {'; '.join(reasons)}" if reasons else "the paper's protocol",
+            f"NOT COMPARABLE with [QEAN] Table 1: {'; '.join(reasons)}" if reasons else "paper protocol",
             f"{'metric':<10} {'ours':>10} {'QEAN (paper)':>12} {'AIST++ GT':>10}",
         ]
         for name, value in values.items():
