@@ -1,4 +1,4 @@
-"""The action-recognition network (seed 000, supplementary section 8.1, Fig. 10). Pure torch.
+"""The action-recognition network ([EgoMusic] supp. Sec. 8.1, Fig. 10). Pure torch.
 
 N Skeleton Mamba blocks encode every body's clip, global average pooling aggregates time, joints
 and bodies, and a linear layer gives the class logits (the softmax is applied by the loss or at
@@ -7,10 +7,10 @@ test time)::
     x (B, M, T, J, C) -> fold bodies (B*M, T, J, C) -> SkeletonMamba -> (B*M, T, J, D)
       -> mean over T, J -> (B*M, D) -> mean over the bodies present -> (B, D) -> Linear -> (B, K)
 
-The seed writes the pooled embedding as ``o in R^{1x1xC}`` with C the number of classes before the
-linear layer; that is the case ``backbone.out_channels = num_classes``. By default the backbone
+[EgoMusic] supp. Sec. 8.1 writes the pooled embedding as ``o in R^{1x1xC}`` with C the number of classes
+before the linear layer; that is the case ``backbone.out_channels = num_classes``. By default the backbone
 keeps its width D (``out_channels = None``) and the linear layer maps D to the classes, as the GCN
-heads of the reference toolkits do (PYSKL ``GCNHead``).
+heads of the reference toolkits do ([PYSKL] ``GCNHead``).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Text-to-motion on HumanML3D (seed 000 section 8.2).
+"""Text-to-motion on [HumanML3D] ([EgoMusic] supp. Sec. 8.2).
 
 ``humanml3d`` (files, captions, splits), ``features`` (the 263-d representation, ``recover_from_ric``),
 ``convert_cli`` (``sm convert``), ``metrics`` / ``evaluator`` / ``glove`` (the T2M evaluation networks and

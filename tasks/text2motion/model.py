@@ -1,4 +1,4 @@
-"""The text-to-motion denoiser: Skeleton Mamba over HumanML3D features mapped to joints (seed 000, 8.2).
+"""The text-to-motion denoiser: Skeleton Mamba over HumanML3D features as joints ([EgoMusic] supp. 8.2).
 
 The 263-d frame is split into 22 joint tokens of :data:`JOINT_CHANNELS` (13) channels each, so the
 backbone's Human Tokenizer (HUMANML3D22 groups) sees a skeleton:

@@ -1,4 +1,4 @@
-"""LightningModule for text-to-motion diffusion (seed 000 section 8.2, MDM's recipe).
+"""LightningModule for text-to-motion diffusion ([EgoMusic] supp. Sec. 8.2, [MDM]'s recipe).
 
 Training (MDM, ``GuyTevet/motion-diffusion-model``): x0 prediction with the shared
 :class:`~skeleton_mamba.tasks.diffusion.GaussianDiffusion` (cosine schedule, 1,000 steps, uniform t),

