@@ -1,8 +1,8 @@
 """EgoDance benchmark: EMM (SkeletonMamba denoiser) vs an EDGE-style transformer denoiser of equal size.
 
-Both models share the same condition path (music encoder + ResNet vision encoder + fusion module, seed 000
-Table 1), which is encoded ONCE per sample before the denoising loop; only the denoisers differ. The
-transformer baseline is EDGE's denoiser shape (reference dance.md section 6: self-attention over frames,
+Both models share the same condition path (music encoder + ResNet vision encoder + fusion module,
+[EgoMusic] supp. Table 1), which is encoded ONCE per sample before the denoising loop; only the denoisers
+differ. The transformer baseline is EDGE's denoiser shape (``model/model.py``: self-attention over frames,
 cross-attention to the condition + a time token, GELU, pre-norm, 8 layers, 4 heads, feed-forward 2x)
 with its width chosen so that its parameter count equals EMM's denoiser (encoders excluded).
 
@@ -23,7 +23,7 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
 - ``gemm``: this machine's fp32 matrix-product rate timed in the same process (before and after the
   models), and ``*_fraction_of_gemm``: each model's achieved matrix-product rate as a fraction of it.
 
-    flock /tmp/bench.lock python benchmarks/bench_egodance.py --json              # seed sizes (slow on CPU)
+    flock /tmp/bench.lock python benchmarks/bench_egodance.py --json              # paper sizes (slow on CPU)
     flock /tmp/bench.lock python benchmarks/bench_egodance.py --size tiny --json  # quick
 """
 
@@ -54,7 +54,7 @@ from skeleton_mamba.tasks.egodance.model import EMM  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
 
 SIZES = {
-    # seed 000 Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones
+    # [EgoMusic] supp. Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones
     "seed": dict(
         dim=128, depth=8, heads=4, mlp_dim=1024, context_dim=256, ff=512, d_state=64, headdim=64, chunk=64,
         group_paths=None, resnet=None, image_size=224,

@@ -58,7 +58,7 @@ BACKBONES = {
         group_paths=[[1, 2, 0, 3, 4]],
         mixer=MixerConfig(d_state=16, headdim=8, chunk_size=16),
     ),
-    "seed": SkeletonMambaConfig(),  # D 128, 8 blocks, MLP 1024 (seed 000 Table 2)
+    "seed": SkeletonMambaConfig(),  # D 128, 8 blocks, MLP 1024 ([EgoMusic] supp. Table 2)
 }
 
 

@@ -100,7 +100,8 @@ def test_print_config_recipe_name_and_path_agree_and_compose_the_backbone(capsys
     backbone = by_name["model"]["init_args"]["backbone"]
     for key in ("dim", "depth", "heads", "mlp_dim"):
         assert backbone[key] == backbone_file[key]
-    assert (backbone["dim"], backbone["depth"], backbone["mlp_dim"]) == (128, 8, 1024)  # seed Table 2
+    # [EgoMusic] supp. Table 2
+    assert (backbone["dim"], backbone["depth"], backbone["mlp_dim"]) == (128, 8, 1024)
     # Linked values are not options: they come from the data module at instantiation.
     assert "num_classes" not in by_name["model"]["init_args"]
     assert by_name["data"]["init_args"]["num_classes"] == 60

@@ -26,7 +26,7 @@ from skeleton_mamba.tasks.motion.metrics import (
 from skeleton_mamba.tasks.motion.metrics.geometric import GEOMETRIC_FEATURE_NAMES, HUMERUS_LENGTH
 from skeleton_mamba.tasks.motion.metrics.mmv import flow_magnitudes, load_video_frames
 
-# Rest offsets of the SMPL skeleton (dance.md section 4, Stanford-TML/EDGE vis.py), y-up.
+# Rest offsets of the SMPL skeleton (Stanford-TML/EDGE vis.py), y-up.
 PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]
 OFFSETS = np.array([
     [0, 0, 0], [0.0586, -0.0823, -0.0177], [-0.0603, -0.0905, -0.0135], [0.0044, 0.1244, -0.0384],
@@ -52,7 +52,7 @@ def rest_pose() -> np.ndarray:
 
 
 def published_kinetic(positions: np.ndarray, bug: bool, fps: float = 60.0) -> np.ndarray:
-    """Loop transcription of aistplusplus_api kinetic.py/utils.py (dance.md 7.1), y-up, window 2."""
+    """Loop transcription of aistplusplus_api kinetic.py/utils.py, y-up, window 2."""
     dt, w, t_len = 1.0 / fps, 2, len(positions)
     out = []
     for j in range(positions.shape[1]):

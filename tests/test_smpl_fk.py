@@ -17,7 +17,7 @@ from skeleton_mamba.tasks.motion.smpl import (
     smpl_forward_kinematics_axis_angle,
 )
 
-# Reference dance.md section 4 (Stanford-TML/EDGE vis.py).
+# Stanford-TML/EDGE vis.py (the SMPL-24 parents and rest offsets).
 REFERENCE_PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]
 
 
