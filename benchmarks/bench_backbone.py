@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--batch", type=int, default=4, help="batch of the seed-configuration row")
+    parser.add_argument("--batch", type=int, default=4, help="batch of the paper-configuration row")
     parser.add_argument("--scaling-batch", type=int, default=1, help="batch of the T-scaling rows")
     parser.add_argument("--lengths", type=int, nargs="+", default=[150, 600, 2400])
     parser.add_argument("--dim", type=int, default=128)
@@ -102,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--checkpointing",
         action="store_true",
-        help="gradient checkpointing in SkeletonMamba (needed for the seed size at batch 4 on 24 GB)",
+        help="gradient checkpointing in SkeletonMamba (needed for the paper's size at batch 4 on 24 GB)",
     )
     parser.add_argument("--one", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         "threads": args.threads,
         "checkpointing": args.checkpointing,
     }
-    seed = [
+    paper = [
         run_isolated(kind=k, batch=args.batch, length=150, repeats=args.repeats, **common)
         for k in ("skeleton_mamba", "attention_twin")
     ]
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         for k in ("skeleton_mamba", "attention_twin")
     ]
     gemm = {"before": gemm_before, "after": gemm_gflop_per_s()}
-    for row in seed + scaling:
+    for row in paper + scaling:
         row["fraction_of_gemm"] = round(row["gflop_per_s"] / gemm_before["gflop_per_s"], 3)
     growth = {}
     for kind in ("skeleton_mamba", "attention_twin"):
@@ -144,14 +144,14 @@ def main(argv: list[str] | None = None) -> int:
         "gemm": gemm,
         "config": common,
         "scaling_config": scaling_common,
-        "seed_config": seed,
+        "paper_config": paper,
         "scaling": scaling,
         "growth_vs_shortest": growth,
     }
     if args.json:
         print(json.dumps(result))
     else:
-        for row in seed + scaling:
+        for row in paper + scaling:
             print(row)
         print("growth:", growth)
         print("gemm GFLOP/s before / after:", gemm_before["gflop_per_s"], gemm["after"]["gflop_per_s"])

@@ -55,7 +55,7 @@ from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: 
 
 SIZES = {
     # [EgoMusic] supp. Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones
-    "seed": dict(
+    "paper": dict(
         dim=128, depth=8, heads=4, mlp_dim=1024, context_dim=256, ff=512, d_state=64, headdim=64, chunk=64,
         group_paths=None, resnet=None, image_size=224,
     ),
@@ -242,7 +242,7 @@ def synchronize() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--size", choices=sorted(SIZES), default="seed")
+    ap.add_argument("--size", choices=sorted(SIZES), default="paper")
     ap.add_argument("--batch", type=int, default=4, help="training batch")
     ap.add_argument("--frames", type=int, default=150)
     ap.add_argument("--repeats", type=int, default=3, help="timed training steps (median)")

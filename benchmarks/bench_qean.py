@@ -1,12 +1,12 @@
 """QEAN: autoregressive generation speed (plain vs fast) and one training step.
 
-    python benchmarks/bench_qean.py --json    # the seed's size (hidden 800, 16 heads, 2/2/12 layers)
+    python benchmarks/bench_qean.py --json    # [QEAN]'s size (hidden 800, 16 heads, 2/2/12 layers)
     python benchmarks/bench_qean.py --size tiny --frames 200
 
-Generation runs ``--frames`` autoregressive steps for one sequence (the seed's protocol generates 1200; on a
+Generation runs ``--frames`` autoregressive steps for one sequence ([QEAN]'s protocol generates 1200; on a
 CPU a few dozen steps give the per-frame rate) with :func:`generate_plain` and :func:`generate_fast` side by
 side on the same model, and checks that both give the same frames. The training step is forward + backward
-+ Adam on a batch of ``--batch`` windows (the seed: 16). Prints one JSON object with ``--json``.
++ Adam on a batch of ``--batch`` windows ([QEAN]: 16). Prints one JSON object with ``--json``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig  # noqa: E402
 
 SIZES = {
     "paper": QEANConfig(),
-    # the seed's layer counts and sequence lengths at a width a CPU can time
+    # [QEAN]'s layer counts and sequence lengths at a width a CPU can time
     "narrow": QEANConfig(hidden=128, heads=4, mlp_dim=512),
     "tiny": QEANConfig(hidden=64, heads=4, motion_layers=1, audio_layers=1, cross_layers=2, mlp_dim=128),
 }

@@ -6,7 +6,7 @@ data module (PYSKL pipeline: pre-normalization, uniform sampling of ``clip_len``
 For every step we time the wait for the next batch and the step itself (forward, backward, SGD).
 The loader keeps up when the mean wait is small against the mean step time.
 
-    python benchmarks/bench_recognition_loader.py [--json] [--backbone tiny|seed] [--num-workers 2]
+    python benchmarks/bench_recognition_loader.py [--json] [--backbone tiny|paper] [--num-workers 2]
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ BACKBONES = {
         dim=16, depth=1, heads=2, mlp_dim=32, group_paths=[[1, 2, 0, 3, 4]],
         mixer=MixerConfig(d_state=16, headdim=8, chunk_size=16),
     ),
-    "seed": SkeletonMambaConfig(),  # D 128, N 8, MLP 1024 (recipes/backbones/skeleton_mamba.yaml)
+    "paper": SkeletonMambaConfig(),  # D 128, N 8, MLP 1024 (recipes/backbones/skeleton_mamba.yaml)
 }  # fmt: skip
 
 

@@ -3,7 +3,7 @@
     python benchmarks/bench_stream.py --json
     python benchmarks/bench_stream.py --json --widths tiny --memory-minutes 1,10
 
-For each backbone width (``seed``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
+For each backbone width (``paper``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
 skeleton_mamba_tiny.yaml) the causal dance network (:class:`StreamDancer`, SMPL-24, random weights)
 runs in a fresh subprocess with ``--threads`` torch threads under ``torch.inference_mode``:
 
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import machine_info  # noqa: E402
 
-WIDTHS = {"seed": "skeleton_mamba.yaml", "tiny": "skeleton_mamba_tiny.yaml"}
+WIDTHS = {"paper": "skeleton_mamba.yaml", "tiny": "skeleton_mamba_tiny.yaml"}
 
 
 def rss_mib() -> float:
@@ -130,7 +130,7 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--widths", default="seed,tiny")
+    p.add_argument("--widths", default="paper,tiny")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--frames", type=int, default=300, help="frames timed per width")
     p.add_argument("--window", type=int, default=150, help="frames of the windowed baseline (5 s)")

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/bench_text2motion.py [--backbone tiny|seed] [--batch 4] [--frames 196]
+    python benchmarks/bench_text2motion.py [--backbone tiny|paper] [--batch 4] [--frames 196]
         [--repeats 3] [--max-real-seconds 600] [--json]
 
 For the Skeleton Mamba denoiser (:class:`TextToMotionDenoiser`) and an MDM-style transformer
@@ -58,7 +58,7 @@ BACKBONES = {
         group_paths=[[1, 2, 0, 3, 4]],
         mixer=MixerConfig(d_state=16, headdim=8, chunk_size=16),
     ),
-    "seed": SkeletonMambaConfig(),  # D 128, 8 blocks, MLP 1024 ([EgoMusic] supp. Table 2)
+    "paper": SkeletonMambaConfig(),  # D 128, 8 blocks, MLP 1024 ([EgoMusic] supp. Table 2)
 }
 
 

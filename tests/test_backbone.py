@@ -66,7 +66,7 @@ def test_output_shape_and_parameter_count_for_each_skeleton(name):
     assert sum(p.numel() for p in model.parameters()) == _expected_params(cfg, sk.num_joints, sk.group_size)
 
 
-def test_seed_configuration_parameter_count():
+def test_paper_configuration_parameter_count():
     cfg = SkeletonMambaConfig()  # D 128, G 5, P 6, E 768, N 8, MLP 1024 ([EgoMusic] supp. Table 2)
     model = SkeletonMamba(cfg)
     n = sum(p.numel() for p in model.parameters())

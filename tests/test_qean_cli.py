@@ -97,7 +97,7 @@ def test_test_splits_come_from_the_annotations_val_plus_test(aistpp, tmp_path):
     for folder in ("motions", "music"):
         (root / folder).symlink_to(aistpp / folder)
     dm = AISTPPDanceDataModule(str(root), music_cache_dir=str(aistpp / "cache"), num_workers=0, **TINY_DATA)
-    assert dm.test_splits == ["val", "test"]  # default: the seed's 40 = crossmodal val + test
+    assert dm.test_splits == ["val", "test"]  # default: [QEAN]'s 40 = crossmodal val + test
     with pytest.raises(FileNotFoundError, match="crossmodal_val.txt"):
         dm.split_names("val")
     packaged = files("skeleton_mamba.tasks.motion") / "aistpp_splits" / "crossmodal_test.txt"

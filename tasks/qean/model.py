@@ -136,7 +136,7 @@ class _Embedding(nn.Module):
 
 
 class TransformerMotionEncoder(nn.Module):
-    """f_mot of the seed: (B, T, 219) -> (B, T, hidden)."""
+    """f_mot of [QEAN]: (B, T, 219) -> (B, T, hidden)."""
 
     def __init__(self, config: QEANConfig) -> None:
         super().__init__()
