@@ -6,10 +6,8 @@ factorised blocks below the diagonal, no chunk states) when L <= max(chunk_size,
 and no initial/final state is involved; else the chunked form. impl="torch": the same choice
 without the kernel.
 
-QUADRATIC_MAX_LEN comes from benchmarks/bench_ssd.py (4 heads, P = N = 64, fp32, 2 CPU threads,
-forward + backward): at L = 150 the single chunk was about 2x faster than chunks of 64, at L = 256
-one chunk of 256 and chunks of 64 or 128 were within the noise of a shared machine, and above that
-the O(L²) work grows faster than the per-chunk state work.
+QUADRATIC_MAX_LEN is where the quadratic form's O(L²) work starts to cost more than the chunked form's
+per-chunk states (measured with ``benchmarks/bench_ssd.py``; figures in ``benchmarks/README.md``).
 """
 
 from __future__ import annotations

@@ -26,8 +26,7 @@ Speed on CPU: the Q×Q tensors (the mask, C Bᵀ and W) are formed for at most `
 entries at a time. When all chunks fit in one tile (every benchmark size) the mask and W are kept
 for the backward; larger inputs run tile by tile with reused buffers and the backward recomputes
 them, so memory stays bounded. Tiles are deliberately large: every operation is a thread fork/join,
-and on a busy 2-core machine cache-sized tiles (2^20 entries, 6-30 tiles at L = 150) made the
-forward + backward 2-8x slower than one tile because of the many synchronisations.
+so many cache-sized tiles cost more in synchronisation than they save (``benchmarks/README.md``, SSD scan).
 """
 
 from __future__ import annotations

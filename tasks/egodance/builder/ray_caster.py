@@ -1,10 +1,8 @@
 """First hits of many rays against a triangle mesh: embree (``embreex``) when installed, trimesh otherwise.
 
 Embree is called directly (``EmbreeScene.run(..., output=1)``), which returns, per ray, the triangle,
-the ray parameter and the barycentric coordinates of the first hit in one pass. Measured on the project's
-shared 2-core machine for one 224 x 224 frame (rotation of the rays included): 14 ms, against 41 ms for
-trimesh's ``intersects_id(..., multiple_hits=False, return_locations=True)`` (which normalises the
-directions and recomputes the hit points in float64) and 20 ms for ``intersects_first`` (triangle only).
+the ray parameter and the barycentric coordinates of the first hit in one pass, faster than trimesh's
+embree-backed queries (``benchmarks/README.md``, EgoAIST++ builder).
 The directions are NOT normalised: the ray parameter ``t`` of a hit is in units of the direction, so
 camera rays with unit z give the z-depth directly, and a segment ``a -> b`` cast as ``(a, b - a)`` is
 crossed when ``t <= 1``.
@@ -17,7 +15,7 @@ numpy caster is used. Its broad phase lists, for every ray, each triangle whose 
 (Python lists, then about 400 bytes per ray-triangle pair in the narrow phase), so one call over a whole
 frame or a penetration test grew to tens of GB. It is called on chunks of at most
 ``max(1, pair_budget // F)`` rays (F triangles), so a call holds at most ``pair_budget`` pairs whatever the
-scene (about 100 MB for the default 2**18); chunks of 50 to 250 rays were also the fastest per ray.
+scene (about 100 MB for the default 2**18).
 """
 
 from __future__ import annotations
