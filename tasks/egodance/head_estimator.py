@@ -1,7 +1,7 @@
 """The head's trajectory from the egocentric frames alone, for head guidance without ground truth.
 
-[EgoMusic] guides sampling with the head trajectory (supp. section 6.3, G_head); the authors' code takes it
-from DROID-SLAM run on the egocentric video. A user's video has no ground-truth camera, so this module
+[EgoMusic] guides sampling with the head trajectory (supp. Sec. 6.3, G_head); the authors' code takes it
+from [DROID-SLAM] run on the egocentric video. A user's video has no ground-truth camera, so this module
 estimates the trajectory of the SMPL head joint (15) -- position (T, 3) and orientation (T, 3, 3) per frame --
 in the canonical frame of the training windows (floor at y = 0, root at x = z = 0 in frame 0, world yaw
 kept; :mod:`.data`), the frame :class:`.guidance.HeadGuidance` expects its targets in.
@@ -12,16 +12,16 @@ Design (ours; justified against the alternatives):
   gives the rotation and the translation *direction* only: the scale, the gravity direction and the
   height above the floor -- which set where the head goes in metres -- need a learned step anyway, and
   feature tracking fails on the textureless, low-resolution and motion-blurred frames of dance videos
-  ([EgoMusic] supp. section 7.2 names blur as its main failure). DROID-SLAM needs a GPU and weights that
-  are not available here. A small network trained on EgoAIST++ windows, whose camera paths are known by
-  construction (``sm make-ego``), learns metric scale, gravity and floor height directly.
+  ([EgoMusic] supp. Sec. 7.3: motion blur is its first failure case). DROID-SLAM needs a GPU and
+  weights that are not available here. A small network trained on EgoAIST++ windows, whose camera paths
+  are known by construction (``sm make-ego``), learns metric scale, gravity and floor height directly.
 - *Appearance + temporal difference per frame.* Each frame (resized to ``input_size``) is stacked with its
   difference to the previous frame (zero for frame 0): the frame carries the absolute cues (floor and walls:
   height, pitch and roll, the room's yaw), the difference carries the ego-motion (what optical flow
   carries in the authors' vision input). A small CNN maps the 6 channels to one feature per frame. The
   pretrained ResNet of the EMM vision encoder is not reused: its pooled feature is built to be invariant to
   the small image shifts that encode head motion.
-- *Bidirectional GRU over time*, then per frame the head position and a 6D rotation (Zhou et al.;
+- *Bidirectional GRU over time*, then per frame the head position and a 6D rotation ([Rot6D];
   :func:`rotation_6d_to_matrix`). Positions are regressed directly, not integrated from per-frame steps: a
   dancer stays near the start, and in a first trial on synthetic EgoAIST++ windows integrated steps were
   off by 1.3-1.5 m after 150 frames (a small per-frame bias summed), while the whole-window context of

@@ -1,10 +1,9 @@
 """Rotation conversions: axis-angle, quaternion (w, x, y, z), rotation matrix, 6D and Euler angles.
 
 Axis-angle, quaternion and matrix conversions are kornia's (batched over any leading shape,
-differentiable). The 6D representation (Zhou et al., CVPR 2019, "On the Continuity of Rotation
-Representations") has no kornia helper and is the only formula written here: the first two
-*columns* of the rotation matrix, mapped back with Gram-Schmidt. pytorch3d and EDGE store the first
-two *rows* instead; ``matrix_to_rotation_6d(R.transpose(-1, -2))`` gives theirs.
+differentiable). The 6D representation ([Rot6D]) has no kornia helper and is the only formula written
+here: the first two *columns* of the rotation matrix, mapped back with Gram-Schmidt. pytorch3d and EDGE
+store the first two *rows* instead; ``matrix_to_rotation_6d(R.transpose(-1, -2))`` gives theirs.
 
 Euler angles follow the BVH convention: ``order`` names the axes in the order of the channels, and
 the matrix is the product of the elementary rotations in that order (intrinsic rotations),

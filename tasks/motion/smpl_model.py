@@ -1,4 +1,4 @@
-"""The SMPL body model (Loper et al., SIGGRAPH Asia 2015) from a user-supplied model file, in torch.
+"""The SMPL body model ([SMPL]) from a user-supplied model file, in torch.
 
 The model file is NOT distributed with the project (its licence forbids it); users pass its path:
 

@@ -1,4 +1,4 @@
-"""The T2M evaluator networks (Guo et al., CVPR 2022) that embed texts and motions for the metrics.
+"""The T2M evaluator networks ([T2M]) that embed texts and motions for the metrics.
 
 Architectures as ``EricGuo5513/text-to-motion networks/modules.py`` (parameter names kept, so the
 official ``checkpoints/t2m/text_mot_match/model/finest.tar`` loads into them):

@@ -1,4 +1,4 @@
-"""T2M evaluation metrics (Guo et al., CVPR 2022) over evaluator embeddings, as torchmetrics metrics.
+"""T2M evaluation metrics ([T2M]) over evaluator embeddings, as torchmetrics metrics.
 
 Definitions follow ``EricGuo5513/text-to-motion utils/metrics.py`` and ``final_evaluations.py`` (MDM
 ``eval/eval_humanml.py`` uses the same code):

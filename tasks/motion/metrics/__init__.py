@@ -7,7 +7,7 @@ FID_k / FID_g           ``FrechetMotionDistance(feature="kinetic"|"geometric")``
 Div_k / Div_g           ``MotionDiversity(feature="kinetic"|"geometric")``        FACT / Bailando scripts
 BeatAlign               ``BeatAlign(variant="fact"|"bailando")``                  FACT / Bailando scripts
 PFC                     ``PFC()``                                                 EDGE eval_pfc.py
-MMV                     ``MMV()``                                                 EgoMusic supp. 7.1
+MMV                     ``MMV()``                                                 [EgoMusic] supp. 7.1
 ======================  =====================================================  ==========================
 
 Feature functions: :func:`kinetic_features` (72-d), :func:`geometric_features` (32-d).
