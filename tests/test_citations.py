@@ -44,7 +44,7 @@ UNFOLLOWABLE = [
 ]
 # A citation key: an upper-case letter, first part at least two characters (so regex classes such as [A-Z]
 # and one-letter placeholders are not keys), parts joined by a space or a hyphen: [NTU RGB+D], [Mamba-2].
-CITATION = re.compile(r"(?<![\w\]\)\[`'\"])\[([A-Z][A-Za-z0-9+]+(?:[ -][A-Za-z0-9+]+)*)\](?![(\[:\w])")
+CITATION = re.compile(r"(?<![\w\]\)\[`])\[([A-Z][A-Za-z0-9+]+(?:[ -][A-Za-z0-9+]+)*)\](?![(\[:\w])")
 KEY_DEFINITION = re.compile(r"^- \*\*\[([^\]]+)\]\*\*", re.M)
 FENCE = re.compile(r"^```.*?^```", re.M | re.S)
 INLINE_CODE = re.compile(r"``.+?``|`[^`\n]+`")
@@ -84,7 +84,7 @@ def test_references_define_the_keys_the_brief_names():
 
 
 def test_scanner_finds_citations_and_ignores_code():
-    code = 'x: list[Path] = [None] * 3  # [EgoMusic] supp. Eq. 15\ns = "see [QEAN] Table 1"\nr = r"[A-Z]"\n'
+    code = 'x: list[Path] = [None] * 3  # [EgoMusic] supp. Eq. 15\ns = "[QEAN] Table 1"\nr = r"[A-Z]"\n'
     found = CITATION.findall(prose(Path("m.py"), code))
     assert found == ["EgoMusic", "QEAN"]
     md = "## [Unreleased]\n[a link](x) and [NTU RGB+D] and `[Inline]`\n```\n[Fenced]\n```\n"
