@@ -140,7 +140,7 @@ class TextToMotionDenoiser(nn.Module):
         text_dim: width of the caption token embeddings (384 MiniLM, 512 CLIP ViT-B/32).
         time_channels: timestep channels appended to every joint token.
         time_embedding_dim: sinusoidal embedding size of the timestep.
-        num_steps: T of the noise schedule (scales the skip connection from x_t,
+        diffusion_steps: T of the noise schedule (scales the skip connection from x_t,
             :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
     """
 
@@ -150,7 +150,7 @@ class TextToMotionDenoiser(nn.Module):
         text_dim: int,
         time_channels: int = 16,
         time_embedding_dim: int = 128,
-        num_steps: int = 1000,
+        diffusion_steps: int = 1000,
     ) -> None:
         super().__init__()
         config = dataclasses.replace(
@@ -167,7 +167,7 @@ class TextToMotionDenoiser(nn.Module):
         self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
         self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
         self.text_proj = nn.Linear(text_dim, text_dim)
-        self.skip_x0 = SkipX0(num_steps, channels=(FEATURE_DIM,))
+        self.skip_x0 = SkipX0(diffusion_steps, channels=(FEATURE_DIM,))
 
     def set_data_statistics(self, features: torch.Tensor) -> None:
         """Per-feature mean and std of normalised training features (N, 263) for the preconditioning (the

@@ -183,7 +183,7 @@ class TextToMotionModule(LightningModule):
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
         self.denoiser = TextToMotionDenoiser(
-            config, self.text_encoder.dim, time_channels, num_steps=diffusion_steps
+            config, self.text_encoder.dim, time_channels, diffusion_steps=diffusion_steps
         )
         self.diffusion = GaussianDiffusion(diffusion_steps)
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
