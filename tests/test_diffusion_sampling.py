@@ -305,6 +305,34 @@ def test_old_text2motion_checkpoint_loads_and_samples_as_before(
     )
 
 
+def test_old_text2motion_checkpoint_through_ckpt_path(text2motion_module_class, tmp_path, monkeypatch):
+    """``sm test --ckpt_path OLD.ckpt``: LightningCLI parses the old hyper-parameters over the new recipe."""
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    module = text2motion_module_class(backbone=TINY, diffusion_steps=1000)
+    old = {k: v for k, v in module.hparams.items() if k not in ("diffusion_steps", "sampler", "eta")}
+    old.update(
+        num_steps=1000,
+        sampling_steps=7,
+        _class_path="skeleton_mamba.tasks.text2motion.module.TextToMotionModule",
+        _instantiator="lightning.pytorch.cli.instantiate_module",
+    )
+    _save(module, old, tmp_path / "old.ckpt")
+    args = ["test", "--recipe", "humanml3d_demo.yaml", "--ckpt_path", str(tmp_path / "old.ckpt")]
+    args += ["--trainer.logger", "false", "--trainer.callbacks", "[]"]
+    args += ["--trainer.enable_progress_bar", "false"]
+    args += ["--trainer.limit_test_batches", "1", "--model.eval_repetitions", "0", "--data.val_clips", "2"]
+    with pytest.warns(FutureWarning, match="num_steps is deprecated"):
+        cli = SkeletonMambaCLI(LightningModule, LightningDataModule, subclass_mode_model=True,
+                               subclass_mode_data=True, args=args)  # fmt: skip
+    assert cli.model.sampling == SamplingOptions("ddim", 7, 0.0, 2.5)
+    assert cli.model.hparams.diffusion_steps == 1000 and "num_steps" not in cli.model.hparams
+
+
 def test_old_text2motion_spellings_in_recipes(text2motion_module_class):
     with pytest.warns(FutureWarning, match="sampler: ddpm"):
         module = text2motion_module_class(

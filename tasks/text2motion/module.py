@@ -179,6 +179,8 @@ class TextToMotionModule(LightningModule):
         # time.
         self.eval_options = SimpleNamespace(**{k: v for k, v in locals().items() if k in _EVAL_ARGS})
         self.save_hyperparameters(ignore=["backbone", "num_steps", *_EVAL_ARGS])
+        # the new spellings (LightningCLI saves the arguments as given, old spellings included)
+        self.hparams.update(diffusion_steps=diffusion_steps, sampler=sampler, sampling_steps=sampling_steps)
         self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
