@@ -17,7 +17,7 @@ from typing import Any
 import torch
 
 from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion
-from skeleton_mamba.tasks.diffusion.samplers import Denoiser, GuidanceTerm, PostStep, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
 
 __all__ = ["SAMPLERS", "SamplingOptions", "sample"]
 
@@ -80,7 +80,6 @@ class SamplingOptions:
         return out
 
 
-@torch.no_grad()
 def sample(
     diffusion: GaussianDiffusion,
     denoiser: Denoiser,
@@ -90,15 +89,7 @@ def sample(
     sampler: str = "ddim",
     sampling_steps: int = 50,
     eta: float = 1.0,
-    guidance_weight: float = 1.0,
-    guidance: Sequence[GuidanceTerm] = (),
-    clip_x0: float | None = None,
-    post_step: PostStep | None = None,
-    x_T: torch.Tensor | None = None,
-    generator: torch.Generator | None = None,
-    device: torch.device | str = "cpu",
-    dtype: torch.dtype = torch.float32,
-    progress: bool = False,
+    **kwargs: Any,
 ) -> torch.Tensor:
     """x0 samples (B, ...) of ``shape`` from ``denoiser`` by the chosen sampler.
 
@@ -108,29 +99,13 @@ def sample(
             classifier-free guidance in one call.
         shape: the sample shape (B, ...).
         cond: the condition (``None``: unconditional).
-        sampler, sampling_steps, eta, guidance_weight: as :class:`SamplingOptions`
-            (``sample(..., **dataclasses.asdict(options))``).
-        guidance: terms adjusting x0_hat or the posterior mean (e.g. EgoMusic's head guidance).
-        clip_x0: clamp x0_hat to [-clip, clip]; ``None`` disables.
-        post_step: a projection after every step (:data:`~.samplers.PostStep`; e.g. window consistency).
-        x_T: the starting noise (default: drawn with ``generator``).
-        generator: a CPU generator for reproducible noise.
-        device, dtype: where and in which dtype to sample.
-        progress: show a tqdm bar.
+        sampler, sampling_steps, eta: as :class:`SamplingOptions` (``sample(..., **asdict(options))``).
+        **kwargs: the sampler's other options, alike for both (:func:`~.samplers.ddpm_sample`):
+            ``guidance_weight``; ``guidance`` terms (e.g. EgoMusic's head guidance); ``clip_x0``;
+            ``post_step`` (e.g. window consistency); ``x_T``; ``generator``; ``device``, ``dtype``;
+            ``progress``.
     """
-    SamplingOptions(sampler, sampling_steps, eta, guidance_weight)  # checks the options
-    common = dict(
-        cond=cond,
-        guidance_weight=guidance_weight,
-        guidance=guidance,
-        clip_x0=clip_x0,
-        post_step=post_step,
-        x_T=x_T,
-        generator=generator,
-        device=device,
-        dtype=dtype,
-        progress=progress,
-    )
+    SamplingOptions(sampler, sampling_steps, eta)  # checks them
     if sampler == "ddpm":
-        return ddpm_sample(diffusion, denoiser, shape, **common)
-    return ddim_sample(diffusion, denoiser, shape, sampling_steps=sampling_steps, eta=eta, **common)
+        return ddpm_sample(diffusion, denoiser, shape, cond, **kwargs)
+    return ddim_sample(diffusion, denoiser, shape, cond, sampling_steps=sampling_steps, eta=eta, **kwargs)
