@@ -83,7 +83,7 @@ def tokens_to_features(tokens: torch.Tensor) -> torch.Tensor:
 
 
 TIME_EMBEDDING_ORDER = "cos_sin"
-"""The text-to-motion denoisers' timestep embedding layout (guided-diffusion's and MDM's ``[cos, sin]``)
+"""The text-to-motion denoisers' timestep embedding layout (guided-diffusion's ``[cos, sin]``)
 of :func:`~skeleton_mamba.tasks.diffusion.sinusoidal_embedding`, kept so checkpoints keep their outputs."""
 
 
