@@ -343,6 +343,8 @@ def test_old_text2motion_spellings_in_recipes(text2motion_module_class):
         text2motion_module_class(backbone=TINY, diffusion_steps=10, eval_sampling_steps=-1)
     with pytest.raises(ValueError, match="sampler"):
         text2motion_module_class(backbone=TINY, sampler="dpm")
+    with pytest.raises(ValueError, match="sampler"):
+        text2motion_module_class(backbone=TINY, eval_sampler="dpm")
     from skeleton_mamba.tasks.text2motion.demo import TextToMotionDemo
 
     with pytest.warns(FutureWarning, match="sampling_steps -1"):

@@ -169,10 +169,12 @@ class TextToMotionModule(LightningModule):
         diffusion_steps, sampler, sampling_steps = _legacy_sampling(
             num_steps, diffusion_steps, sampler, sampling_steps
         )
-        SamplingOptions(sampler, sampling_steps, eta, guidance_weight)  # checks them
         if eval_sampling_steps == -1:
             warnings.warn("eval_sampling_steps: -1 is deprecated, use null (the module's)", FutureWarning, 2)
             eval_sampling_steps = None
+        SamplingOptions(sampler, sampling_steps, eta, guidance_weight).override(
+            eval_sampler, eval_sampling_steps
+        )  # checks both
         config = backbone_config(backbone)
         # Evaluation settings are test-time options kept out of the checkpoint's hyperparameters: LightningCLI
         # lets a checkpoint's hyperparameters override the command line, which would freeze them at training
