@@ -98,7 +98,7 @@ def test_text_to_motion_overfits_two_clips_and_beats_x_t_at_small_t():
     tiny = SkeletonMambaConfig(
         dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
     )
-    module = TextToMotionModule(backbone=tiny, num_steps=20, lr=1e-3)
+    module = TextToMotionModule(backbone=tiny, diffusion_steps=20, lr=1e-3)
     clips = [synthetic_clip("bounce", 32, seed=1), synthetic_clip("arms", 32, seed=2)]
     features = torch.from_numpy(np.stack([c.features for c in clips]))
     mean, std = features.mean(dim=(0, 1)), features.std(dim=(0, 1)).clamp(min=1e-3)

@@ -9,8 +9,8 @@ import torch
 from transformers import ResNetConfig
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion
-from skeleton_mamba.tasks.egodance.encoders import FusionModule, sinusoidal_embedding
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, sinusoidal_embedding
+from skeleton_mamba.tasks.egodance.encoders import FusionModule
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance, head_guidance_objective
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import encode_motion

@@ -202,7 +202,7 @@ def test_long_form_dance_and_decoding():
         head,
         window=16,
         overlap=8,
-        steps=2,
+        sampling_steps=2,
         generator=torch.Generator().manual_seed(0),
     )
     assert tokens.shape == (40, 24, 10) and torch.isfinite(tokens).all()

@@ -1,26 +1,65 @@
 """Ancestral DDPM and DDIM sampling with classifier-free guidance and pluggable guidance terms.
 
 A denoiser is any callable ``(x_t (B, ...), t (B,) long, cond) -> x0_hat (B, ...)``; ``cond=None`` asks
-for the unconditional prediction (the task model substitutes its learned null condition).
+for the unconditional prediction (the task model substitutes its learned null condition). Task code
+samples through the one entry point :func:`~skeleton_mamba.tasks.diffusion.sampling.sample`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 from tqdm.auto import tqdm
 
 from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion, _extract
 
-__all__ = ["Denoiser", "GuidanceTerm", "guided_x0", "ddpm_sample", "ddim_sample", "ddim_timesteps"]
+__all__ = [
+    "Denoiser",
+    "NullConditioned",
+    "GuidanceTerm",
+    "concat_conditions",
+    "guided_x0",
+    "ddpm_sample",
+    "ddim_sample",
+    "ddim_timesteps",
+]
 
 Denoiser = Callable[[torch.Tensor, torch.Tensor, Any], torch.Tensor]
 PostStep = Callable[[torch.Tensor, torch.Tensor | None, torch.Tensor], torch.Tensor]
 """``post_step(x, x0_hat, signal) -> x``: a projection of the new sample x (B, ...) after every step, given
 the prediction x0_hat it came from (None before the first step) and ``signal`` (B, 1, ..., 1) =
 sqrt(alpha_bar) of x's noise level (x = signal * x0 + noise; 1 after the last step)."""
+
+
+@runtime_checkable
+class NullConditioned(Protocol):
+    """A denoiser that can state its null condition, so classifier-free guidance takes one call.
+
+    ``null_condition(cond)`` is the condition meaning "no condition" for the batch ``cond`` conditions:
+    of the same type and batch size (a tensor, or a dataclass of batch-first tensors such as a caption's
+    tokens and mask), and ``denoiser(x_t, t, null_condition(cond))`` equals ``denoiser(x_t, t, None)``.
+    Both task denoisers implement it (EMM, the text-to-motion ``LengthMaskedDenoiser``).
+    """
+
+    def __call__(self, x_t: torch.Tensor, t: torch.Tensor, cond: Any) -> torch.Tensor: ...
+
+    def null_condition(self, cond: Any) -> Any: ...
+
+
+def concat_conditions(first: Any, second: Any) -> Any:
+    """Two conditions joined along the batch: tensors by ``torch.cat``, dataclasses field by field."""
+    if torch.is_tensor(first):
+        return torch.cat([first, second])
+    if dataclasses.is_dataclass(first) and not isinstance(first, type):
+        joined = {
+            f.name: concat_conditions(getattr(first, f.name), getattr(second, f.name))
+            for f in dataclasses.fields(first)
+        }
+        return dataclasses.replace(first, **joined)
+    raise TypeError(f"a condition is a tensor or a dataclass of tensors, got {type(first).__name__}")
 
 
 class GuidanceTerm:
@@ -45,34 +84,21 @@ def guided_x0(
 ) -> torch.Tensor:
     """Classifier-free guidance on x0: ``unc + w (cond - unc)`` (EDGE; w = 1 is plain conditional).
 
-    w = 0 returns the unconditional prediction and never evaluates the conditional one. A denoiser that
-    can express both predictions in one batch is called once on the doubled batch ``[x_t; x_t]``
-    instead of twice: it has either ``batch_with_null(cond)`` (any condition type: the condition of the
-    doubled batch, ``cond`` then its null) or ``null_condition(cond) -> tensor`` (a tensor ``cond``;
-    the null condition shaped like it).
+    w = 0 returns the unconditional prediction and never evaluates the conditional one. A
+    :class:`NullConditioned` denoiser is called once on the doubled batch ``[x_t; x_t]`` with the
+    condition ``[cond; null_condition(cond)]``; any other callable twice, with ``cond`` and with ``None``.
     """
     if cond is None or guidance_weight == 0.0:
         return denoiser(x_t, t, None)
     if guidance_weight == 1.0:
         return denoiser(x_t, t, cond)
-    doubled = _condition_with_null(denoiser, cond)
-    if doubled is not None:
+    if isinstance(denoiser, NullConditioned):
+        doubled = concat_conditions(cond, denoiser.null_condition(cond))
         cond_x0, unc_x0 = denoiser(torch.cat([x_t, x_t]), torch.cat([t, t]), doubled).chunk(2)
     else:
         cond_x0 = denoiser(x_t, t, cond)
         unc_x0 = denoiser(x_t, t, None)
     return unc_x0 + guidance_weight * (cond_x0 - unc_x0)
-
-
-def _condition_with_null(denoiser: Denoiser, cond: Any) -> Any:
-    """The condition of the doubled batch ``[cond; null]``; ``None`` if the denoiser cannot say it."""
-    batch_with_null = getattr(denoiser, "batch_with_null", None)
-    if batch_with_null is not None:
-        return batch_with_null(cond)
-    null_condition = getattr(denoiser, "null_condition", None)
-    if null_condition is not None and torch.is_tensor(cond):
-        return torch.cat([cond, null_condition(cond)])
-    return None
 
 
 def _predict_x0(

@@ -20,12 +20,14 @@ with the music muxed in; ``--no-render`` skips it); ``--out FILE.npz`` names the
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.errors import InputError
 
 __all__ = ["main", "build_parser"]
@@ -50,9 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default="dance", help="file stem inside an output folder")
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
     p.add_argument("--render-size", type=_size, default=(640, 480), help="video WxH (multiples of 16)")
-    p.add_argument("--sampler", choices=("ddim", "ddpm"), default=None, help="default: the checkpoint's")
-    p.add_argument("--steps", type=int, default=None, help="DDIM steps (default: the checkpoint's)")
-    p.add_argument("--guidance", type=float, default=None, help="classifier-free guidance weight")
+    add_sampling_arguments(p)
     p.add_argument("--head-weight", type=float, default=None, help="head guidance step size (0: off)")
     p.add_argument(
         "--head",
@@ -168,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(str(err)) from err
     head_source, head = _head_targets(args, module, frames, oracle)
     model = module.model if args.no_ema else module.ema.module
+    sampling = module.sampling.override(**sampling_overrides(args))
     tokens = sample_long_dance(
         model,
         module.diffusion,
@@ -176,10 +177,9 @@ def main(argv: list[str] | None = None) -> int:
         head,
         window=args.window,
         overlap=args.overlap,
-        sampler=args.sampler or hp.sampler,
-        steps=args.steps or hp.sampling_steps,
-        guidance_weight=hp.guidance_weight if args.guidance is None else args.guidance,
-        head_weight=hp.head_guidance_weight if args.head_weight is None else args.head_weight,
+        **dataclasses.asdict(sampling),
+        head_guidance_weight=hp.head_guidance_weight if args.head_weight is None else args.head_weight,
+        head_guidance_steps=hp.head_guidance_steps,
         generator=torch.Generator().manual_seed(args.seed),
         progress=args.progress,
     )

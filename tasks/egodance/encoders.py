@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import math
 import warnings
 from pathlib import Path
 
@@ -23,8 +22,9 @@ import torch
 from torch import nn
 from transformers import ResNetConfig, ResNetModel
 
+from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
+
 __all__ = [
-    "sinusoidal_embedding",
     "transformer_encoder",
     "load_resnet",
     "MusicEncoder",
@@ -34,15 +34,6 @@ __all__ = [
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
-
-
-def sinusoidal_embedding(positions: torch.Tensor, dim: int) -> torch.Tensor:
-    """(...,) positions -> (..., dim) sin/cos embedding (Vaswani et al.; DDPM timestep embedding)."""
-    half = dim // 2
-    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, device=positions.device) / max(half, 1))
-    args = positions.float()[..., None] * freqs
-    emb = torch.cat([torch.sin(args), torch.cos(args)], dim=-1)
-    return nn.functional.pad(emb, (0, dim % 2))
 
 
 def transformer_encoder(

@@ -25,13 +25,9 @@ from torch import nn
 from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
-from skeleton_mamba.tasks.egodance.encoders import (
-    FusionModule,
-    MusicEncoder,
-    VisionEncoder,
-    sinusoidal_embedding,
-)
+from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
 
 __all__ = ["EMM"]
@@ -131,7 +127,8 @@ class EMM(nn.Module):
         return self.fuse(*self.encode_modalities(music, frames))
 
     def null_condition(self, context: torch.Tensor) -> torch.Tensor:
-        """The learned null condition shaped like ``context`` (B, S, Dc) (for batched guidance)."""
+        """The learned null condition shaped like ``context`` (B, S, Dc)
+        (:class:`~skeleton_mamba.tasks.diffusion.NullConditioned`: guidance in one call)."""
         return self.null_context.to(context.dtype).expand_as(context)
 
     def drop_condition(self, context: torch.Tensor, drop: torch.Tensor) -> torch.Tensor:
@@ -159,6 +156,7 @@ class EMM(nn.Module):
         b, n = x_t.shape[:2]
         if context is None:
             context = self.null_context.to(x_t.dtype).expand(b, n, -1)
+        # the [sin, cos] timestep embedding (EDGE's order; :mod:`skeleton_mamba.tasks.diffusion.embedding`)
         temb = self.time_mlp(sinusoidal_embedding(t, self.input_proj.out_features).to(x_t.dtype))
         h = self.input_proj(self.skip_x0.network_input(x_t, t)) + temb[:, None, None, :]
         context = torch.cat([self.time_token(temb)[:, None], context], dim=1)

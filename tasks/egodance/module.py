@@ -25,6 +25,8 @@ provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on)
 
 from __future__ import annotations
 
+import dataclasses
+
 import torch
 from lightning.pytorch import LightningModule
 from lightning.pytorch.utilities import rank_zero_info
@@ -35,7 +37,7 @@ from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
 from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadEstimatorConfig,
@@ -103,7 +105,8 @@ class EgoDanceModule(LightningModule):
         align_temperature: its InfoNCE temperature tau.
         lr: AdamW learning rate (2e-4). weight_decay: AdamW weight decay.
         ema_decay: EMA decay. ema_every: update the EMA every this many optimizer steps.
-        sampler: ``ddim`` or ``ddpm`` at test/predict time. sampling_steps: DDIM steps.
+        sampler: ``ddim`` or ``ddpm`` at test/predict time. sampling_steps: DDIM steps. eta: DDIM noise
+            (EDGE: 1) (:class:`~skeleton_mamba.tasks.diffusion.SamplingOptions`).
         guidance_weight: classifier-free guidance weight w (EDGE: 2).
         head_guidance_weight: G_head step size (0 disables). head_guidance_steps: gradient steps per step.
         head_source: where head guidance takes its targets: ``estimate`` (from the frames), ``oracle`` (the
@@ -147,6 +150,7 @@ class EgoDanceModule(LightningModule):
         ema_every: int = 10,
         sampler: str = "ddim",
         sampling_steps: int = 50,
+        eta: float = 1.0,
         guidance_weight: float = 2.0,
         head_guidance_weight: float = 0.05,
         head_guidance_steps: int = 1,
@@ -169,6 +173,7 @@ class EgoDanceModule(LightningModule):
                 "head_source='estimate' needs the head-trajectory estimator, which needs egocentric frames "
                 "(use_vision=True, use_head_estimator=True); choose head_source 'none' (or 'oracle')"
             )
+        SamplingOptions(sampler, sampling_steps, eta, guidance_weight)  # checks them
         config = backbone_config(backbone)
         estimator_config = _estimator_config(head_estimator)
         self.save_hyperparameters(ignore=["backbone", "head_estimator"])
@@ -303,6 +308,11 @@ class EgoDanceModule(LightningModule):
                 nn.utils.clip_grad_norm_(grads, gradient_clip_val)
 
     # ------------------------------------------------------------------ sampling
+    @property
+    def sampling(self) -> SamplingOptions:
+        """Test and predict sampling: ``sampler``, ``sampling_steps``, ``eta``, ``guidance_weight``."""
+        return SamplingOptions.from_hparams(self.hparams)
+
     @torch.no_grad()
     def estimate_head(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Head positions (B, T, 3) and rotations (B, T, 3, 3) estimated from frames (B, T, 3, H, W)."""
@@ -350,11 +360,9 @@ class EgoDanceModule(LightningModule):
             batch["music"],
             batch.get("frames"),
             head,
-            sampler=hp.sampler,
-            steps=hp.sampling_steps,
-            guidance_weight=hp.guidance_weight,
-            head_weight=hp.head_guidance_weight,
-            head_steps=hp.head_guidance_steps,
+            **dataclasses.asdict(self.sampling),
+            head_guidance_weight=hp.head_guidance_weight,
+            head_guidance_steps=hp.head_guidance_steps,
             generator=torch.Generator().manual_seed(hp.seed + batch_idx),
         )
 

@@ -1,8 +1,9 @@
 """Dance generation with a trained EMM: one window, or long-form by stitched windows, and decoding.
 
-The sampler is DDIM (EDGE: 50 steps, eta 1) or ancestral DDPM (the original code, 1000 steps), with
-classifier-free guidance (weight ``guidance_weight``) and the head guidance G_head when head targets
-are given (:mod:`.guidance`).
+Sampling goes through the shared entry point :func:`~skeleton_mamba.tasks.diffusion.sample` (DDIM, EDGE:
+50 steps, eta 1; or ancestral DDPM, the original code, 1000 steps) with classifier-free guidance
+(``guidance_weight``) and the head guidance G_head when head targets are given (:mod:`.guidance`);
+long tracks through :func:`~skeleton_mamba.tasks.diffusion.sample_long`.
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, WindowConsistency, ddim_sample, ddpm_sample
-from skeleton_mamba.tasks.diffusion.stitching import split_windows, stitch_windows, window_starts
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, sample, sample_long
+from skeleton_mamba.tasks.diffusion.stitching import split_windows, window_starts
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
@@ -47,27 +48,37 @@ def sample_dance(
     frames: torch.Tensor | None = None,
     head: torch.Tensor | None = None,
     sampler: str = "ddim",
-    steps: int = 50,
+    sampling_steps: int = 50,
     eta: float = 1.0,
     guidance_weight: float = 2.0,
-    head_weight: float = 0.05,
-    head_steps: int = 1,
+    head_guidance_weight: float = 0.05,
+    head_guidance_steps: int = 1,
     post_step=None,
     generator: torch.Generator | None = None,
     progress: bool = False,
 ) -> torch.Tensor:
     """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
 
-    ``sampler`` is ``"ddim"`` (``steps`` steps) or ``"ddpm"`` (all T steps; ``steps`` is ignored). The
-    condition (music + vision encoders + fusion) is encoded once, not per denoising step.
+    ``sampler``, ``sampling_steps``, ``eta`` and ``guidance_weight`` are the options of
+    :class:`~skeleton_mamba.tasks.diffusion.SamplingOptions`; ``head_guidance_weight`` and
+    ``head_guidance_steps`` those of :class:`.guidance.HeadGuidance`. The condition (music + vision
+    encoders + fusion) is encoded once, not per denoising step.
     """
     b, t = music.shape[:2]
     context = model.encode_condition(music, frames)
     guidance = []
-    if head is not None and head_weight > 0:
-        guidance.append(HeadGuidance(head, head_weight, head_steps, num_steps=diffusion.num_steps))
-    common = dict(
-        cond=context,
+    if head is not None and head_guidance_weight > 0:
+        guidance.append(
+            HeadGuidance(head, head_guidance_weight, head_guidance_steps, num_steps=diffusion.num_steps)
+        )
+    return sample(
+        diffusion,
+        model,
+        (b, t, NUM_JOINTS, NUM_CHANNELS),
+        context,
+        sampler=sampler,
+        sampling_steps=sampling_steps,
+        eta=eta,
         guidance_weight=guidance_weight,
         guidance=guidance,
         post_step=post_step,
@@ -76,12 +87,6 @@ def sample_dance(
         dtype=music.dtype,
         progress=progress,
     )
-    shape = (b, t, NUM_JOINTS, NUM_CHANNELS)
-    if sampler == "ddim":
-        return ddim_sample(diffusion, model, shape, sampling_steps=steps, eta=eta, **common)
-    if sampler == "ddpm":
-        return ddpm_sample(diffusion, model, shape, **common)
-    raise ValueError(f"unknown sampler {sampler!r} (ddim | ddpm)")
 
 
 def sample_long_dance(
@@ -96,21 +101,15 @@ def sample_long_dance(
 ) -> torch.Tensor:
     """A whole track: music (T, L), frames (T, 3, S, S), head (T, 3) -> tokens (T, 24, 10).
 
-    The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75), sampled as
-    one batch whose overlaps are in-painted after every step (:class:`WindowConsistency`; the root's
-    horizontal position relative to each window's start, as in training), and stitched into one
+    The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75; one padded
+    window when the track is shorter), sampled as one batch by
+    :func:`~skeleton_mamba.tasks.diffusion.sample_long` (overlaps in-painted after every step, the root's
+    horizontal position relative to each window's start, as in training) and stitched into one
     continuous dance in the first window's frame. Head targets (T, 3) are moved into each window's frame
     by the head's own horizontal displacement since frame 0 (an approximation of the root's, which is only
     known once sampled). Other arguments as :func:`sample_dance`.
     """
     total = music.shape[0]
-    if total <= window:
-        pad = window - total
-        music_w = split_windows(music, window, 0)
-        frames_w = None if frames is None else split_windows(frames, window, 0)
-        head_w = None if head is None else split_windows(head, window, 0)
-        out = sample_dance(model, diffusion, music_w, frames_w, head_w, **kwargs)
-        return out[0, : window - pad]
     music_w = split_windows(music, window, overlap)
     frames_w = None if frames is None else split_windows(frames, window, overlap)
     head_w = None
@@ -120,9 +119,11 @@ def sample_long_dance(
         shift = head[[min(s, total - 1) for s in starts]] - head[:1]
         shift[:, 1] = 0.0  # heights are absolute (floor at y = 0)
         head_w = head_w - shift[:, None]
-    consistency = WindowConsistency(overlap, root_xz_mask())
-    windows = sample_dance(model, diffusion, music_w, frames_w, head_w, post_step=consistency, **kwargs)
-    return stitch_windows(consistency.to_global(windows), overlap, total)
+
+    def windows(post_step) -> torch.Tensor:
+        return sample_dance(model, diffusion, music_w, frames_w, head_w, post_step=post_step, **kwargs)
+
+    return sample_long(windows, overlap, total, relative=root_xz_mask())
 
 
 def tokens_to_motion(tokens: torch.Tensor, fps: float = 30.0) -> MotionData:

@@ -16,12 +16,15 @@ The demo model was trained on SYNTHETIC captioned dances; the files, metadata an
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import warnings
 from pathlib import Path
 
 import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
+from skeleton_mamba.tasks.diffusion import SamplingOptions
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores, format_caption_scores
 from skeleton_mamba.tasks.text2motion.features import recover_from_ric
@@ -40,7 +43,9 @@ class TextToMotionDemo(Callback):
         length: duration, ``"6s"`` (20 fps) or a frame count.
         out_subdir: folder under the trainer's log dir (``runs/<name>/version_N``).
         render: ``"mp4"``, ``"gif"`` or ``None`` (no video).
-        sampling_steps: DDIM steps; ``None`` = DDPM; -1 = the module's setting.
+        sampler: ``"ddim"`` or ``"ddpm"`` (``None``: the module's).
+        sampling_steps: DDIM steps (``None``: the module's; a number alone selects DDIM; -1 is the
+            deprecated spelling of ``None``).
         seed: noise seed.
         score_captions: held-out captions (of the data module's val split) to score (0: no scores).
         score_samples: motions generated per scored caption (at least 2).
@@ -52,17 +57,22 @@ class TextToMotionDemo(Callback):
         length: str = "6s",
         out_subdir: str = "demo",
         render: str | None = "mp4",
-        sampling_steps: int | None = -1,
+        sampling_steps: int | None = None,
         seed: int = 0,
         score_captions: int = 2,
         score_samples: int = 2,
+        sampler: str | None = None,
     ) -> None:
+        if sampling_steps == -1:
+            warnings.warn("TextToMotionDemo: sampling_steps -1 is deprecated, use null", FutureWarning, 2)
+            sampling_steps = None
         self.prompts = list(prompts or ["a person waves both arms up and down."])
         self.frames = parse_length(length)
         if render not in (None, "mp4", "gif"):
             raise ValueError(f"render must be 'mp4', 'gif' or null, got {render!r}")
         self.out_subdir = out_subdir
         self.render = render
+        self.sampler = sampler
         self.sampling_steps = sampling_steps
         self.seed = seed
         if score_captions and (score_captions < 2 or score_samples < 2):
@@ -79,13 +89,14 @@ class TextToMotionDemo(Callback):
         out = self.out_dir(trainer)
         was_training = pl_module.training
         pl_module.eval()
+        sampling = pl_module.sampling.override(self.sampler, self.sampling_steps)
         features, _ = pl_module.generate(
             self.prompts,
             [self.frames] * len(self.prompts),
             generator=torch.Generator().manual_seed(self.seed),
-            sampling_steps=self.sampling_steps,
+            **dataclasses.asdict(sampling),
         )
-        scored = self._score(trainer, pl_module)
+        scored = self._score(trainer, pl_module, sampling)
         if was_training:
             pl_module.train()
         records = []
@@ -93,14 +104,12 @@ class TextToMotionDemo(Callback):
             stem = out / f"synthetic_{i:02d}_{slug(prompt)}"
             paths = save_generated(features[i], prompt, stem, self.render)
             records.append({"prompt": prompt, **{k: str(v) for k, v in paths.items()}})
-        steps = pl_module.hparams.get("sampling_steps") if self.sampling_steps == -1 else self.sampling_steps
         summary = {
             "synthetic": True,
             "label": LABEL,
             "frames": self.frames,
             "fps": 20,
-            "sampling_steps": steps,
-            "guidance_weight": pl_module.hparams.get("guidance_weight"),
+            **sampling.describe(),
             "global_step": trainer.global_step,
             "samples": records,
         }
@@ -121,7 +130,9 @@ class TextToMotionDemo(Callback):
             lines.append(format_caption_scores(scores, checks))
         print("\n".join(lines), flush=True)
 
-    def _score(self, trainer: Trainer, pl_module: LightningModule) -> tuple[dict, dict] | None:
+    def _score(
+        self, trainer: Trainer, pl_module: LightningModule, sampling: SamplingOptions
+    ) -> tuple[dict, dict] | None:
         """Generate for held-out captions and score them (:mod:`.demo_scores`); None when not scoring."""
         datasets = getattr(trainer.datamodule, "datasets", {}) or {}
         if not self.score_captions or "train" not in datasets or "val" not in datasets:
@@ -138,7 +149,7 @@ class TextToMotionDemo(Callback):
             prompts,
             [self.frames] * len(prompts),
             generator=torch.Generator().manual_seed(self.seed + 1),
-            sampling_steps=self.sampling_steps,
+            **dataclasses.asdict(sampling),
         )
         joints = recover_from_ric(features.detach().cpu().double())
         motions = {c: [joints[i] for i, p in enumerate(prompts) if p == c] for c in captions}

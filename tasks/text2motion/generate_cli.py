@@ -8,8 +8,9 @@ repetition it writes, in ``DIR``:
 - ``NNN_<words>.gif`` / ``.mp4`` with ``--render gif|mp4``.
 
 ``--length`` is seconds with an ``s`` suffix (``6s`` = 120 frames) or a frame count (``120``).
-Sampling is DDIM with ``--steps`` steps (default: the checkpoint's setting) or ancestral DDPM over all
-steps with ``--steps ddpm``; ``--guidance`` is the classifier-free guidance scale.
+Sampling takes the checkpoint's settings unless ``--sampler ddim|ddpm``, ``--steps`` (DDIM steps; alone it
+selects DDIM), ``--eta`` or ``--guidance`` (the classifier-free guidance scale) say otherwise, as for
+``sm dance``.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
@@ -86,10 +88,6 @@ def save_generated(
     return paths
 
 
-def _steps(value: str) -> int | None:
-    return None if value == "ddpm" else int(value)
-
-
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm generate", description="Generate motion from text.")
     p.add_argument("--checkpoint", required=True, help="TextToMotionModule checkpoint (.ckpt)")
@@ -97,8 +95,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default 6s)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--num", type=int, default=1, help="samples per caption")
-    p.add_argument("--steps", type=_steps, default=-1, help="DDIM steps, or 'ddpm' (default: checkpoint's)")
-    p.add_argument("--guidance", type=float, default=None, help="CFG scale (default: checkpoint's, 2.5)")
+    add_sampling_arguments(p)
     p.add_argument("--seed", type=int, default=0, help="noise seed")
     p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
     return p
@@ -124,9 +121,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         captions,
         [frames] * len(captions),
         generator=torch.Generator().manual_seed(args.seed),
-        guidance_weight=args.guidance,
-        sampling_steps=args.steps,
         progress=True,
+        **sampling_overrides(args),
     )
     out = Path(args.out)
     for i, caption in enumerate(captions):

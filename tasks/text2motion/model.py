@@ -26,13 +26,13 @@ with the backbone's output F: :mod:`skeleton_mamba.tasks.diffusion.parameterisat
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 
@@ -82,12 +82,14 @@ def tokens_to_features(tokens: torch.Tensor) -> torch.Tensor:
     return out.index_copy(-1, flat_index[used], flat)
 
 
-def timestep_embedding(t: torch.Tensor, dim: int, max_period: float = 10000.0) -> torch.Tensor:
-    """Sinusoidal embedding (B,) -> (B, dim): ``[cos(t f_k), sin(t f_k)]``, ``f_k = max_period^(-k/half)``."""
-    half = dim // 2
-    freqs = torch.exp(-math.log(max_period) * torch.arange(half, device=t.device, dtype=torch.float32) / half)
-    args = t.float()[:, None] * freqs[None]
-    return torch.cat([torch.cos(args), torch.sin(args)], dim=-1)
+TIME_EMBEDDING_ORDER = "cos_sin"
+"""The text-to-motion denoisers' timestep embedding layout (guided-diffusion's ``[cos, sin]``)
+of :func:`~skeleton_mamba.tasks.diffusion.sinusoidal_embedding`, kept so checkpoints keep their outputs."""
+
+
+def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
+    """(B,) timesteps -> (B, dim) ``[cos(t f_k), sin(t f_k)]`` (:data:`TIME_EMBEDDING_ORDER`)."""
+    return sinusoidal_embedding(t, dim, order=TIME_EMBEDDING_ORDER)
 
 
 @dataclass
@@ -97,24 +99,22 @@ class TextCondition:
     tokens: torch.Tensor
     mask: torch.Tensor
 
-    def with_null(self) -> TextCondition:
-        """``[self; null]`` for a doubled batch: the null half is all padding (no caption token).
+    def null(self) -> TextCondition:
+        """The null condition of this batch: all padding (no caption token), of the same shape.
 
         Both text-to-motion denoisers read an all-padding caption exactly as no caption (the
         cross-attention sees only the time token; the transformer's pooled text is zero), so one call
-        on the doubled batch gives the conditional and the unconditional prediction.
+        on the doubled batch ``[cond; null]`` gives the conditional and the unconditional prediction.
         """
-        return TextCondition(
-            torch.cat([self.tokens, torch.zeros_like(self.tokens)]),
-            torch.cat([self.mask, torch.zeros_like(self.mask)]),
-        )
+        return TextCondition(torch.zeros_like(self.tokens), torch.zeros_like(self.mask))
 
 
 class LengthMaskedDenoiser:
     """A text-to-motion denoiser at fixed frame masks, as the samplers call it: ``(x_t, t, cond) -> x0``.
 
     ``model(x_t, t, cond, mask)`` is either denoiser of this package; ``mask`` (B, T) bool marks valid
-    frames. On the doubled batch of classifier-free guidance (``batch_with_null``) the mask repeats.
+    frames. It implements :class:`~skeleton_mamba.tasks.diffusion.NullConditioned` (the null caption
+    :meth:`TextCondition.null`); on the doubled batch of classifier-free guidance the mask repeats.
     """
 
     def __init__(self, model: nn.Module, mask: torch.Tensor) -> None:
@@ -127,8 +127,8 @@ class LengthMaskedDenoiser:
         return self.model(x_t, t, cond, mask)
 
     @staticmethod
-    def batch_with_null(cond: TextCondition) -> TextCondition:
-        return cond.with_null()
+    def null_condition(cond: TextCondition) -> TextCondition:
+        return cond.null()
 
 
 class TextToMotionDenoiser(nn.Module):
@@ -140,7 +140,7 @@ class TextToMotionDenoiser(nn.Module):
         text_dim: width of the caption token embeddings (384 MiniLM, 512 CLIP ViT-B/32).
         time_channels: timestep channels appended to every joint token.
         time_embedding_dim: sinusoidal embedding size of the timestep.
-        num_steps: T of the noise schedule (scales the skip connection from x_t,
+        diffusion_steps: T of the noise schedule (scales the skip connection from x_t,
             :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
     """
 
@@ -150,7 +150,7 @@ class TextToMotionDenoiser(nn.Module):
         text_dim: int,
         time_channels: int = 16,
         time_embedding_dim: int = 128,
-        num_steps: int = 1000,
+        diffusion_steps: int = 1000,
     ) -> None:
         super().__init__()
         config = dataclasses.replace(
@@ -167,7 +167,7 @@ class TextToMotionDenoiser(nn.Module):
         self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
         self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
         self.text_proj = nn.Linear(text_dim, text_dim)
-        self.skip_x0 = SkipX0(num_steps, channels=(FEATURE_DIM,))
+        self.skip_x0 = SkipX0(diffusion_steps, channels=(FEATURE_DIM,))
 
     def set_data_statistics(self, features: torch.Tensor) -> None:
         """Per-feature mean and std of normalised training features (N, 263) for the preconditioning (the

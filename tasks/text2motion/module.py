@@ -3,8 +3,10 @@
 Training (MDM, ``GuyTevet/motion-diffusion-model``): x0 prediction with the shared
 :class:`~skeleton_mamba.tasks.diffusion.GaussianDiffusion` (cosine schedule, 1,000 steps, uniform t),
 masked MSE ``|x0 - x0_hat|^2`` over valid frames, the caption dropped with probability 0.1 for
-classifier-free guidance, AdamW (lr 1e-4, weight decay 0). Sampling: classifier-free guidance
-``unc + s (cond - unc)`` with s = 2.5, ancestral DDPM over all steps or DDIM with ``sampling_steps``.
+classifier-free guidance, AdamW (lr 1e-4, weight decay 0). Sampling (the shared
+:func:`~skeleton_mamba.tasks.diffusion.sample`): classifier-free guidance ``unc + s (cond - unc)`` with
+s = ``guidance_weight`` = 2.5, ``sampler`` ancestral DDPM over all steps (MDM) or DDIM with
+``sampling_steps`` steps and noise ``eta``.
 
 The text encoder (:class:`~.text_encoder.TextEncoder`, frozen) is kept outside the module's state:
 checkpoints hold only the denoiser and the feature statistics (``feature_mean``, ``feature_std``,
@@ -21,6 +23,8 @@ The ``eval_*`` / ``evaluator_*`` / ``glove_dir`` settings are not saved in check
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -30,7 +34,7 @@ from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions, sample
 from skeleton_mamba.tasks.text2motion.evaluation import T2MEvaluation, T2MProtocol
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     COMPARABLE,
@@ -48,11 +52,13 @@ from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 
 __all__ = ["TextToMotionModule"]
 
+DEFAULT_SAMPLING_STEPS = 50  # DDIM steps when none is given
 STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
 _EVAL_ARGS = (
     "eval_repetitions",
     "eval_samples",
     "eval_batch_size",
+    "eval_sampler",
     "eval_sampling_steps",
     "eval_diversity_times",
     "eval_mm_samples",
@@ -66,6 +72,30 @@ _EVAL_ARGS = (
 )
 
 
+def _legacy_sampling(
+    num_steps: int | None, diffusion_steps: int, sampler: str, sampling_steps: int | None
+) -> tuple[int, str, int]:
+    """``(diffusion_steps, sampler, sampling_steps)`` with the old spellings (``num_steps``;
+    ``sampling_steps`` ``None`` for DDPM, a number for DDIM) mapped, and a warning naming the new ones."""
+    if num_steps is not None:
+        warnings.warn(
+            "TextToMotionModule: num_steps is deprecated, use diffusion_steps (and sampler: ddim | ddpm with "
+            "sampling_steps for DDIM's steps); with num_steps, sampling_steps keeps its old meaning "
+            f"(sampling_steps={sampling_steps}: {'DDPM' if sampling_steps is None else 'DDIM'})",
+            FutureWarning,
+            stacklevel=3,
+        )
+        diffusion_steps, sampler = num_steps, "ddpm" if sampling_steps is None else "ddim"
+    elif sampling_steps is None:
+        warnings.warn(
+            "TextToMotionModule: sampling_steps: null for DDPM is deprecated, use sampler: ddpm",
+            FutureWarning,
+            stacklevel=3,
+        )
+        sampler = "ddpm"
+    return diffusion_steps, sampler, DEFAULT_SAMPLING_STEPS if sampling_steps is None else sampling_steps
+
+
 class TextToMotionModule(LightningModule):
     """Skeleton Mamba text-to-motion diffusion.
 
@@ -74,16 +104,20 @@ class TextToMotionModule(LightningModule):
         text_encoder_path: local CLIP / transformers folder; ``None`` = the packaged MiniLM.
         max_tokens: caption tokens kept by the text encoder.
         time_channels: timestep channels appended to every joint token.
-        num_steps: diffusion steps T (1000).
+        diffusion_steps: diffusion steps T (1000).
         cond_drop_prob: probability of dropping the caption in training (0.1).
         guidance_weight: classifier-free guidance scale s at sampling (2.5).
-        sampling_steps: ``None`` = DDPM over all T steps; else DDIM with this many steps.
+        sampler: ``ddpm`` (all T steps, MDM) or ``ddim`` at sampling.
+        sampling_steps: DDIM steps (``None``: deprecated spelling of ``sampler: ddpm``).
+        eta: DDIM noise (0: deterministic).
         lr: AdamW learning rate (1e-4).
         weight_decay: AdamW weight decay (0).
         eval_repetitions: T2M protocol replications at ``sm test`` (20); 0 reports the test loss only.
         eval_samples: generated motions per replication (MDM: 1000); ``None`` = the whole test split.
         eval_batch_size: R-Precision group size (32).
-        eval_sampling_steps: DDIM steps for the evaluation; ``None`` = DDPM; -1 = ``sampling_steps``.
+        eval_sampler: the evaluation's sampler (``None``: the module's ``sampler``).
+        eval_sampling_steps: the evaluation's DDIM steps (``None``: the module's; a number alone selects
+            DDIM; -1 is the deprecated spelling of ``None``).
         eval_diversity_times: Diversity pairs (300).
         eval_mm_samples: captions for MultiModality (MDM mm modes: 100); 0 skips it.
         eval_mm_repeats: generations per MultiModality caption (30).
@@ -96,6 +130,9 @@ class TextToMotionModule(LightningModule):
         evaluator_std: the evaluator's Std (MDM ``dataset/t2m_std.npy``).
         glove_dir: folder of ``our_vab_*`` GloVe files; needed with an evaluator checkpoint; without it
             (random evaluator only) words get hashed random vectors.
+        num_steps: deprecated spelling of ``diffusion_steps``; with it, ``sampling_steps`` keeps its old
+            meaning (a number: DDIM with that many steps; ``None``: DDPM) whatever ``sampler`` says, so
+            checkpoints and recipes written before ``sampler`` existed sample as they did.
     """
 
     def __init__(
@@ -104,16 +141,19 @@ class TextToMotionModule(LightningModule):
         text_encoder_path: str | None = None,
         max_tokens: int = 77,
         time_channels: int = 16,
-        num_steps: int = 1000,
+        diffusion_steps: int = 1000,
         cond_drop_prob: float = 0.1,
         guidance_weight: float = 2.5,
-        sampling_steps: int | None = None,
+        sampler: str = "ddpm",
+        sampling_steps: int | None = DEFAULT_SAMPLING_STEPS,
+        eta: float = 0.0,
         lr: float = 1e-4,
         weight_decay: float = 0.0,
         eval_repetitions: int = 20,
         eval_samples: int | None = 1000,
         eval_batch_size: int = 32,
-        eval_sampling_steps: int | None = -1,
+        eval_sampler: str | None = None,
+        eval_sampling_steps: int | None = None,
         eval_diversity_times: int = 300,
         eval_mm_samples: int = 0,
         eval_mm_repeats: int = 30,
@@ -123,21 +163,33 @@ class TextToMotionModule(LightningModule):
         evaluator_mean: str | None = None,
         evaluator_std: str | None = None,
         glove_dir: str | None = None,
+        num_steps: int | None = None,
     ) -> None:
         super().__init__()
+        diffusion_steps, sampler, sampling_steps = _legacy_sampling(
+            num_steps, diffusion_steps, sampler, sampling_steps
+        )
+        if eval_sampling_steps == -1:
+            warnings.warn("eval_sampling_steps: -1 is deprecated, use null (the module's)", FutureWarning, 2)
+            eval_sampling_steps = None
+        SamplingOptions(sampler, sampling_steps, eta, guidance_weight).override(
+            eval_sampler, eval_sampling_steps
+        )  # checks both
         config = backbone_config(backbone)
         # Evaluation settings are test-time options kept out of the checkpoint's hyperparameters: LightningCLI
         # lets a checkpoint's hyperparameters override the command line, which would freeze them at training
         # time.
         self.eval_options = SimpleNamespace(**{k: v for k, v in locals().items() if k in _EVAL_ARGS})
-        self.save_hyperparameters(ignore=["backbone", *_EVAL_ARGS])
+        self.save_hyperparameters(ignore=["backbone", "num_steps", *_EVAL_ARGS])
+        # the new spellings (LightningCLI saves the arguments as given, old spellings included)
+        self.hparams.update(diffusion_steps=diffusion_steps, sampler=sampler, sampling_steps=sampling_steps)
         self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
         self.denoiser = TextToMotionDenoiser(
-            config, self.text_encoder.dim, time_channels, num_steps=num_steps
+            config, self.text_encoder.dim, time_channels, diffusion_steps=diffusion_steps
         )
-        self.diffusion = GaussianDiffusion(num_steps)
+        self.diffusion = GaussianDiffusion(diffusion_steps)
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
         self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
 
@@ -188,18 +240,16 @@ class TextToMotionModule(LightningModule):
         if self.eval_options.eval_repetitions < 1:
             return
         evaluation, label = self._t2m_evaluation()
-        steps = self.eval_options.eval_sampling_steps
+        hp = self.eval_options
+        sampling = self.sampling.override(hp.eval_sampler, hp.eval_sampling_steps)
 
         def generate(captions: list[str], lengths: list[int], noise: torch.Generator) -> torch.Tensor:
-            return self.generate(captions, lengths, generator=noise, sampling_steps=steps)[0]
+            return self.generate(captions, lengths, generator=noise, **dataclasses.asdict(sampling))[0]
 
         progress = self.trainer.progress_bar_callback is not None
         summary = summarize(evaluation.run(generate, progress=progress))
         folder = Path(self.trainer.log_dir or self.trainer.default_root_dir)
-        protocol = {
-            **evaluation.describe(),
-            "sampling_steps": self.hparams.sampling_steps if steps == -1 else steps,
-        }
+        protocol = {**evaluation.describe(), **sampling.describe()}
         protocol["evaluator_checkpoint"] = self.eval_options.evaluator_checkpoint
         json_path, csv_path = write_report(folder, summary, label, protocol)
         self.print(format_table(summary, label))
@@ -244,6 +294,11 @@ class TextToMotionModule(LightningModule):
         label = COMPARABLE if evaluator.comparable else NOT_COMPARABLE
         return T2MEvaluation(evaluator, clips, words, mean, std, protocol), label
 
+    @property
+    def sampling(self) -> SamplingOptions:
+        """The module's sampling: ``sampler``, ``sampling_steps``, ``eta``, ``guidance_weight``."""
+        return SamplingOptions.from_hparams(self.hparams)
+
     @torch.no_grad()
     def generate(
         self,
@@ -251,8 +306,10 @@ class TextToMotionModule(LightningModule):
         lengths: list[int],
         generator: torch.Generator | None = None,
         guidance_weight: float | None = None,
-        sampling_steps: int | None = -1,
+        sampling_steps: int | None = None,
         progress: bool = False,
+        sampler: str | None = None,
+        eta: float | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Sample motions for captions.
 
@@ -260,27 +317,30 @@ class TextToMotionModule(LightningModule):
             captions: B captions.
             lengths: B lengths in frames (20 fps).
             generator: CPU generator for reproducible noise.
-            guidance_weight: CFG scale (default: the module's).
-            sampling_steps: DDIM steps; ``None`` = DDPM over all steps; ``-1`` (default) = the module's.
+            guidance_weight, sampling_steps, sampler, eta: overrides of the module's :attr:`sampling`
+                (``None`` keeps its setting; a step count alone selects DDIM:
+                :meth:`~skeleton_mamba.tasks.diffusion.SamplingOptions.override`).
             progress: show a progress bar.
 
         Returns:
             De-normalised features (B, T_max, 263) (zeros past each length) and the mask (B, T_max).
         """
-        steps = self.hparams.sampling_steps if sampling_steps == -1 else sampling_steps
-        weight = self.hparams.guidance_weight if guidance_weight is None else guidance_weight
+        options = self.sampling.override(sampler, sampling_steps, eta, guidance_weight)
         lengths_t = torch.tensor(lengths, device=self.device)
         mask = torch.arange(int(lengths_t.max()), device=self.device)[None] < lengths_t[:, None]
         cond = self.encode_text(captions)
-
         denoiser = LengthMaskedDenoiser(self.denoiser, mask)  # guidance: one call on a doubled batch
         shape = (len(captions), mask.shape[1], FEATURE_DIM)
-        common = dict(cond=cond, guidance_weight=weight, generator=generator, device=self.device)
-        common["progress"] = progress
-        if steps is None:
-            x = ddpm_sample(self.diffusion, denoiser, shape, **common)
-        else:
-            x = ddim_sample(self.diffusion, denoiser, shape, sampling_steps=steps, eta=0.0, **common)
+        x = sample(
+            self.diffusion,
+            denoiser,
+            shape,
+            cond,
+            **dataclasses.asdict(options),
+            generator=generator,
+            device=self.device,
+            progress=progress,
+        )
         features = (x * self.feature_std + self.feature_mean) * mask[..., None]
         return features, mask
 

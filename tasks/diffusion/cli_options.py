@@ -1,0 +1,50 @@
+"""The sampling options of the generative commands (``sm dance``, ``sm generate``), spelled alike.
+
+``--sampler ddim|ddpm``, ``--steps N`` (DDIM steps; alone it selects DDIM), ``--eta`` and ``--guidance``
+override the checkpoint's :class:`~.sampling.SamplingOptions` (:meth:`~.sampling.SamplingOptions.override`).
+``--steps ddpm`` is the deprecated spelling of ``--sampler ddpm``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+
+from skeleton_mamba.tasks.diffusion.sampling import SAMPLERS
+
+__all__ = ["add_sampling_arguments", "sampling_overrides"]
+
+_DDPM_STEPS = "ddpm"
+
+
+def _steps(text: str) -> int | str:
+    if text == _DDPM_STEPS:
+        return text
+    try:
+        steps = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of DDIM steps, got {text!r}") from None
+    if steps < 1:
+        raise argparse.ArgumentTypeError(f"expected at least 1 DDIM step, got {steps}")
+    return steps
+
+
+def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--sampler``, ``--steps``, ``--eta`` and ``--guidance`` (each default: the checkpoint's)."""
+    parser.add_argument("--sampler", choices=SAMPLERS, default=None, help="default: the checkpoint's")
+    parser.add_argument(
+        "--steps", type=_steps, default=None, help="DDIM steps (alone: DDIM; default: the checkpoint's)"
+    )
+    parser.add_argument("--eta", type=float, default=None, help="DDIM noise eta (default: the checkpoint's)")
+    parser.add_argument(
+        "--guidance", type=float, default=None, help="classifier-free guidance weight (default: checkpoint's)"
+    )
+
+
+def sampling_overrides(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :meth:`~.sampling.SamplingOptions.override` that ``args`` gives."""
+    sampler, steps = args.sampler, args.steps
+    if steps == _DDPM_STEPS:
+        warnings.warn("--steps ddpm is deprecated; use --sampler ddpm", FutureWarning, stacklevel=2)
+        sampler, steps = sampler or "ddpm", None
+    return dict(sampler=sampler, sampling_steps=steps, eta=args.eta, guidance_weight=args.guidance)

@@ -1,0 +1,111 @@
+"""The one sampling entry point of the generative tasks: :func:`sample`, and its options.
+
+Every task names its sampling options the same way (module arguments, recipes, :class:`SamplingOptions`):
+``sampler`` (``"ddim"``: DDIM over ``sampling_steps`` timesteps with noise ``eta``; ``"ddpm"``: ancestral
+sampling through all T steps, where ``sampling_steps`` and ``eta`` do not apply) and ``guidance_weight``
+(the classifier-free guidance weight w). Task-specific terms (EgoMusic's head guidance) are
+:class:`~.samplers.GuidanceTerm` objects passed as ``guidance``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion
+from skeleton_mamba.tasks.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
+
+__all__ = ["SAMPLERS", "SamplingOptions", "sample"]
+
+SAMPLERS = ("ddim", "ddpm")
+
+
+@dataclass(frozen=True)
+class SamplingOptions:
+    """How a task samples (module docstring for the names); checked when made.
+
+    Args:
+        sampler: ``"ddim"`` or ``"ddpm"``.
+        sampling_steps: DDIM timesteps (DDPM runs all T).
+        eta: DDIM noise (0: deterministic; 1: EDGE).
+        guidance_weight: classifier-free guidance weight w (1: plain conditional, 0: unconditional).
+    """
+
+    sampler: str = "ddim"
+    sampling_steps: int = 50
+    eta: float = 1.0
+    guidance_weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {self.sampler!r}")
+        if isinstance(self.sampling_steps, bool) or not isinstance(self.sampling_steps, int):
+            raise ValueError(f"sampling_steps must be an integer, got {self.sampling_steps!r}")
+        if self.sampling_steps < 1:
+            raise ValueError(f"sampling_steps must be >= 1, got {self.sampling_steps}")
+        if not self.eta >= 0:
+            raise ValueError(f"eta must be >= 0, got {self.eta}")
+
+    @classmethod
+    def from_hparams(cls, hparams) -> SamplingOptions:
+        """The options stored under their names in a module's hyper-parameters (a mapping)."""
+        return cls(**{f.name: hparams[f.name] for f in dataclasses.fields(cls)})
+
+    def override(
+        self,
+        sampler: str | None = None,
+        sampling_steps: int | None = None,
+        eta: float | None = None,
+        guidance_weight: float | None = None,
+    ) -> SamplingOptions:
+        """These options with the given ones replaced (``None`` keeps a setting).
+
+        A step count given without a sampler selects DDIM, the sampler that takes one (``sm generate
+        --steps 10`` on a DDPM model samples DDIM with 10 steps).
+        """
+        if sampler is None and sampling_steps is not None:
+            sampler = "ddim"
+        given = dict(sampler=sampler, sampling_steps=sampling_steps, eta=eta, guidance_weight=guidance_weight)
+        return dataclasses.replace(self, **{k: v for k, v in given.items() if v is not None})
+
+    def describe(self) -> dict:
+        """The options as a plain dict, without those the sampler does not use (for reports)."""
+        out = dataclasses.asdict(self)
+        if self.sampler == "ddpm":
+            del out["sampling_steps"], out["eta"]
+        return out
+
+
+def sample(
+    diffusion: GaussianDiffusion,
+    denoiser: Denoiser,
+    shape: Sequence[int],
+    cond: Any = None,
+    *,
+    sampler: str = "ddim",
+    sampling_steps: int = 50,
+    eta: float = 1.0,
+    **kwargs: Any,
+) -> torch.Tensor:
+    """x0 samples (B, ...) of ``shape`` from ``denoiser`` by the chosen sampler.
+
+    Args:
+        diffusion: the schedule (T = ``diffusion.num_steps``).
+        denoiser: ``(x_t, t, cond) -> x0_hat``; a :class:`~.samplers.NullConditioned` one evaluates
+            classifier-free guidance in one call.
+        shape: the sample shape (B, ...).
+        cond: the condition (``None``: unconditional).
+        sampler, sampling_steps, eta: as :class:`SamplingOptions` (``sample(..., **asdict(options))``).
+        **kwargs: the sampler's other options, alike for both (:func:`~.samplers.ddpm_sample`):
+            ``guidance_weight``; ``guidance`` terms (e.g. EgoMusic's head guidance); ``clip_x0``;
+            ``post_step`` (e.g. window consistency); ``x_T``; ``generator``; ``device``, ``dtype``;
+            ``progress``.
+    """
+    SamplingOptions(sampler, sampling_steps, eta)  # checks them
+    if sampler == "ddpm":
+        return ddpm_sample(diffusion, denoiser, shape, cond, **kwargs)
+    return ddim_sample(diffusion, denoiser, shape, cond, sampling_steps=sampling_steps, eta=eta, **kwargs)
