@@ -30,7 +30,7 @@ from pathlib import Path
 
 import lightning.pytorch as pl
 from lightning.pytorch import LightningDataModule, LightningModule
-from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _get_module_type, _InstantiatorFn
+from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _InstantiatorFn
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.checkpoints import load_checkpoint
@@ -52,6 +52,8 @@ DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
     ("skeleton", "skeleton"),
     ("in_channels", "in_channels"),
     ("batch_size", "batch_size"),
+    ("image_size", "image_size"),
+    ("fps", "fps"),
 )
 
 
@@ -120,7 +122,7 @@ class SkeletonMambaCLI(LightningCLI):
         super()._add_instantiators()
         self.parser.add_instantiator(
             _AcceptedLinksInstantiator(cli=self, key="model"),
-            _get_module_type(self._model_class),
+            self.model_class or LightningModule,
             subclasses=self.subclass_mode_model,
             prepend=True,
         )
