@@ -173,3 +173,23 @@ def test_sm_fit_ddp_over_two_cpu_processes(tmp_path):
     assert (run_dir / "checkpoints" / "last.ckpt").is_file()
     assert (run_dir / "config.yaml").is_file() and (run_dir / "metrics.csv").is_file()
     assert not (tmp_path / "runs" / "recognition_synthetic" / "version_1").exists()  # TB and CSV share a dir
+
+
+def test_image_size_and_fps_are_linked_from_the_data_module():
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+
+    import_task_modules()
+    data = ["--data.init_args.image_size", "48", "--data.init_args.fps", "20"]
+    args = ["--config", "egodance_demo.yaml", *data, "--model.init_args.head_source", "none"]
+    args += ["--trainer.logger", "false"]
+    with pytest.warns(UserWarning, match="randomly initialised"):
+        cli = SkeletonMambaCLI(
+            LightningModule, LightningDataModule, subclass_mode_model=True, subclass_mode_data=True,
+            run=False, args=args,
+        )  # fmt: skip
+    assert (cli.model.hparams.image_size, cli.model.hparams.fps) == (48, 20)
+    assert cli.model.model.vision_encoder.image_size == 48
+    recipe = yaml.safe_load((RECIPES_DIR / "egodance_demo.yaml").read_text())["model"]["init_args"]
+    assert "image_size" not in recipe and "fps" not in recipe  # stated once, on the data module

@@ -198,6 +198,7 @@ class EgoDanceDataModule(SplitDataModule):
         super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
         self.root = Path(root)
+        self.fps, self.image_size = fps, image_size  # linked to the model
 
     def check_data(self) -> list[Path]:
         """The complete sample folders; raises :class:`DatasetNotFoundError` saying what is missing."""

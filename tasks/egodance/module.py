@@ -106,7 +106,7 @@ class EgoDanceModule(BackboneModule):
         backbone: SkeletonMambaConfig | None = None,
         network: EMMConfig | None = None,
         image_size: int = 224,
-        fps: float = 30.0,
+        fps: int = 30,
         diffusion_steps: int = 1000,
         cond_drop_prob: float = 0.25,
         reconstruction: str = "l2",
