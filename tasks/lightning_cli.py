@@ -81,7 +81,9 @@ class _AcceptedLinksInstantiator(_InstantiatorFn):
 
     Lightning stores every applied data-to-model link in the checkpoint's hyper-parameters and parses them
     back on ``--ckpt_path``; a link the model has no argument for (``batch_size`` on a module without one)
-    would then break ``sm test/predict --ckpt_path``.
+    would then break ``sm test/predict --ckpt_path``. Lightning has no public hook for this, so the class
+    builds on its private ``_InstantiatorFn`` and ``_add_instantiators``: pyproject bounds lightning below 2.7
+    and ``tests/test_qean_sm.py`` (``sm predict --ckpt_path`` of a module without ``batch_size``) guards it.
     """
 
     def __call__(self, class_type, *args, applied_instantiation_links: dict, **kwargs):

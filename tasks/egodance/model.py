@@ -45,10 +45,8 @@ class EMMConfig:
         context_dim: Dc, the width of the condition tokens (256).
         music_dim: L, per-frame music features (35: librosa; 4800: Jukebox).
         use_vision: encode egocentric frames (``False``: music-only condition).
-        resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
-            downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
-            ``resnet_layers`` (an explicit choice, warned).
-        resnet_layers: ``ResNetConfig`` keyword arguments when no path is given (None: ResNet-50).
+        resnet_layers: ``ResNetConfig`` keyword arguments of a ResNet built without ``resnet_path`` (None:
+            ResNet-50).
         freeze_resnet: keep the ResNet fixed.
         encoder_layers: Transformer layers of the music encoder (2).
         fusion_layers: Transformer layers of the fusion module (2).
@@ -60,7 +58,6 @@ class EMMConfig:
     context_dim: int = 256
     music_dim: int = 35
     use_vision: bool = True
-    resnet_path: str | None = None
     resnet_layers: dict | None = None
     freeze_resnet: bool = True
     encoder_layers: int = 2
@@ -76,6 +73,9 @@ class EMM(nn.Module):
     Args:
         backbone: the SkeletonMamba settings (skeleton, channels and ``context_dim`` are set here).
         config: the condition encoders' settings (None: :class:`EMMConfig` defaults).
+        resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
+            downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
+            ``config.resnet_layers`` (an explicit choice, warned).
         image_size: square size the frames are resized to (the ResNet input).
         diffusion_steps: T of the noise schedule (of the preconditioning's scalings).
     """
@@ -84,6 +84,7 @@ class EMM(nn.Module):
         self,
         backbone: SkeletonMambaConfig | None = None,
         config: EMMConfig | None = None,
+        resnet_path: str | None = None,
         image_size: int = 224,
         diffusion_steps: int = 1000,
     ):
@@ -108,7 +109,7 @@ class EMM(nn.Module):
         )
         resnet_config = ResNetConfig(**c.resnet_layers) if c.resnet_layers else None
         self.vision_encoder = (
-            VisionEncoder(context_dim, c.resnet_path, resnet_config, image_size, c.freeze_resnet)
+            VisionEncoder(context_dim, resnet_path, resnet_config, image_size, c.freeze_resnet)
             if c.use_vision
             else None
         )

@@ -74,6 +74,9 @@ class EgoDanceModule(BackboneModule):
     Args:
         backbone: SkeletonMamba settings (recipes include ``backbones/skeleton_mamba.yaml``).
         network: the condition encoders' settings (:class:`~.model.EMMConfig`; None: its defaults).
+        resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
+            downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
+            ``network.resnet_layers`` (an explicit choice, warned).
         image_size: ResNet input size. Linked from the data module (not user-settable under ``sm``).
         fps: motion and music frame rate of the test metrics. Linked from the data module.
         diffusion_steps: T (1000).
@@ -105,6 +108,7 @@ class EgoDanceModule(BackboneModule):
         self,
         backbone: SkeletonMambaConfig | None = None,
         network: EMMConfig | None = None,
+        resnet_path: str | None = None,
         image_size: int = 224,
         fps: int = 30,
         diffusion_steps: int = 1000,
@@ -151,7 +155,7 @@ class EgoDanceModule(BackboneModule):
         config = self.save_backbone_hyperparameters(backbone, ignore=ignore)
         self.hparams["network"] = plain_backbone_config(network)
         self.hparams["head_estimator"] = plain_backbone_config(estimator_config)
-        self.model = EMM(config, network, image_size=image_size, diffusion_steps=diffusion_steps)
+        self.model = EMM(config, network, resnet_path, image_size, diffusion_steps)
         self.ema = AveragedModel(self.model, multi_avg_fn=get_ema_multi_avg_fn(ema_decay), use_buffers=True)
         self.ema.requires_grad_(False)
         self.diffusion = GaussianDiffusion(diffusion_steps)
