@@ -40,7 +40,6 @@ from pathlib import Path
 import torch
 from torch import nn
 from torch.utils.flop_counter import FlopCounterMode
-from transformers import ResNetConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms  # noqa: E402
@@ -50,7 +49,7 @@ from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_
 from skeleton_mamba.tasks.diffusion.samplers import guided_x0  # noqa: E402
 from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa: E402
 from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
-from skeleton_mamba.tasks.egodance.model import EMM  # noqa: E402
+from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
 
 SIZES = {
@@ -128,19 +127,17 @@ def build(size: str) -> tuple[EMM, TransformerDenoiser]:
         dim=p["dim"], depth=p["depth"], heads=p["heads"], mlp_dim=p["mlp_dim"], group_paths=p["group_paths"],
         mixer=MixerConfig(d_state=p["d_state"], headdim=p["headdim"], chunk_size=p["chunk"]),
     )  # fmt: skip
-    resnet = ResNetConfig(**p["resnet"]) if p["resnet"] else None
+    network = EMMConfig(
+        context_dim=p["context_dim"],
+        use_vision=True,
+        resnet_layers=p["resnet"],
+        heads=p["heads"],
+        transformer_ff=p["ff"],
+        dropout=0.0,
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # random ResNet init: timing only
-        emm = EMM(
-            cfg,
-            context_dim=p["context_dim"],
-            use_vision=True,
-            resnet_config=resnet,
-            image_size=p["image_size"],
-            heads=p["heads"],
-            transformer_ff=p["ff"],
-            dropout=0.0,
-        )
+        emm = EMM(cfg, network, image_size=p["image_size"])
     target = denoiser_params(emm)
     h = p["heads"]
 

@@ -10,7 +10,7 @@ from skeleton_mamba import streaming
 from skeleton_mamba.block import SkeletonMambaBlock
 from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.padding import zero_padding
-from skeleton_mamba.skeletons import DEFAULT_GROUP_PATHS, get_skeleton
+from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.temporal_scan import check_prefix_mask
 
@@ -36,12 +36,8 @@ class SkeletonMamba(nn.Module):
         self.config = config
         skeleton = get_skeleton(config.skeleton)
         self.skeleton = skeleton
-        if config.group_paths is not None:
-            paths = [tuple(p) for p in config.group_paths]
-        elif skeleton.num_groups == 5:
-            paths = list(DEFAULT_GROUP_PATHS)
-        else:
-            paths = [tuple(range(skeleton.num_groups))]
+        group_paths = skeleton.group_paths if config.group_paths is None else config.group_paths
+        paths = [tuple(p) for p in group_paths]
         d = config.dim
         self.input_proj = (
             nn.Linear(config.in_channels, d) if config.in_channels is not None else nn.Identity()

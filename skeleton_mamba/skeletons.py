@@ -91,6 +91,14 @@ class Skeleton:
         return len(self.groups[0])
 
     @property
+    def group_paths(self) -> tuple[tuple[int, ...], ...]:
+        """The default Group Scan paths: the authors' eight (:data:`DEFAULT_GROUP_PATHS`) for the five
+        body groups (spine, arms, legs), else one path in group order."""
+        if self.num_groups == len(GROUP_MIRROR):
+            return DEFAULT_GROUP_PATHS
+        return (tuple(range(self.num_groups)),)
+
+    @property
     def topological_order(self) -> tuple[int, ...]:
         """Joint indices with every parent before its children (for forward kinematics)."""
         order: list[int] = []

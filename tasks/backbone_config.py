@@ -1,7 +1,7 @@
-"""The backbone configuration as task modules receive and store it.
+"""Config dataclasses (the backbone's and the networks') as task modules receive and store them.
 
-Recipes hand task modules a :class:`SkeletonMambaConfig` (LightningCLI parses the dataclass);
-checkpoints store it as plain dicts and lists so that they load with ``weights_only=True``.
+Recipes hand task modules a :class:`SkeletonMambaConfig` or a network's config (LightningCLI parses the
+dataclass); checkpoints store them as plain dicts and lists so that they load with ``weights_only=True``.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 
-__all__ = ["backbone_config", "plain_backbone_config"]
+__all__ = ["backbone_config", "config_from", "plain_backbone_config", "with_flat_fields"]
 
 
 def backbone_config(value: SkeletonMambaConfig | Mapping | None) -> SkeletonMambaConfig:
@@ -42,3 +42,32 @@ def plain_backbone_config(config: SkeletonMambaConfig) -> dict:
         return value
 
     return plain(dataclasses.asdict(config))
+
+
+def config_from(cls: type, value: object | Mapping | None):
+    """A ``cls`` config dataclass from a config, a plain mapping (checkpoint hparams) or ``None`` (defaults).
+
+    Lists become tuples where the field's default is a tuple (checkpoints store tuples as lists).
+    """
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    defaults = cls()
+    fields = {
+        name: tuple(v) if isinstance(v, list) and isinstance(getattr(defaults, name, None), tuple) else v
+        for name, v in dict(value).items()
+    }
+    return cls(**fields)
+
+
+def with_flat_fields(config, flat: Mapping, renames: Mapping[str, str] | None = None):
+    """``config`` with fields replaced by flat keyword arguments (checkpoints saved before the config existed
+    hold its fields as flat hyperparameters; ``renames`` maps their old names to the fields')."""
+    renames = renames or {}
+    values = {renames.get(k, k): v for k, v in flat.items()}
+    unknown = sorted(set(values) - {f.name for f in dataclasses.fields(config)})
+    if unknown:
+        name = type(config).__name__
+        raise TypeError(f"unexpected keyword arguments {', '.join(unknown)}: not fields of {name}")
+    return dataclasses.replace(config, **values) if values else config

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import lightning.pytorch as pl
 from lightning.pytorch import LightningDataModule, LightningModule
-from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _get_module_type, _InstantiatorFn
+from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _InstantiatorFn
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.checkpoints import load_checkpoint
@@ -52,6 +52,8 @@ DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
     ("skeleton", "skeleton"),
     ("in_channels", "in_channels"),
     ("batch_size", "batch_size"),
+    ("image_size", "image_size"),
+    ("fps", "fps"),
 )
 
 
@@ -79,7 +81,9 @@ class _AcceptedLinksInstantiator(_InstantiatorFn):
 
     Lightning stores every applied data-to-model link in the checkpoint's hyper-parameters and parses them
     back on ``--ckpt_path``; a link the model has no argument for (``batch_size`` on a module without one)
-    would then break ``sm test/predict --ckpt_path``.
+    would then break ``sm test/predict --ckpt_path``. Lightning has no public hook for this, so the class
+    builds on its private ``_InstantiatorFn`` and ``_add_instantiators``: pyproject bounds lightning below 2.7
+    and ``tests/test_qean_sm.py`` (``sm predict --ckpt_path`` of a module without ``batch_size``) guards it.
     """
 
     def __call__(self, class_type, *args, applied_instantiation_links: dict, **kwargs):
@@ -120,7 +124,7 @@ class SkeletonMambaCLI(LightningCLI):
         super()._add_instantiators()
         self.parser.add_instantiator(
             _AcceptedLinksInstantiator(cli=self, key="model"),
-            _get_module_type(self._model_class),
+            self.model_class or LightningModule,
             subclasses=self.subclass_mode_model,
             prepend=True,
         )

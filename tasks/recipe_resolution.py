@@ -12,11 +12,16 @@ resolved path to :class:`jsonargparse.ActionConfigFile`. Resolution order for a 
    YAML ends in ``parser.error`` naming the file, line and column.
 
 Several ``--recipe``/``--config`` options and dotted overrides merge left to right.
+
+A recipe may be an *overlay* of another: a top-level ``base: ntu60.yaml`` (a path relative to the overlay's
+folder, or a packaged name; a list merges several) is applied first, then the overlay's own keys, exactly as
+``--recipe ntu60.yaml --config overlay.yaml`` would (a list, such as the loggers, is replaced as a whole).
 """
 
 from __future__ import annotations
 
 import importlib.resources
+import os
 from pathlib import Path
 
 import yaml
@@ -24,6 +29,7 @@ from jsonargparse import ActionConfigFile
 
 RECIPE_PACKAGE = "skeleton_mamba.recipes"
 RECIPE_SUFFIXES = (".yaml", ".yml")
+BASE_KEY = "base"  # an overlay's base recipe(s)
 
 __all__ = [
     "RecipeConfigAction",
@@ -96,9 +102,33 @@ class RecipeConfigAction(ActionConfigFile):
                     f"{option_string or '--recipe'} {values!r}: no such file and no packaged recipe of that "
                     f"name. Available recipes: {available} (`sm recipes` describes them)."
                 )
-            values = str(resolved)
             _check_yaml(parser, resolved)
+            self._apply_recipe(parser, cfg, resolved, option_string, ())
+            return
         super().__call__(parser, cfg, values, option_string)
+
+    def _apply_recipe(self, parser, cfg, path: Path, option_string, overlays: tuple[Path, ...]) -> None:
+        """Apply the recipe at ``path``: its ``base`` recipes first (recursively), then its own keys."""
+        content = yaml.safe_load(path.read_text(encoding="utf-8"))
+        if not isinstance(content, dict) or BASE_KEY not in content:
+            super().__call__(parser, cfg, str(path), option_string)
+            return
+        if path.resolve() in overlays:
+            parser.error(f"{path}: its base recipes include itself")
+        bases = content.pop(BASE_KEY)
+        for name in [bases] if isinstance(bases, str) else bases:
+            base = path.parent / str(name)
+            base = base if base.is_file() else resolve_recipe(str(name))
+            if base is None:
+                parser.error(f"{path}: base recipe {name!r}: no such file next to it and no packaged recipe")
+            _check_yaml(parser, base)
+            self._apply_recipe(parser, cfg, base, option_string, (*overlays, path.resolve()))
+        cwd = os.getcwd()
+        os.chdir(path.parent)  # relative paths in the overlay (a backbone fragment) resolve as in its file
+        try:
+            super().__call__(parser, cfg, yaml.safe_dump(content), option_string)
+        finally:
+            os.chdir(cwd)
 
 
 def _check_yaml(parser, path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -37,6 +38,7 @@ def tiny_egodance_module():
 
     ``tiny_egodance_module(**overrides)``: keyword arguments replace the tiny defaults.
     """
+    from skeleton_mamba.tasks.egodance.model import EMMConfig
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 
     tiny = {
@@ -47,21 +49,29 @@ def tiny_egodance_module():
             "mlp_dim": 32,
             "mixer": {"d_state": 8, "headdim": 8, "chunk_size": 16},
         },
-        "context_dim": 16,
-        "resnet_layers": {
-            "embedding_size": 8,
-            "hidden_sizes": [8, 16],
-            "depths": [1, 1],
-            "layer_type": "basic",
+        "network": {
+            "context_dim": 16,
+            "resnet_layers": {
+                "embedding_size": 8,
+                "hidden_sizes": [8, 16],
+                "depths": [1, 1],
+                "layer_type": "basic",
+            },
+            "heads": 2,
+            "transformer_ff": 32,
         },
         "image_size": 32,
-        "heads": 2,
-        "transformer_ff": 32,
         "diffusion_steps": 20,
         "sampling_steps": 2,
         "head_estimator": {"input_size": 16, "channels": [8, 8], "dim": 8, "layers": 1},
     }
-    return lambda **overrides: EgoDanceModule(**{**tiny, **overrides})
+    network_fields = {f.name for f in dataclasses.fields(EMMConfig)}
+
+    def build(**overrides) -> EgoDanceModule:
+        network = {**tiny["network"], **{k: overrides.pop(k) for k in set(overrides) & network_fields}}
+        return EgoDanceModule(**{**tiny, "network": network, **overrides})
+
+    return build
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -174,3 +174,53 @@ def test_sm_fit_ddp_over_two_cpu_processes(tmp_path):
     assert (run_dir / "checkpoints" / "last.ckpt").is_file()
     assert (run_dir / "config.yaml").is_file() and (run_dir / "metrics.csv").is_file()
     assert not (tmp_path / "runs" / "recognition_synthetic" / "version_1").exists()  # TB and CSV share a dir
+
+
+def test_image_size_and_fps_are_linked_from_the_data_module():
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+
+    import_task_modules()
+    data = ["--data.init_args.image_size", "48", "--data.init_args.fps", "20"]
+    args = ["--config", "egodance_demo.yaml", *data, "--model.init_args.head_source", "none"]
+    args += ["--trainer.logger", "false"]
+    with pytest.warns(UserWarning, match="randomly initialised"):
+        cli = SkeletonMambaCLI(
+            LightningModule, LightningDataModule, subclass_mode_model=True, subclass_mode_data=True,
+            run=False, args=args,
+        )  # fmt: skip
+    assert (cli.model.hparams.image_size, cli.model.hparams.fps) == (48, 20)
+    assert cli.model.model.vision_encoder.image_size == 48
+    recipe = yaml.safe_load((RECIPES_DIR / "egodance_demo.yaml").read_text())["model"]["init_args"]
+    assert "image_size" not in recipe and "fps" not in recipe  # stated once, on the data module
+
+
+def test_overlay_recipes_are_their_base_with_their_own_keys(capsys):
+    base = print_config(["fit", "--recipe", "ntu60.yaml"], capsys)
+    overlay = print_config(["fit", "--recipe", "ntu120_xsub.yaml"], capsys)
+    data = overlay["data"]["init_args"]
+    assert (data["num_classes"], data["ann_file"]) == (120, "data/ntu120_3danno.pkl")
+    assert (data["train_split"], data["val_split"]) == ("xsub_train", "xsub_val")
+    assert [logger["init_args"]["name"] for logger in overlay["trainer"]["logger"]] == ["ntu120_xsub"] * 2
+    assert overlay["trainer"]["callbacks"] == base["trainer"]["callbacks"]  # not in the overlay: the base's
+    assert overlay["model"] == base["model"] and overlay["trainer"]["max_epochs"] == 80
+    mamba = print_config(["fit", "--recipe", "qean_mamba.yaml"], capsys)
+    assert mamba["model"]["init_args"]["backbone"]["dim"] == 128  # a path relative to the overlay's folder
+    assert mamba["model"]["init_args"]["hidden"] == 800 and mamba["trainer"]["max_steps"] == 500000
+
+
+def test_overlay_of_a_local_recipe_by_relative_path_and_base_errors(tmp_path, capsys):
+    (tmp_path / "mine.yaml").write_text("base: recognition_synthetic.yaml\ntrainer: {max_epochs: 7}\n")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "more.yaml").write_text("base: ../mine.yaml\nmodel: {init_args: {lr: 0.25}}\n")
+    config = print_config(["fit", "--recipe", str(tmp_path / "sub" / "more.yaml")], capsys)
+    assert config["trainer"]["max_epochs"] == 7 and config["model"]["init_args"]["lr"] == 0.25
+    assert config["data"]["class_path"].endswith("SyntheticRecognitionDataModule")
+    (tmp_path / "loop.yaml").write_text("base: loop.yaml\n")
+    (tmp_path / "missing.yaml").write_text("base: no_such_base.yaml\n")
+    for name, message in (("loop.yaml", "include itself"), ("missing.yaml", "'no_such_base.yaml'")):
+        with pytest.raises(SystemExit):
+            sm_main(["fit", "--recipe", str(tmp_path / name), "--print_config"])
+        err = capsys.readouterr().err
+        assert message in err and name in err

@@ -6,13 +6,12 @@ import warnings
 
 import numpy as np
 import torch
-from transformers import ResNetConfig
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, sinusoidal_embedding
 from skeleton_mamba.tasks.egodance.encoders import FusionModule
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance, head_guidance_objective
-from skeleton_mamba.tasks.egodance.model import EMM
+from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 
@@ -39,10 +38,11 @@ def _tiny_emm() -> EMM:
     backbone = SkeletonMambaConfig(
         dim=16, depth=1, mlp_dim=32, heads=2, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
     )
-    resnet = ResNetConfig(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
+    resnet = dict(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return EMM(backbone, context_dim=16, resnet_config=resnet, image_size=32, heads=2, transformer_ff=32)
+        network = EMMConfig(context_dim=16, resnet_layers=resnet, heads=2, transformer_ff=32)
+        return EMM(backbone, network, image_size=32)
 
 
 # ---------------------------------------------------------------------------------------- x0 target

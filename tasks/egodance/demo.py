@@ -32,11 +32,11 @@ from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.render import RenderStyle
 
 __all__ = ["DanceDemo"]
 
-MUSIC_BEAT_CHANNEL = 34  # the one-hot beat column of the 35-d librosa music features
 LABEL = "SYNTHETIC demo data (procedural dances, synthesised music, procedural rooms)"
 
 
@@ -104,7 +104,7 @@ class DanceDemo(Callback):
                 tokens = pl_module.sample(batch, index)[0].cpu()
             dances.append(motion_joints(tokens))
             truths.append(motion_joints(item["motion"]))
-            beats.append(item["music"][:, MUSIC_BEAT_CHANNEL])
+            beats.append(item["music"][:, BEAT])
             if index >= self.num_samples:
                 continue
             meta = json.loads((Path(dataset.folders[index]) / "meta.json").read_text(encoding="utf-8"))

@@ -17,10 +17,10 @@ from torchmetrics import MeanMetric
 
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT
 from skeleton_mamba.tasks.motion.metrics.mmv import MMV, visual_beats
+from skeleton_mamba.tasks.motion.music import BEAT
 
 __all__ = ["DanceMetrics", "video_beats"]
 
-MUSIC_BEAT_CHANNEL = 34  # the beat one-hot of the 35-d music feature
 
 
 def video_beats(frames: torch.Tensor, fps: float = 30.0) -> list[np.ndarray]:
@@ -55,7 +55,7 @@ class DanceMetrics(nn.Module):
         self.root.update(err[..., 0].mean(dim=1))
         self.head.update(err[..., HEAD_JOINT].mean(dim=1))
         pred = pred.float().cpu()
-        music_beats = music[..., MUSIC_BEAT_CHANNEL].cpu()
+        music_beats = music[..., BEAT].cpu()
         if beats is not None:
             self.mmv.update(pred, list(music_beats), video_beats=beats)
             self.has_video = True

@@ -30,7 +30,37 @@ from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
 
-__all__ = ["EMM"]
+__all__ = ["EMM", "EMMConfig"]
+
+
+@dataclasses.dataclass
+class EMMConfig:
+    """EMM's condition encoders ([EgoMusic] supp. Table 2; the backbone is a :class:`SkeletonMambaConfig`).
+
+    Attributes:
+        context_dim: Dc, the width of the condition tokens (256).
+        music_dim: L, per-frame music features (35: librosa; 4800: Jukebox).
+        use_vision: encode egocentric frames (``False``: music-only condition).
+        resnet_layers: ``ResNetConfig`` keyword arguments of a ResNet built without ``resnet_path`` (None:
+            ResNet-50).
+        freeze_resnet: keep the ResNet fixed.
+        encoder_layers: Transformer layers of the music encoder (2).
+        fusion_layers: Transformer layers of the fusion module (2).
+        heads: attention heads of the encoders (4).
+        transformer_ff: feed-forward width of the encoders ("Transformer dim" 512).
+        dropout: dropout of the encoders.
+    """
+
+    context_dim: int = 256
+    music_dim: int = 35
+    use_vision: bool = True
+    resnet_layers: dict | None = None
+    freeze_resnet: bool = True
+    encoder_layers: int = 2
+    fusion_layers: int = 2
+    heads: int = 4
+    transformer_ff: int = 512
+    dropout: float = 0.1
 
 
 class EMM(nn.Module):
@@ -38,39 +68,25 @@ class EMM(nn.Module):
 
     Args:
         backbone: the SkeletonMamba settings (skeleton, channels and ``context_dim`` are set here).
-        context_dim: Dc, the width of the condition tokens.
-        music_dim: L, per-frame music features (35: librosa; 4800: Jukebox).
-        use_vision: encode egocentric frames (``False``: music-only condition).
-        resnet_path: local folder of a pretrained ``transformers`` ResNet (None: random init, warned).
-        resnet_config: the ResNet architecture without a path (default ResNet-50).
-        image_size: square size the frames are resized to.
-        freeze_resnet: keep the ResNet fixed.
-        encoder_layers: Transformer layers of the music encoder (2).
-        fusion_layers: Transformer layers of the fusion module (2).
-        heads: attention heads of the encoders.
-        transformer_ff: feed-forward width of the encoders ("Transformer dim" 512).
-        dropout: dropout of the encoders.
+        config: the condition encoders' settings (None: :class:`EMMConfig` defaults).
+        resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
+            downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
+            ``config.resnet_layers`` (an explicit choice, warned).
+        image_size: square size the frames are resized to (the ResNet input).
         diffusion_steps: T of the noise schedule (of the preconditioning's scalings).
     """
 
     def __init__(
         self,
         backbone: SkeletonMambaConfig | None = None,
-        context_dim: int = 256,
-        music_dim: int = 35,
-        use_vision: bool = True,
+        config: EMMConfig | None = None,
         resnet_path: str | None = None,
-        resnet_config: ResNetConfig | None = None,
         image_size: int = 224,
-        freeze_resnet: bool = True,
-        encoder_layers: int = 2,
-        fusion_layers: int = 2,
-        heads: int = 4,
-        transformer_ff: int = 512,
-        dropout: float = 0.1,
         diffusion_steps: int = 1000,
     ):
         super().__init__()
+        self.config = c = config or EMMConfig()
+        context_dim = c.context_dim
         cfg = dataclasses.replace(
             backbone or SkeletonMambaConfig(),
             skeleton="smpl24",
@@ -85,15 +101,18 @@ class EMM(nn.Module):
         self.time_token = nn.Linear(d, context_dim)
         self.backbone = SkeletonMamba(cfg)
         self.music_encoder = MusicEncoder(
-            music_dim, context_dim, encoder_layers, heads, transformer_ff, dropout
+            c.music_dim, context_dim, c.encoder_layers, c.heads, c.transformer_ff, c.dropout
         )
+        resnet_config = ResNetConfig(**c.resnet_layers) if c.resnet_layers else None
         self.vision_encoder = (
-            VisionEncoder(context_dim, resnet_path, resnet_config, image_size, freeze_resnet)
-            if use_vision
+            VisionEncoder(context_dim, resnet_path, resnet_config, image_size, c.freeze_resnet)
+            if c.use_vision
             else None
         )
         self.fusion = (
-            FusionModule(context_dim, fusion_layers, heads, transformer_ff, dropout) if use_vision else None
+            FusionModule(context_dim, c.fusion_layers, c.heads, c.transformer_ff, c.dropout)
+            if c.use_vision
+            else None
         )
         self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
         self.skip_x0 = SkipX0(diffusion_steps, channels=(NUM_JOINTS, NUM_CHANNELS))

@@ -26,6 +26,7 @@ provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on)
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import torch
 from lightning.pytorch import LightningModule
@@ -33,10 +34,10 @@ from lightning.pytorch.utilities import rank_zero_info
 from torch import nn
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchmetrics import MeanMetric
-from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config, with_flat_fields
+from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
 from skeleton_mamba.tasks.egodance.head_estimator import (
@@ -46,7 +47,7 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     head_trajectory_loss,
 )
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
-from skeleton_mamba.tasks.egodance.model import EMM
+from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
@@ -58,17 +59,8 @@ HEAD_SOURCES = {"estimate": "estimated_head", "oracle": "oracle_head", "none": "
 """Head-guidance sources and the name their test metrics are logged under (``test/<name>/...``)."""
 
 
-def _estimator_config(value: HeadEstimatorConfig | dict | None) -> HeadEstimatorConfig:
-    if value is None:
-        return HeadEstimatorConfig()
-    if isinstance(value, HeadEstimatorConfig):
-        return value
-    fields = dict(value)
-    if "channels" in fields:
-        fields["channels"] = tuple(fields["channels"])
-    return HeadEstimatorConfig(**fields)
-
-MOTION_FPS = 30.0  # EMM's motion and music rate ([EgoMusic] supp. Table 2)
+FLAT_NETWORK_RENAMES = {"encoder_dropout": "dropout"}
+"""Flat hyperparameters of checkpoints saved before :class:`~.model.EMMConfig`, renamed as its fields."""
 
 
 def _music_cache_dir(module: LightningModule) -> str | None:
@@ -77,25 +69,17 @@ def _music_cache_dir(module: LightningModule) -> str | None:
     return getattr(datamodule, "hparams", {}).get("music_cache_dir")
 
 
-class EgoDanceModule(LightningModule):
+class EgoDanceModule(BackboneModule):
     """EMM trained as a conditional diffusion model.
 
     Args:
         backbone: SkeletonMamba settings (recipes include ``backbones/skeleton_mamba.yaml``).
-        context_dim: Dc (256).
-        music_dim: per-frame music features (35 librosa; 4800 Jukebox).
-        use_vision: condition on egocentric frames.
+        network: the condition encoders' settings (:class:`~.model.EMMConfig`; None: its defaults).
         resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
             downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
-            ``resnet_layers`` (an explicit choice, warned).
-        resnet_layers: ``ResNetConfig`` keyword arguments when no path is given (None: ResNet-50).
-        image_size: ResNet input size (match the data module's ``image_size``).
-        freeze_resnet: keep the ResNet fixed.
-        encoder_layers: music encoder layers (2).
-        fusion_layers: fusion module layers (2).
-        heads: attention heads of the encoders (4).
-        transformer_ff: encoder feed-forward width (512).
-        encoder_dropout: encoder dropout.
+            ``network.resnet_layers`` (an explicit choice, warned).
+        image_size: ResNet input size. Linked from the data module (not user-settable under ``sm``).
+        fps: motion and music frame rate of the test metrics. Linked from the data module.
         diffusion_steps: T (1000).
         cond_drop_prob: probability of training with the null condition.
         reconstruction: ``l2`` (EDGE) or ``l1`` (original code).
@@ -118,23 +102,17 @@ class EgoDanceModule(LightningModule):
         seed: seed of the evaluation noise.
         protocol: dance-evaluation protocol of the test loop: ``"edge"`` (default), ``"bailando"`` or
             ``"fact"`` (see the module docstring).
+        **flat_network: :class:`~.model.EMMConfig` fields given one by one, as checkpoints saved before
+            ``network`` existed hold them (``encoder_dropout`` is its ``dropout``); they override ``network``.
     """
 
     def __init__(
         self,
         backbone: SkeletonMambaConfig | None = None,
-        context_dim: int = 256,
-        music_dim: int = 35,
-        use_vision: bool = True,
+        network: EMMConfig | None = None,
         resnet_path: str | None = None,
-        resnet_layers: dict | None = None,
         image_size: int = 224,
-        freeze_resnet: bool = True,
-        encoder_layers: int = 2,
-        fusion_layers: int = 2,
-        heads: int = 4,
-        transformer_ff: int = 512,
-        encoder_dropout: float = 0.1,
+        fps: int = 30,
         diffusion_steps: int = 1000,
         cond_drop_prob: float = 0.25,
         reconstruction: str = "l2",
@@ -161,40 +139,27 @@ class EgoDanceModule(LightningModule):
         test_oracle_head: bool = True,
         seed: int = 0,
         protocol: str = "edge",
+        **flat_network: Any,
     ) -> None:
         super().__init__()
+        network = with_flat_fields(config_from(EMMConfig, network), flat_network, FLAT_NETWORK_RENAMES)
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         if head_source not in HEAD_SOURCES:
             raise ValueError(f"head_source must be one of {sorted(HEAD_SOURCES)}, got {head_source!r}")
-        has_estimator = use_vision and use_head_estimator
+        has_estimator = network.use_vision and use_head_estimator
         if head_source == "estimate" and not has_estimator:
             raise ValueError(
                 "head_source='estimate' needs the head-trajectory estimator, which needs egocentric frames "
                 "(use_vision=True, use_head_estimator=True); choose head_source 'none' (or 'oracle')"
             )
         SamplingOptions(sampler, sampling_steps, eta, guidance_weight)  # checks them
-        config = backbone_config(backbone)
-        estimator_config = _estimator_config(head_estimator)
-        self.save_hyperparameters(ignore=["backbone", "head_estimator"])
-        self.hparams["backbone"] = plain_backbone_config(config)
+        estimator_config = config_from(HeadEstimatorConfig, head_estimator)
+        ignore = ("network", "head_estimator", *flat_network)
+        config = self.save_backbone_hyperparameters(backbone, ignore=ignore)
+        self.hparams["network"] = plain_backbone_config(network)
         self.hparams["head_estimator"] = plain_backbone_config(estimator_config)
-        self.model = EMM(
-            config,
-            context_dim=context_dim,
-            music_dim=music_dim,
-            use_vision=use_vision,
-            resnet_path=resnet_path,
-            resnet_config=ResNetConfig(**resnet_layers) if resnet_layers else None,
-            image_size=image_size,
-            freeze_resnet=freeze_resnet,
-            encoder_layers=encoder_layers,
-            fusion_layers=fusion_layers,
-            heads=heads,
-            transformer_ff=transformer_ff,
-            dropout=encoder_dropout,
-            diffusion_steps=diffusion_steps,
-        )
+        self.model = EMM(config, network, resnet_path, image_size, diffusion_steps)
         self.ema = AveragedModel(self.model, multi_avg_fn=get_ema_multi_avg_fn(ema_decay), use_buffers=True)
         self.ema.requires_grad_(False)
         self.diffusion = GaussianDiffusion(diffusion_steps)
@@ -389,7 +354,8 @@ class EgoDanceModule(LightningModule):
                 self.log("test/head_estimator/position_mm", self.test_head_position, batch_size=b)
                 self.log("test/head_estimator/rotation_deg", self.test_head_rotation, batch_size=b)
         protocol, cache = next(iter(self.test_evaluations.values())).protocol, _music_cache_dir(self)
-        duration = true.shape[1] / MOTION_FPS
+        fps = self.hparams.fps
+        duration = true.shape[1] / fps
         music_beats = [
             protocol.music_beats(path, float(start), duration, cache)
             for path, start in zip(batch["music_path"], batch["music_start_s"])
@@ -400,8 +366,8 @@ class EgoDanceModule(LightningModule):
             name = HEAD_SOURCES[source]
             self.test_metrics[name].update(pred, true, batch["music"], beats)
             for i, window_beats in enumerate(music_beats):
-                self.test_evaluations[name].add(true[i].cpu(), MOTION_FPS, window_beats, real=True)
-                self.test_evaluations[name].add(pred[i].cpu(), MOTION_FPS, window_beats)
+                self.test_evaluations[name].add(true[i].cpu(), fps, window_beats, real=True)
+                self.test_evaluations[name].add(pred[i].cpu(), fps, window_beats)
 
     def on_test_epoch_end(self) -> None:
         names = {"BeatAlign": "beat_align", "PFC": "pfc", "FID_k": "FID_k", "FID_g": "FID_g",

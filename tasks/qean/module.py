@@ -28,11 +28,10 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-from lightning.pytorch import LightningModule
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
@@ -55,7 +54,7 @@ PAPER_SEQUENCES = 40  # generated sequences of [QEAN]'s protocol (crossmodal val
 PAPER_FRAMES = 1200  # frames generated after each seed motion (20 s at 60 fps)
 
 
-class QEANModule(LightningModule):
+class QEANModule(BackboneModule):
     """QEAN music-to-dance generation.
 
     Args:
@@ -113,9 +112,7 @@ class QEANModule(LightningModule):
         protocol: str = "fact",
     ) -> None:
         super().__init__()
-        self.save_hyperparameters(ignore=["backbone"])
-        backbone_cfg = None if backbone is None else backbone_config(backbone)
-        self.hparams["backbone"] = None if backbone_cfg is None else plain_backbone_config(backbone_cfg)
+        backbone_cfg = self.save_backbone_hyperparameters(backbone, optional=True)
         self.lr_milestones = [90_000, 150_000] if lr_milestones is None else list(lr_milestones)
         names = {f.name for f in dataclasses.fields(QEANConfig)}
         config = QEANConfig(**{k: v for k, v in self.hparams.items() if k in names})

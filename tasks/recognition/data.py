@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from lightning.pytorch import LightningDataModule
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import Dataset
 
 from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.base_data import SplitDataModule
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
@@ -52,7 +52,7 @@ class SkeletonClipDataset(Dataset):
         return torch.from_numpy(self.pipeline(annotation, rng)), annotation["label"]
 
 
-class RecognitionDataModule(LightningDataModule):
+class RecognitionDataModule(SplitDataModule):
     """Skeleton clips from a PYSKL annotation pickle.
 
     Args:
@@ -91,7 +91,7 @@ class RecognitionDataModule(LightningDataModule):
         num_workers: int = 4,
         prepare_command: str | None = None,
     ) -> None:
-        super().__init__()
+        super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
         get_skeleton(skeleton)  # fail early on an unknown name
         self.ann_file = ann_file
@@ -103,11 +103,8 @@ class RecognitionDataModule(LightningDataModule):
         self.num_person = num_person
         self.max_angle = max_angle
         self.scale_range = scale_range
-        self.batch_size = batch_size
-        self.num_workers = num_workers
         self.prepare_command = prepare_command
         self._data: dict | None = None
-        self.datasets: dict[str, SkeletonClipDataset] = {}
         self.check_data()
 
     def check_data(self) -> None:
@@ -169,29 +166,13 @@ class RecognitionDataModule(LightningDataModule):
                 pipeline = self.pipeline({"train": "fit", "val": "validate"}.get(key, "test"))
                 self.datasets[key] = SkeletonClipDataset(self._split(self.splits[key]), pipeline)
 
-    def _loader(self, key: str, shuffle: bool) -> DataLoader:
-        workers = self.num_workers
-        return DataLoader(
-            self.datasets[key],
-            batch_size=self.batch_size,
-            shuffle=shuffle,
-            drop_last=shuffle,
-            num_workers=workers,
-            persistent_workers=workers > 0,
-            pin_memory=torch.cuda.is_available(),
-        )
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", shuffle=True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", shuffle=False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)
-
-    def predict_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)
+    def loader_options(self, split: str) -> dict:
+        train = split == "train"
+        return {
+            "drop_last": train,
+            "persistent_workers": self.num_workers > 0,
+            "pin_memory": torch.cuda.is_available(),
+        }
 
 
 class SyntheticRecognitionDataModule(RecognitionDataModule):

@@ -27,13 +27,12 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
-from lightning.pytorch import LightningModule
 from lightning.pytorch.utilities import rank_zero_info
 from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.early import (
     FRACTIONS,
@@ -47,7 +46,7 @@ from skeleton_mamba.tasks.recognition.prediction_writer import PredictionCSVWrit
 __all__ = ["ActionRecognitionModule"]
 
 
-class ActionRecognitionModule(LightningModule):
+class ActionRecognitionModule(BackboneModule):
     """Skeleton Mamba action recognizer.
 
     Args:
@@ -84,9 +83,7 @@ class ActionRecognitionModule(LightningModule):
         class_names: list[str] | None = None,
     ) -> None:
         super().__init__()
-        config = backbone_config(backbone)
-        self.save_hyperparameters(ignore=["backbone"])
-        self.hparams["backbone"] = plain_backbone_config(config)
+        config = self.save_backbone_hyperparameters(backbone)
         config = dataclasses.replace(config, skeleton=skeleton, in_channels=in_channels)
         self.model = ActionRecognizer(config, num_classes=num_classes, dropout=dropout)
         top_k = {"top1": MulticlassAccuracy(num_classes, top_k=1, average="micro")}

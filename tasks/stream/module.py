@@ -10,17 +10,16 @@ from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
-from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES
 from skeleton_mamba.tasks.stream.model import StreamDancer, teacher_forcing_inputs
 
 __all__ = ["StreamDanceModule"]
 
 
-class StreamDanceModule(LightningModule):
+class StreamDanceModule(BackboneModule):
     """Causal music-to-dance on Skeleton Mamba.
 
     Args:
@@ -40,9 +39,7 @@ class StreamDanceModule(LightningModule):
         weight_decay: float = 0.01,
     ) -> None:
         super().__init__()
-        self.save_hyperparameters(ignore=["backbone"])
-        config = backbone_config(backbone)
-        self.hparams["backbone"] = plain_backbone_config(config)
+        config = self.save_backbone_hyperparameters(backbone)
         self.model = StreamDancer(config, music_dim)
 
     def on_fit_start(self) -> None:

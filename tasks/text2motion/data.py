@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from lightning.pytorch import LightningDataModule
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import Dataset
 
+from skeleton_mamba.tasks.base_data import SplitDataModule
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.text2motion.features import group_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import (
@@ -80,12 +80,7 @@ def collate_text_motion(items: list[dict]) -> dict:
     }
 
 
-class _TextMotionDataModule(LightningDataModule):
-    def __init__(self, batch_size: int, num_workers: int) -> None:
-        super().__init__()
-        self.batch_size = batch_size
-        self.num_workers = num_workers
-        self.datasets: dict[str, TextMotionDataset] = {}
+class _TextMotionDataModule(SplitDataModule):
 
     def statistics(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(Mean, Std) (263,) float32 used for normalisation."""
@@ -101,24 +96,8 @@ class _TextMotionDataModule(LightningDataModule):
             raise RuntimeError(f"{type(self).__name__}: split {split!r} is not set up (call setup first)")
         return self.datasets[split].clips
 
-    def _loader(self, split: str, shuffle: bool) -> DataLoader:
-        return DataLoader(
-            self.datasets[split],
-            batch_size=self.batch_size,
-            shuffle=shuffle,
-            num_workers=self.num_workers,
-            collate_fn=collate_text_motion,
-            drop_last=False,
-        )
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", shuffle=True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", shuffle=False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)
+    def loader_options(self, split: str) -> dict:
+        return {"collate_fn": collate_text_motion}
 
 
 class HumanML3DDataModule(_TextMotionDataModule):

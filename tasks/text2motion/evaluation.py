@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 import torch
@@ -42,7 +42,7 @@ from skeleton_mamba.tasks.text2motion.metrics import (
     multimodality,
 )
 
-__all__ = ["GROUND_TRUTH", "MODEL", "T2MProtocol", "MotionGenerator", "T2MEvaluation"]
+__all__ = ["GROUND_TRUTH", "MODEL", "T2MEvalConfig", "T2MProtocol", "MotionGenerator", "T2MEvaluation"]
 
 GROUND_TRUTH = "ground_truth"
 MODEL = "model"
@@ -99,6 +99,31 @@ class T2MProtocol:
         """Groups generated per replication: ``ceil(samples / batch_size)``, at most all full groups."""
         groups = num_clips // self.batch_size
         return groups if self.samples is None else min(groups, math.ceil(self.samples / self.batch_size))
+
+
+@dataclass(frozen=True)
+class T2MEvalConfig(T2MProtocol):
+    """The T2M evaluation of ``sm test``: the protocol's sizes (:class:`T2MProtocol`), the evaluator's files.
+
+    Attributes:
+        evaluator_checkpoint: the official ``finest.tar`` (comparable), a ``sm fit --recipe
+            t2m_evaluator.yaml`` ``.ckpt`` (not comparable), or ``None``: a random evaluator (not comparable).
+        evaluator_mean: the evaluator's Mean (MDM ``dataset/t2m_mean.npy``); needed with ``finest.tar``;
+            default the data statistics.
+        evaluator_std: the evaluator's Std (MDM ``dataset/t2m_std.npy``).
+        glove_dir: folder of ``our_vab_*`` GloVe files; needed with an evaluator checkpoint; without it
+            (random evaluator only) words get hashed random vectors.
+    """
+
+    evaluator_checkpoint: str | None = None
+    evaluator_mean: str | None = None
+    evaluator_std: str | None = None
+    glove_dir: str | None = None
+
+    @property
+    def protocol(self) -> T2MProtocol:
+        """The protocol's sizes alone."""
+        return T2MProtocol(**{f.name: getattr(self, f.name) for f in fields(T2MProtocol)})
 
 
 class T2MEvaluation:

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
 
 from skeleton_mamba.tasks.text2motion.data import HumanML3DDataModule, TextMotionDataset
 from skeleton_mamba.tasks.text2motion.glove import HashedWordVectorizer, WordVectorizer
@@ -87,12 +86,5 @@ class T2MEvaluatorDataModule(HumanML3DDataModule):
                 clips = load_clips(self.root, split, limit=self.limit)
                 self.datasets[split] = EvaluatorDataset(clips, mean, std, words)
 
-    def _loader(self, split: str, shuffle: bool) -> DataLoader:
-        # drop_last as the evaluation's groups of 32; default collation (fixed shapes)
-        return DataLoader(
-            self.datasets[split],
-            batch_size=self.batch_size,
-            shuffle=shuffle,
-            num_workers=self.num_workers,
-            drop_last=True,
-        )
+    def loader_options(self, split: str) -> dict:
+        return {"drop_last": True}  # as the evaluation's groups of 32; default collation (fixed shapes)

@@ -13,12 +13,14 @@ checkpoints hold only the denoiser and the feature statistics (``feature_mean``,
 copied from the data module's ``statistics()`` at setup), so generation de-normalises on its own.
 
 ``sm test`` reports the test loss and then runs the T2M evaluation protocol (:mod:`.evaluation`:
-``eval_repetitions`` replications of R-Precision, FID, MM-Dist, Diversity and, when ``eval_mm_samples``
-> 0, MultiModality, for the real test motions and for the model), prints the table with 95 % intervals
-and writes ``t2m_evaluation.json`` / ``.csv`` in the log folder. The table is labelled comparable with
-published numbers only when the official evaluator checkpoint, its statistics and GloVe were loaded.
-The ``eval_*`` / ``evaluator_*`` / ``glove_dir`` settings are not saved in checkpoints, so
-``sm test --ckpt_path CKPT --model.eval_repetitions 2`` takes them from the recipe and command line.
+``evaluation.repetitions`` replications of R-Precision, FID, MM-Dist, Diversity and, when
+``evaluation.mm_samples`` > 0, MultiModality, for the real test motions and for the model), prints the
+table with 95 % intervals and writes ``t2m_evaluation.json`` / ``.csv`` in the log folder. The table is
+labelled comparable with published numbers only when the official evaluator checkpoint, its statistics
+and GloVe were loaded.
+The ``evaluation`` settings (:class:`~.evaluation.T2MEvalConfig`) and ``eval_sampling_steps`` are not saved in
+checkpoints, so ``sm test --ckpt_path CKPT --model.evaluation.repetitions 2`` takes them from the recipe and
+command line.
 """
 
 from __future__ import annotations
@@ -26,16 +28,15 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import torch
-from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.backbone_config import config_from
+from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions, sample
-from skeleton_mamba.tasks.text2motion.evaluation import T2MEvaluation, T2MProtocol
+from skeleton_mamba.tasks.text2motion.evaluation import T2MEvalConfig, T2MEvaluation
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     COMPARABLE,
     NOT_COMPARABLE,
@@ -54,22 +55,6 @@ __all__ = ["TextToMotionModule"]
 
 DEFAULT_SAMPLING_STEPS = 50  # DDIM steps when none is given
 STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
-_EVAL_ARGS = (
-    "eval_repetitions",
-    "eval_samples",
-    "eval_batch_size",
-    "eval_sampler",
-    "eval_sampling_steps",
-    "eval_diversity_times",
-    "eval_mm_samples",
-    "eval_mm_repeats",
-    "eval_mm_times",
-    "eval_seed",
-    "evaluator_checkpoint",
-    "evaluator_mean",
-    "evaluator_std",
-    "glove_dir",
-)
 
 
 def _legacy_sampling(
@@ -96,7 +81,7 @@ def _legacy_sampling(
     return diffusion_steps, sampler, DEFAULT_SAMPLING_STEPS if sampling_steps is None else sampling_steps
 
 
-class TextToMotionModule(LightningModule):
+class TextToMotionModule(BackboneModule):
     """Skeleton Mamba text-to-motion diffusion.
 
     Args:
@@ -112,24 +97,11 @@ class TextToMotionModule(LightningModule):
         eta: DDIM noise (0: deterministic).
         lr: AdamW learning rate (1e-4).
         weight_decay: AdamW weight decay (0).
-        eval_repetitions: T2M protocol replications at ``sm test`` (20); 0 reports the test loss only.
-        eval_samples: generated motions per replication (MDM: 1000); ``None`` = the whole test split.
-        eval_batch_size: R-Precision group size (32).
+        evaluation: the T2M evaluation of ``sm test`` (:class:`~.evaluation.T2MEvalConfig`: the protocol's
+            sizes, MDM's by default, ``repetitions: 0`` reports the test loss only; the evaluator's files).
         eval_sampler: the evaluation's sampler (``None``: the module's ``sampler``).
         eval_sampling_steps: the evaluation's DDIM steps (``None``: the module's; a number alone selects
             DDIM; -1 is the deprecated spelling of ``None``).
-        eval_diversity_times: Diversity pairs (300).
-        eval_mm_samples: captions for MultiModality (MDM mm modes: 100); 0 skips it.
-        eval_mm_repeats: generations per MultiModality caption (30).
-        eval_mm_times: MultiModality pairs per caption (10).
-        eval_seed: seed of the evaluation's draws (replication r uses ``eval_seed + r``).
-        evaluator_checkpoint: the official ``finest.tar`` (comparable), a ``sm fit --recipe
-            t2m_evaluator.yaml`` ``.ckpt`` (not comparable), or ``None``: a random evaluator (not comparable).
-        evaluator_mean: the evaluator's Mean (MDM ``dataset/t2m_mean.npy``); needed with ``finest.tar``;
-            default the data statistics.
-        evaluator_std: the evaluator's Std (MDM ``dataset/t2m_std.npy``).
-        glove_dir: folder of ``our_vab_*`` GloVe files; needed with an evaluator checkpoint; without it
-            (random evaluator only) words get hashed random vectors.
         num_steps: deprecated spelling of ``diffusion_steps``; with it, ``sampling_steps`` keeps its old
             meaning (a number: DDIM with that many steps; ``None``: DDPM) whatever ``sampler`` says, so
             checkpoints and recipes written before ``sampler`` existed sample as they did.
@@ -149,20 +121,9 @@ class TextToMotionModule(LightningModule):
         eta: float = 0.0,
         lr: float = 1e-4,
         weight_decay: float = 0.0,
-        eval_repetitions: int = 20,
-        eval_samples: int | None = 1000,
-        eval_batch_size: int = 32,
+        evaluation: T2MEvalConfig | None = None,
         eval_sampler: str | None = None,
         eval_sampling_steps: int | None = None,
-        eval_diversity_times: int = 300,
-        eval_mm_samples: int = 0,
-        eval_mm_repeats: int = 30,
-        eval_mm_times: int = 10,
-        eval_seed: int = 0,
-        evaluator_checkpoint: str | None = None,
-        evaluator_mean: str | None = None,
-        evaluator_std: str | None = None,
-        glove_dir: str | None = None,
         num_steps: int | None = None,
     ) -> None:
         super().__init__()
@@ -175,15 +136,16 @@ class TextToMotionModule(LightningModule):
         SamplingOptions(sampler, sampling_steps, eta, guidance_weight).override(
             eval_sampler, eval_sampling_steps
         )  # checks both
-        config = backbone_config(backbone)
         # Evaluation settings are test-time options kept out of the checkpoint's hyperparameters: LightningCLI
         # lets a checkpoint's hyperparameters override the command line, which would freeze them at training
         # time.
-        self.eval_options = SimpleNamespace(**{k: v for k, v in locals().items() if k in _EVAL_ARGS})
-        self.save_hyperparameters(ignore=["backbone", "num_steps", *_EVAL_ARGS])
+        self.eval_options = config_from(T2MEvalConfig, evaluation)
+        self.eval_sampler, self.eval_sampling_steps = eval_sampler, eval_sampling_steps
+        config = self.save_backbone_hyperparameters(
+            backbone, ignore=("evaluation", "eval_sampler", "eval_sampling_steps", "num_steps")
+        )
         # the new spellings (LightningCLI saves the arguments as given, old spellings included)
         self.hparams.update(diffusion_steps=diffusion_steps, sampler=sampler, sampling_steps=sampling_steps)
-        self.hparams["backbone"] = plain_backbone_config(config)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
         self.denoiser = TextToMotionDenoiser(
@@ -237,11 +199,10 @@ class TextToMotionModule(LightningModule):
 
     def on_test_epoch_end(self) -> None:
         """Run the T2M protocol, print its table and write it as JSON / CSV in the log folder."""
-        if self.eval_options.eval_repetitions < 1:
+        if self.eval_options.repetitions < 1:
             return
         evaluation, label = self._t2m_evaluation()
-        hp = self.eval_options
-        sampling = self.sampling.override(hp.eval_sampler, hp.eval_sampling_steps)
+        sampling = self.sampling.override(self.eval_sampler, self.eval_sampling_steps)
 
         def generate(captions: list[str], lengths: list[int], noise: torch.Generator) -> torch.Tensor:
             return self.generate(captions, lengths, generator=noise, **dataclasses.asdict(sampling))[0]
@@ -273,26 +234,16 @@ class TextToMotionModule(LightningModule):
                 f"the official evaluator {checkpoint} needs evaluator_mean / evaluator_std "
                 "(MDM dataset/t2m_mean.npy and t2m_std.npy)"
             )
-        evaluator = load_evaluator(checkpoint, FEATURE_DIM, hp.eval_seed).to(self.device)
-        words = WordVectorizer(hp.glove_dir) if hp.glove_dir else HashedWordVectorizer(seed=hp.eval_seed)
+        evaluator = load_evaluator(checkpoint, FEATURE_DIM, hp.seed).to(self.device)
+        words = WordVectorizer(hp.glove_dir) if hp.glove_dir else HashedWordVectorizer(seed=hp.seed)
         if hp.evaluator_mean is not None:
             mean = read_feature_vector(hp.evaluator_mean, "evaluator Mean")
             std = read_feature_vector(hp.evaluator_std, "evaluator Std")
         else:
             mean, std = self.feature_mean.cpu().numpy(), self.feature_std.cpu().numpy()
-        protocol = T2MProtocol(
-            repetitions=hp.eval_repetitions,
-            samples=hp.eval_samples,
-            batch_size=hp.eval_batch_size,
-            diversity_times=hp.eval_diversity_times,
-            mm_samples=hp.eval_mm_samples,
-            mm_repeats=hp.eval_mm_repeats,
-            mm_times=hp.eval_mm_times,
-            seed=hp.eval_seed,
-        )
         clips = datamodule.evaluation_clips("test")
         label = COMPARABLE if evaluator.comparable else NOT_COMPARABLE
-        return T2MEvaluation(evaluator, clips, words, mean, std, protocol), label
+        return T2MEvaluation(evaluator, clips, words, mean, std, hp.protocol), label
 
     @property
     def sampling(self) -> SamplingOptions:
