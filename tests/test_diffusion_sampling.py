@@ -325,7 +325,7 @@ def test_old_text2motion_checkpoint_through_ckpt_path(text2motion_module_class, 
     args = ["test", "--recipe", "humanml3d_demo.yaml", "--ckpt_path", str(tmp_path / "old.ckpt")]
     args += ["--trainer.logger", "false", "--trainer.callbacks", "[]"]
     args += ["--trainer.enable_progress_bar", "false"]
-    args += ["--trainer.limit_test_batches", "1", "--model.eval_repetitions", "0", "--data.val_clips", "2"]
+    args += ["--trainer.limit_test_batches", "1", "--model.evaluation.repetitions", "0", "--data.val_clips", "2"]
     with pytest.warns(FutureWarning, match="num_steps is deprecated"):
         cli = SkeletonMambaCLI(LightningModule, LightningDataModule, subclass_mode_model=True,
                                subclass_mode_data=True, args=args)  # fmt: skip
@@ -394,11 +394,12 @@ def _previous_sample_long_dance(model, diffusion, music, frames, head, window, o
 
 @pytest.mark.parametrize(("frames", "sampler"), [(40, "ddim"), (40, "ddpm"), (12, "ddim")])
 def test_long_dance_through_sample_long_equals_the_previous_sampler(frames, sampler):
-    from skeleton_mamba.tasks.egodance.model import EMM
+    from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
     from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 
     torch.manual_seed(0)
-    model = EMM(TINY, context_dim=16, use_vision=False, heads=2, transformer_ff=32, diffusion_steps=10).eval()
+    network = EMMConfig(context_dim=16, use_vision=False, heads=2, transformer_ff=32)
+    model = EMM(TINY, network, diffusion_steps=10).eval()
     diffusion = GaussianDiffusion(10)
     music = torch.randn(frames, 35)
     head = torch.cumsum(torch.randn(frames, 3) * 0.02, dim=0) + torch.tensor([0.0, 1.6, 0.0])
