@@ -45,8 +45,9 @@ __all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "li
 # use short class names (``class_path: ActionRecognitionModule``).
 TASK_PACKAGES = ("recognition", "egodance", "qean", "text2motion", "stream")
 
-# data-module attribute -> model init argument, applied once the data module is instantiated.
-# Linked arguments are not user-settable (jsonargparse overwrites them); set them on the data module.
+# data-module attribute -> model init argument (or a field of one: ``network.seed_frames``), applied once the
+# data module is instantiated. Linked arguments are not user-settable (jsonargparse overwrites them); set them
+# on the data module.
 DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
     ("num_classes", "num_classes"),
     ("skeleton", "skeleton"),
@@ -54,6 +55,10 @@ DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
     ("batch_size", "batch_size"),
     ("image_size", "image_size"),
     ("fps", "fps"),
+    ("seed_frames", "network.seed_frames"),  # QEAN's window lengths
+    ("music_frames", "network.music_frames"),
+    ("predict_frames", "network.predict_frames"),
+    ("generate_frames", "generate_frames"),
 )
 
 
@@ -91,7 +96,7 @@ class _AcceptedLinksInstantiator(_InstantiatorFn):
         links = {
             key: value
             for key, value in applied_instantiation_links.items()
-            if not key.startswith("model.") or key.rsplit(".", 1)[-1] in accepted
+            if not key.startswith("model.init_args.") or key.split(".")[2] in accepted
         }
         return super().__call__(class_type, *args, applied_instantiation_links=links, **kwargs)
 

@@ -207,7 +207,7 @@ def test_overlay_recipes_are_their_base_with_their_own_keys(capsys):
     assert overlay["model"] == base["model"] and overlay["trainer"]["max_epochs"] == 80
     mamba = print_config(["fit", "--recipe", "qean_mamba.yaml"], capsys)
     assert mamba["model"]["init_args"]["backbone"]["dim"] == 128  # a path relative to the overlay's folder
-    assert mamba["model"]["init_args"]["hidden"] == 800 and mamba["trainer"]["max_steps"] == 500000
+    assert mamba["model"]["init_args"]["network"]["hidden"] == 800 and mamba["trainer"]["max_steps"] == 500000
 
 
 def test_overlay_of_a_local_recipe_by_relative_path_and_base_errors(tmp_path, capsys):

@@ -325,7 +325,8 @@ def test_old_text2motion_checkpoint_through_ckpt_path(text2motion_module_class, 
     args = ["test", "--recipe", "humanml3d_demo.yaml", "--ckpt_path", str(tmp_path / "old.ckpt")]
     args += ["--trainer.logger", "false", "--trainer.callbacks", "[]"]
     args += ["--trainer.enable_progress_bar", "false"]
-    args += ["--trainer.limit_test_batches", "1", "--model.evaluation.repetitions", "0", "--data.val_clips", "2"]
+    args += ["--trainer.limit_test_batches", "1", "--model.evaluation.repetitions", "0"]
+    args += ["--data.val_clips", "2"]
     with pytest.warns(FutureWarning, match="num_steps is deprecated"):
         cli = SkeletonMambaCLI(LightningModule, LightningDataModule, subclass_mode_model=True,
                                subclass_mode_data=True, args=args)  # fmt: skip

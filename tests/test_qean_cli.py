@@ -15,15 +15,20 @@ from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.lightning_cli import run
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
+from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule
 from skeleton_mamba.tasks.qean.representation import smpl_to_features
 
 NAMES = ["gBR_sBM_cAll_d04_mBR0_ch01", "gPO_sBM_cAll_d10_mPO1_ch02", "gBR_sBM_cAll_d05_mBR0_ch03"]
-TINY_MODEL = {
+TINY_NETWORK = {
     "hidden": 32, "heads": 2, "motion_layers": 1, "audio_layers": 1, "cross_layers": 1, "mlp_dim": 64,
-    "num_periods": 2, "seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20,
+    "num_periods": 2,
 }  # fmt: skip
 TINY_DATA = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
+TINY_MODEL = {
+    "network": QEANConfig(**TINY_NETWORK, seed_frames=12, music_frames=24, predict_frames=4),
+    "generate_frames": 20,
+}
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +153,7 @@ def test_test_metrics_and_predict(aistpp, tmp_path):
 
 def test_sm_fit_one_training_step(aistpp, tmp_path, monkeypatch, caplog):
     """``sm fit --recipe qean.yaml`` in this process (the subprocess path is tests/test_qean_sm.py's)."""
-    model_args = [f"--model.init_args.{k}={v}" for k, v in TINY_MODEL.items()]
+    model_args = [f"--model.init_args.network.{k}={v}" for k, v in TINY_NETWORK.items()]
     data_args = [f"--data.init_args.{k}={v}" for k, v in TINY_DATA.items()]
     argv = [
         "fit", "--recipe", "qean.yaml",

@@ -30,8 +30,9 @@ VAL = ["gBR_sBM_cAll_d05_mBR0_ch05"]
 TEST = ["gPO_sBM_cAll_d11_mPO1_ch02", "gBR_sBM_cAll_d06_mBR0_ch02"]
 SCALING = 93.0  # AIST++ stores smpl_trans in units of smpl_scaling
 MODEL = {
-    "hidden": 32, "heads": 2, "motion_layers": 1, "audio_layers": 1, "cross_layers": 1, "mlp_dim": 64,
-    "num_periods": 2, "dropout": 0.0, "output_dir": "predictions",
+    "network.hidden": 32, "network.heads": 2, "network.motion_layers": 1, "network.audio_layers": 1,
+    "network.cross_layers": 1, "network.mlp_dim": 64, "network.num_periods": 2, "network.dropout": 0.0,
+    "output_dir": "predictions",
 }  # fmt: skip
 LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
 # [QEAN] Table 1
@@ -62,8 +63,8 @@ def aistpp(tmp_path_factory):
 
 
 def _overrides(root, backbone: bool) -> list[str]:
-    args = [f"--model.init_args.{k}={v}" for k, v in (MODEL | LENGTHS).items()]
-    args += [f"--data.init_args.{k}={v}" for k, v in LENGTHS.items()]
+    args = [f"--model.init_args.{k}={v}" for k, v in MODEL.items()]
+    args += [f"--data.init_args.{k}={v}" for k, v in LENGTHS.items()]  # linked to the model
     args += [
         "--trainer.accelerator=cpu", "--trainer.logger=false", "--trainer.callbacks=null",
         "--trainer.enable_progress_bar=false", f"--data.init_args.root={root}",

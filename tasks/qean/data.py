@@ -174,6 +174,8 @@ class AISTPPDanceDataModule(LightningDataModule):
             raise ValueError(f"test_max_sequences must be >= 1 or None, got {test_max_sequences}")
         self.synthetic = synthetic
         self.batch_size = batch_size
+        self.seed_frames, self.music_frames = seed_frames, music_frames  # linked to the model
+        self.predict_frames, self.generate_frames = predict_frames, generate_frames
         self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.datasets: dict[str, Dataset] = {}
         if predict_seed is None:  # fail before the model is built; `sm predict` needs no AIST++ copy

@@ -22,8 +22,8 @@ mp4 with the music.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -31,6 +31,7 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config, with_flat_fields
 from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
@@ -60,48 +61,26 @@ class QEANModule(BackboneModule):
     Args:
         backbone: a SkeletonMamba config (``backbones/skeleton_mamba.yaml``) used as the motion encoder;
             ``None`` uses [QEAN]'s motion transformer.
-        hidden: width of all transformers (800).
-        heads: attention heads (16).
-        motion_layers: motion-transformer blocks (not in [QEAN]; FACT 2).
-        audio_layers: audio-transformer blocks (not in [QEAN]; FACT 2).
-        cross_layers: cross-modal QRA blocks (not in [QEAN]; FACT 12).
-        mlp_dim: MLP width of every block (not in [QEAN]; FACT 3072).
-        dropout: dropout of attention, MLP and residual branches (value not in [QEAN]).
-        num_periods: P of Quaternion Rotary Attention (not in [QEAN]).
-        conv_kernel: kernel of the frequency/phase convolutions (not in [QEAN]).
-        rotary_base: Spin Position Embedding base (RoFormer's 10000).
-        learned_positions: add learnable absolute position embeddings ([QEAN] Table 2's ablation baseline).
-        seed_frames: seed motion frames (120; must equal the data module's).
-        music_frames: music window frames (240; must equal the data module's).
-        predict_frames: predicted frames per step (20; must equal the data module's).
+        network: QEAN's sizes and window lengths (:class:`~.model.QEANConfig`; None: its defaults, [QEAN]
+            Sec. 4.2). Under ``sm`` its ``seed_frames``, ``music_frames`` and ``predict_frames`` are linked
+            from the data module (set them there).
         lr: Adam learning rate (1e-4).
         lr_milestones: optimizer steps where the learning rate is multiplied by ``lr_gamma`` (90k, 150k).
         lr_gamma: decay factor (0.1: 1e-4 -> 1e-5 -> 1e-6).
-        generate_frames: frames generated at test/predict time (1200).
+        generate_frames: frames generated at test/predict time (1200; under ``sm`` linked from the data).
         audio_chunk: music windows encoded per batched call in fast generation.
         output_dir: folder for ``sm predict`` outputs.
         render: also render an mp4 at predict time.
         protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, [QEAN]'s), ``"bailando"``
             or ``"edge"`` (see :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`).
+        **flat_network: :class:`~.model.QEANConfig` fields given one by one, as checkpoints saved before
+            ``network`` existed hold them; they override ``network``.
     """
 
     def __init__(
         self,
         backbone: SkeletonMambaConfig | None = None,
-        hidden: int = 800,
-        heads: int = 16,
-        motion_layers: int = 2,
-        audio_layers: int = 2,
-        cross_layers: int = 12,
-        mlp_dim: int = 3072,
-        dropout: float = 0.1,
-        num_periods: int = 4,
-        conv_kernel: int = 3,
-        rotary_base: float = 10000.0,
-        learned_positions: bool = False,
-        seed_frames: int = 120,
-        music_frames: int = 240,
-        predict_frames: int = 20,
+        network: QEANConfig | None = None,
         lr: float = 1e-4,
         lr_milestones: list[int] | None = None,
         lr_gamma: float = 0.1,
@@ -110,16 +89,18 @@ class QEANModule(BackboneModule):
         output_dir: str = "qean_predictions",
         render: bool = True,
         protocol: str = "fact",
+        **flat_network: Any,
     ) -> None:
         super().__init__()
-        backbone_cfg = self.save_backbone_hyperparameters(backbone, optional=True)
-        self.lr_milestones = [90_000, 150_000] if lr_milestones is None else list(lr_milestones)
-        names = {f.name for f in dataclasses.fields(QEANConfig)}
-        config = QEANConfig(**{k: v for k, v in self.hparams.items() if k in names})
-        self.model = QEAN(config, backbone_cfg)
+        network = with_flat_fields(config_from(QEANConfig, network), flat_network)
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
-        scorer = FACTProtocol(seed_frames) if protocol == "fact" else get_protocol(protocol)
+        ignore = ("network", *flat_network)
+        backbone_cfg = self.save_backbone_hyperparameters(backbone, ignore=ignore, optional=True)
+        self.hparams["network"] = plain_backbone_config(network)
+        self.lr_milestones = [90_000, 150_000] if lr_milestones is None else list(lr_milestones)
+        self.model = QEAN(network, backbone_cfg)
+        scorer = FACTProtocol(network.seed_frames) if protocol == "fact" else get_protocol(protocol)
         self.test_evaluation = DanceEvaluation(scorer)
         self._reference_loaded = False
         self._reference_count = 0
@@ -132,11 +113,14 @@ class QEANModule(BackboneModule):
     def setup(self, stage: str) -> None:
         datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
         hparams = getattr(datamodule, "hparams", {})
-        for key in ("seed_frames", "music_frames", "predict_frames", "generate_frames"):
-            if key in hparams and hparams[key] != self.hparams[key]:
+        lengths = ("seed_frames", "music_frames", "predict_frames")
+        ours = {key: getattr(self.model.config, key) for key in lengths}
+        ours["generate_frames"] = self.hparams.generate_frames
+        for key, value in ours.items():
+            if key in hparams and hparams[key] != value:
                 raise ValueError(
-                    f"model.{key} = {self.hparams[key]} but data.{key} = {hparams[key]}: "
-                    "set both to the same value"
+                    f"the model's {key} = {value} but data.{key} = {hparams[key]}: set both to the same "
+                    "value (sm links them from the data module)"
                 )
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
@@ -156,7 +140,7 @@ class QEANModule(BackboneModule):
         frames = generate_fast(
             self.model, seed, music, self.hparams.generate_frames, self.hparams.audio_chunk, progress
         )
-        return torch.cat([seed[:, -self.hparams.seed_frames :], frames], dim=1)
+        return torch.cat([seed[:, -self.model.config.seed_frames :], frames], dim=1)
 
     # ----- test -----
     def on_test_epoch_start(self) -> None:
