@@ -196,6 +196,33 @@ def test_image_size_and_fps_are_linked_from_the_data_module():
     assert "image_size" not in recipe and "fps" not in recipe  # stated once, on the data module
 
 
+def test_qean_window_lengths_are_linked_from_the_data_module(tmp_path):
+    """``seed_frames``, ``music_frames``, ``predict_frames`` reach ``network`` (a nested link target),
+    ``generate_frames`` the module, from the data module alone."""
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+
+    import_task_modules()
+    for folder in ("motions", "music"):  # the AIST++ layout the data module checks at construction
+        (tmp_path / folder).mkdir()
+    lengths = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 20}
+    args = ["--config", "qean.yaml", f"--data.init_args.root={tmp_path}", "--trainer.logger", "false"]
+    args += [f"--data.init_args.{k}={v}" for k, v in lengths.items()]
+    args += ["--model.init_args.network.hidden=32", "--model.init_args.network.heads=2"]
+    cli = SkeletonMambaCLI(
+        LightningModule, LightningDataModule, subclass_mode_model=True, subclass_mode_data=True,
+        run=False, args=args,
+    )  # fmt: skip
+    config = cli.model.model.config
+    assert (config.seed_frames, config.music_frames, config.predict_frames) == (12, 24, 4)
+    assert config.hidden == 32 and cli.model.hparams.generate_frames == 20
+    assert cli.model.hparams["network"]["seed_frames"] == 12  # what the checkpoint will hold
+    assert cli.model.test_evaluation.protocol.seed_frames == 12
+    recipe = yaml.safe_load((RECIPES_DIR / "qean.yaml").read_text())["model"]["init_args"]
+    assert not set(lengths) & (set(recipe) | set(recipe["network"]))  # stated once, on the data module
+
+
 def test_overlay_recipes_are_their_base_with_their_own_keys(capsys):
     base = print_config(["fit", "--recipe", "ntu60.yaml"], capsys)
     overlay = print_config(["fit", "--recipe", "ntu120_xsub.yaml"], capsys)
