@@ -11,9 +11,9 @@ far from the data mean. With the data's per-channel mean ``mu`` and standard dev
 
     x0_hat = mu + (a sigma^2 / d) y_t + (sigma s / sqrt(d)) F
 
-the preconditioning of [EDM] (Karras et al. 2022, Table 1: ``c_in``, ``c_skip``, ``c_out`` with
+the preconditioning of [EDM] (Table 1: ``c_in``, ``c_skip``, ``c_out`` with
 ``sigma_data`` per channel) in variance-preserving form about the data mean. With ``mu = 0, sigma = 1`` it is
-``a x_t + s F``, the v-prediction of [v-pred] (Salimans & Ho 2022, ``F = -v``). The optimal linear estimate
+``a x_t + s F``, the v-prediction of [v-pred] (``F = -v``). The optimal linear estimate
 of x0 is the ``F = 0`` output, so an untrained network already returns the data mean at large t and
 ``x_t`` at small t. The denoiser still returns x0: the x0 losses ([EgoMusic] supp. Eqs. 26-29), guidance
 and the samplers are unchanged.

@@ -1,4 +1,4 @@
-"""Ancestral DDPM and DDIM sampling with classifier-free guidance and pluggable guidance terms.
+"""Ancestral [DDPM] and [DDIM] sampling with classifier-free guidance [CFG] and pluggable guidance terms.
 
 A denoiser is any callable ``(x_t (B, ...), t (B,) long, cond) -> x0_hat (B, ...)``; ``cond=None`` asks
 for the unconditional prediction (the task model substitutes its learned null condition). Task code
@@ -82,7 +82,7 @@ class GuidanceTerm:
 def guided_x0(
     denoiser: Denoiser, x_t: torch.Tensor, t: torch.Tensor, cond: Any, guidance_weight: float
 ) -> torch.Tensor:
-    """Classifier-free guidance on x0: ``unc + w (cond - unc)`` (EDGE; w = 1 is plain conditional).
+    """Classifier-free guidance [CFG] on x0 as [EDGE]: ``unc + w (cond - unc)`` (w = 1 is plain conditional).
 
     w = 0 returns the unconditional prediction and never evaluates the conditional one. A
     :class:`NullConditioned` denoiser is called once on the doubled batch ``[x_t; x_t]`` with the
@@ -149,7 +149,7 @@ def ddpm_sample(
         cond: the condition passed to the denoiser (``None``: unconditional).
         guidance_weight: classifier-free guidance weight w.
         guidance: terms adjusting x0_hat or the posterior mean (:class:`GuidanceTerm`).
-        clip_x0: clamp x0_hat to [-clip, clip] (EDGE: 1 on normalised data); ``None`` disables.
+        clip_x0: clamp x0_hat to [-clip, clip] ([EDGE]: 1 on normalised data); ``None`` disables.
         post_step: a projection ``(x, x0_hat, signal) -> x`` applied after every step (:data:`PostStep`;
             e.g. window consistency).
         x_T: the starting noise (default: drawn with ``generator``).
@@ -208,11 +208,12 @@ def ddim_sample(
     dtype: torch.dtype = torch.float32,
     progress: bool = False,
 ) -> torch.Tensor:
-    """DDIM (Song et al. 2021) over ``sampling_steps`` timesteps; EDGE uses 50 steps with eta = 1.
+    """[DDIM] over ``sampling_steps`` timesteps; [EDGE] uses 50 steps with eta = 1.
 
-    ``x_prev = sqrt(abar_prev) x0_hat + sqrt(1 - abar_prev - sigma^2) eps_hat + sigma z`` with
-    ``sigma = eta sqrt((1 - abar_prev) / (1 - abar_t)) sqrt(1 - abar_t / abar_prev)`` and abar_prev = 1
-    after the last step, so the final x equals the last x0_hat. Other arguments as :func:`ddpm_sample`.
+    ``x_prev = sqrt(abar_prev) x0_hat + sqrt(1 - abar_prev - sigma^2) eps_hat + sigma z`` ([DDIM] Eq. 12)
+    with ``sigma = eta sqrt((1 - abar_prev) / (1 - abar_t)) sqrt(1 - abar_t / abar_prev)`` (Eq. 16) and
+    abar_prev = 1 after the last step, so the final x equals the last x0_hat. Other arguments as
+    :func:`ddpm_sample`.
     """
     x = _initial_noise(shape, x_T, generator, device, dtype)
     steps = ddim_timesteps(diffusion.num_steps, sampling_steps)

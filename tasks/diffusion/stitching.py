@@ -1,4 +1,5 @@
-"""Long-form sampling by overlapping windows kept consistent during sampling (EDGE, Tseng et al. 2023).
+"""Long-form sampling by overlapping windows kept consistent during sampling ([EDGE]; EDGE
+``model/diffusion.py`` ``long_ddim_sample``).
 
 A long sequence is cut into B windows of W frames starting every ``hop = W - overlap`` frames; the B
 windows are sampled as one batch and, after every denoising step, the first ``overlap`` frames of window
