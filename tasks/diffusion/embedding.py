@@ -1,8 +1,8 @@
 """The sinusoidal embedding of diffusion timesteps and sequence positions, shared by every task.
 
 ``f_k = max_period^(-k / half)`` for ``k < half = dim // 2``; the embedding of a position p is the
-``half`` sines ``sin(p f_k)`` and the ``half`` cosines ``cos(p f_k)`` side by side (Vaswani et al. 2017;
-the DDPM timestep embedding). Upstream code puts the two halves in either order: EDGE's
+``half`` sines ``sin(p f_k)`` and the ``half`` cosines ``cos(p f_k)`` side by side ([Transformer]
+Sec. 3.5; [DDPM]'s timestep embedding). Upstream code puts the two halves in either order: EDGE's
 ``SinusoidalPosEmb`` writes ``[sin, cos]`` and guided-diffusion's ``nn.timestep_embedding``
 ``[cos, sin]``. The order only permutes the input columns of the first layer that reads the embedding,
 so a network keeps the order it was trained with: EMM ``"sin_cos"``, the text-to-motion denoisers
