@@ -64,6 +64,21 @@ def test_canonicalize_init_head_turns_each_window_to_face_its_first_head_heading
         torch.testing.assert_close(c["music"], w["music"])
 
 
+def test_synthetic_set_refuses_dances_generated_with_other_settings(tmp_path):
+    from skeleton_mamba.tasks.egodance.data import SyntheticEgoDanceDataModule
+
+    motions = tmp_path / "data" / "motions"
+    motions.mkdir(parents=True)
+    (motions / "synthetic_bounce_120bpm_s0.npz").write_bytes(b"")
+    module = SyntheticEgoDanceDataModule(root=str(tmp_path / "data"), count=2, swing_side="music")
+    with pytest.raises(ValueError, match="unrecorded settings.*remove"):  # a build from before the record
+        module.prepare_data()
+    settings = {"count": 2, "duration_s": 10.0, "seed": 0, "fps": 30.0, "swing_side": "random"}
+    (motions / "generator.json").write_text(json.dumps(settings))
+    with pytest.raises(ValueError, match="'swing_side': 'random'.*'swing_side': 'music'"):
+        module.prepare_data()
+
+
 @pytest.fixture(scope="module")
 def song(tmp_path_factory) -> str:
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
