@@ -82,21 +82,6 @@ def test_dance_format_and_errors(tmp_path):
         assert sr == 22050 and len(audio) == 22050
 
 
-
-def test_tempo_by_style_gives_every_style_its_own_tempo_range(tmp_path):
-    import re
-
-    def tempi(folder, **kwargs) -> list[tuple[str, int]]:
-        pairs = make_demo_set(tmp_path / folder, count=9, duration_s=0.5, seed=3, **kwargs)
-        return [(m[1], int(m[2])) for p, _ in pairs if (m := re.match(r"synthetic_(\w+?)_(\d+)bpm", p.name))]
-
-    banded = tempi("banded", tempo_by_style=True)
-    ranges = {"arms": (90, 106), "bounce": (107, 123), "sway": (124, 140)}
-    assert len(banded) == 9 and all(ranges[style][0] <= bpm <= ranges[style][1] for style, bpm in banded)
-    # the default still draws every tempo from the whole range, as before
-    rng = np.random.default_rng(3)
-    assert [bpm for _, bpm in tempi("default")] == [int(rng.integers(90, 141)) for _ in range(9)]
-
 def test_music_has_the_requested_tempo(tmp_path):
     import librosa
 

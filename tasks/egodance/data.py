@@ -316,8 +316,6 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         seed: generator seed.
         swing_side: ``random`` or ``music`` (the music's bars decide which way the dancers swing;
             :func:`~skeleton_mamba.tasks.motion.synthetic.synthesize_dance`).
-        tempo_by_style: each dance style has its own tempo range
-            (:func:`~skeleton_mamba.tasks.motion.synthetic.make_demo_set`).
         cache_frames: keep decoded frames in memory (default here: the set is small).
         Other arguments as :class:`EgoDanceDataModule`.
     """
@@ -331,7 +329,6 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         num_rooms: int = 2,
         seed: int = 0,
         swing_side: str = "random",
-        tempo_by_style: bool = False,
         window: int = 150,
         fps: int = 30,
         batch_size: int = 4,
@@ -368,7 +365,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         hp = self.hparams
         motions = self.source_root / "motions"
         settings = {"count": hp.count, "duration_s": hp.duration_s, "seed": hp.seed, "fps": float(hp.fps),
-                    "swing_side": hp.swing_side, "tempo_by_style": hp.tempo_by_style}  # fmt: skip
+                    "swing_side": hp.swing_side}  # fmt: skip
         record = motions / "generator.json"
         if motions.is_dir() and any(motions.glob("*.npz")):
             found = json.loads(record.read_text(encoding="utf-8")) if record.is_file() else None
@@ -379,9 +376,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
                     f"remove {self.source_root} to generate them again, or choose another data root"
                 )
         else:
-            make_demo_set(
-                motions, hp.count, hp.duration_s, hp.seed, float(hp.fps), hp.swing_side, hp.tempo_by_style
-            )
+            make_demo_set(motions, hp.count, hp.duration_s, hp.seed, float(hp.fps), hp.swing_side)
             with atomic_open(record, "w", encoding="utf-8") as f:
                 f.write(json.dumps(settings))
         config = BuildConfig(

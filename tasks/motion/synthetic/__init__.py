@@ -27,13 +27,9 @@ def make_demo_set(
     seed: int = 0,
     fps: float = 30.0,
     swing_side: str = "random",
-    tempo_by_style: bool = False,
 ) -> list[tuple[Path, Path]]:
     """Write ``count`` (dance ``.npz``, music ``.wav``) pairs, styles in turn, tempi in 90-140 BPM
     (``swing_side``: see :func:`synthesize_dance`).
-
-    ``tempo_by_style`` draws each style's tempi from its own third of that range (in sorted style order:
-    90-106, 107-123, 124-140 BPM), as dance genres come with their own tempi, so the music tells the style.
 
     Returns:
         The (motion path, music path) pairs.
@@ -42,8 +38,7 @@ def make_demo_set(
     styles = sorted(STYLES)
     pairs = []
     for k in range(count):
-        low = 90 + 17 * (k % len(styles)) if tempo_by_style else 90
-        bpm = float(rng.integers(low, low + 17 if tempo_by_style else 141))
+        bpm = float(rng.integers(90, 141))
         motion = write_dance(out_dir, bpm, duration_s, styles[k % len(styles)], seed + k, fps, swing_side)
         music = write_music(motion.with_suffix(".wav"), synthesize_music(bpm, duration_s, seed=seed + k))
         pairs.append((motion, music))
