@@ -100,3 +100,16 @@ def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch):
     np.testing.assert_allclose(steps, normal, rtol=1e-3)
     np.testing.assert_allclose(root[:, 0], STEP_X * np.arange(360), atol=1e-4)
     np.testing.assert_allclose(root[:, 1], 0.9, atol=1e-5)
+
+
+def test_sm_dance_refuses_long_tracks_for_heading_canonical_checkpoints(inputs):
+    from skeleton_mamba.tasks.errors import InputError
+
+    tmp, ckpt, wav = inputs
+    checkpoint = torch.load(ckpt, weights_only=True)
+    checkpoint["datamodule_hyper_parameters"] = {"canonicalize_init_head": True}
+    canonical = tmp / "canonical.ckpt"
+    torch.save(checkpoint, canonical)
+    # 360 frames would be stitched from windows in the world-yaw frame: a clear error instead
+    with pytest.raises(InputError, match="canonicalize_init_head.*at most 150 frames"):
+        _dance(tmp, canonical, wav, tmp / "canonical_out", "--no-render")

@@ -33,6 +33,52 @@ def test_splits_keep_sources_together_and_respect_aist_test_list():
     assert aist == {"gBR_sBM_cAll_d04_mBR0_ch02.pkl": "test", "gBR_sBM_cAll_d04_mBR0_ch01.pkl": "train"}
 
 
+def test_canonicalize_init_head_turns_each_window_to_face_its_first_head_heading(tmp_path):
+    from skeleton_mamba.tasks.egodance.data import SyntheticEgoDanceDataModule
+    from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
+
+    kwargs = dict(root=str(tmp_path / "data"), count=2, duration_s=5.0, frame_size=16, image_size=16,
+                  val_fraction=0.0, test_fraction=0.0, music_cache_dir=str(tmp_path / "cache"))  # fmt: skip
+    world = SyntheticEgoDanceDataModule(**kwargs)
+    world.prepare_data()
+    world.setup("fit")
+    canon = SyntheticEgoDanceDataModule(**kwargs, canonicalize_init_head=True)
+    canon.setup("fit")
+    for w, c in zip(world.datasets["train"].items, canon.datasets["train"].items, strict=True):
+        # the head faces +z in frame 0 (its forward axis: the rotation's third column), pitch kept
+        forward_w, forward_c = w["head_rotation"][0, :, 2].double(), c["head_rotation"][0, :, 2].double()
+        assert abs(forward_c[0]) < 1e-6 and forward_c[2] > 0
+        assert forward_c[1] == pytest.approx(float(forward_w[1]), abs=1e-6)
+        # the whole window is the world-yaw window turned by minus that heading about the vertical through
+        # the root's start (floor and root start unchanged), motion and head targets alike
+        angle = -float(np.arctan2(forward_w[0], forward_w[2]))
+        c_, s_ = np.cos(angle), np.sin(angle)
+        turn = torch.tensor([[c_, 0, s_], [0, 1, 0], [-s_, 0, c_]])
+        joints_w, joints_c = motion_joints(w["motion"]).double(), motion_joints(c["motion"]).double()
+        start = joints_w[0, 0] * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)
+        torch.testing.assert_close(joints_c, (joints_w - start) @ turn.T, atol=1e-4, rtol=0)
+        head_w = w["head"].double()
+        torch.testing.assert_close(c["head"].double(), (head_w - start) @ turn.T, atol=1e-4, rtol=0)
+        torch.testing.assert_close(c["head"], motion_joints(c["motion"])[:, HEAD_JOINT], atol=1e-4, rtol=0)
+        torch.testing.assert_close(c["head_rotation"].double(), turn @ w["head_rotation"].double())
+        torch.testing.assert_close(c["music"], w["music"])
+
+
+def test_synthetic_set_refuses_dances_generated_with_other_settings(tmp_path):
+    from skeleton_mamba.tasks.egodance.data import SyntheticEgoDanceDataModule
+
+    motions = tmp_path / "data" / "motions"
+    motions.mkdir(parents=True)
+    (motions / "synthetic_bounce_120bpm_s0.npz").write_bytes(b"")
+    module = SyntheticEgoDanceDataModule(root=str(tmp_path / "data"), count=2, swing_side="music")
+    with pytest.raises(ValueError, match="unrecorded settings.*remove"):  # a build from before the record
+        module.prepare_data()
+    settings = {"count": 2, "duration_s": 10.0, "seed": 0, "fps": 30.0, "swing_side": "random"}
+    (motions / "generator.json").write_text(json.dumps(settings))
+    with pytest.raises(ValueError, match="'swing_side': 'random'.*'swing_side': 'music'"):
+        module.prepare_data()
+
+
 @pytest.fixture(scope="module")
 def song(tmp_path_factory) -> str:
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music

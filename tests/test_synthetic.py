@@ -25,6 +25,24 @@ def _speed(motion) -> np.ndarray:
     return speed
 
 
+def test_swing_side_music_fixes_the_side_of_the_two_beat_swing():
+    from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_euler
+
+    def swing(seed: int, swing_side: str) -> float:
+        """Left shoulder's z angle (deg) on beat 0 minus beat 1 of an "arms" dance: 2 * scale * side * 50."""
+        motion = synthesize_dance(120.0, 1.0, 30.0, "arms", seed, swing_side)  # beat 1 at frame 15
+        z = matrix_to_euler(axis_angle_to_matrix(torch.from_numpy(motion.poses[[0, 15], 16])), "XYZ")[:, 2]
+        return float(np.degrees(z[0] - z[1]))
+
+    music = [swing(seed, "music") for seed in range(8)]
+    assert all(2 * 0.8 * 50 - 1e-6 <= d <= 2 * 1.2 * 50 + 1e-6 for d in music)  # always the listed side
+    drawn = [swing(seed, "random") for seed in range(8)]
+    assert min(drawn) < 0 < max(drawn)  # the default draws it per seed
+    # the seed's amplitude is the same either way
+    assert sorted(abs(d) for d in drawn) == pytest.approx(sorted(music), abs=1e-6)
+    with pytest.raises(ValueError, match="swing side"):
+        synthesize_dance(120.0, 1.0, 30.0, "arms", 0, "left")
+
 @pytest.mark.parametrize("style", sorted(STYLES))
 def test_dance_velocity_minima_fall_on_beats(style):
     fps, bpm = 60.0, 120.0  # a beat every 30 frames

@@ -15,6 +15,8 @@ tracks longer than the training window are sampled as overlapping windows whose 
 at every denoising step (EDGE long-form), so a 60 s song gives one continuous dance.
 ``--out DIR`` receives ``<name>.npz`` (our motion format), ``<name>.bvh`` and ``<name>.mp4`` (the skeleton
 with the music muxed in; ``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE.
+A checkpoint trained with ``canonicalize_init_head`` (the demo's) dances clips of at most one window: its
+windows face their first frame's head heading, and long-form stitching joins windows in the world-yaw frame.
 """
 
 from __future__ import annotations
@@ -101,7 +103,17 @@ def _music_source(args) -> tuple[str | None, float]:
     return music.get("path"), float(music.get("start_s", 0.0))
 
 
-def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+def _canonical_heading(ckpt: str) -> bool:
+    """Whether the checkpoint's data module turned windows to their first head heading."""
+    from skeleton_mamba.tasks.checkpoints import load_checkpoint
+
+    data = load_checkpoint(ckpt).get("datamodule_hyper_parameters") or {}
+    return bool(data.get("canonicalize_init_head", False))
+
+
+def _conditions(
+    args, module, canonical: bool = False
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
     """music (T, L), frames (T, 3, S, S) or None, ground-truth head targets (T, 3) (--sample) or None."""
     from skeleton_mamba.tasks.egodance.builder.layout import read_frames
     from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
@@ -114,7 +126,9 @@ def _conditions(args, module) -> tuple[torch.Tensor, torch.Tensor | None, torch.
         if num_frames is None:
             with np.load(folder / "camera.npz", allow_pickle=False) as cam:
                 num_frames = len(cam["positions"])
-        item = EgoDanceDataset([folder], window=num_frames, load_frames=vision, image_size=size)[0]
+        item = EgoDanceDataset(
+            [folder], window=num_frames, load_frames=vision, image_size=size, canonicalize_init_head=canonical
+        )[0]
         return item["music"], item.get("frames"), item["head"]
     from skeleton_mamba.tasks.motion.music import extract_music_features
 
@@ -162,10 +176,17 @@ def main(argv: list[str] | None = None) -> int:
 
     module = load_module(EgoDanceModule, args.ckpt).eval()  # checked: local, weights_only, project classes
     hp = module.hparams
+    canonical = _canonical_heading(args.ckpt)
     try:
-        music, frames, oracle = _conditions(args, module)
+        music, frames, oracle = _conditions(args, module, canonical)
     except ValueError as err:  # the music, video or sample files (their readers name the file)
         raise InputError(str(err)) from err
+    if canonical and len(music) > args.window:
+        raise InputError(
+            f"{args.ckpt} was trained on windows turned to face their first frame's head heading "
+            f"(canonicalize_init_head), which long-form stitching cannot join: give at most {args.window} "
+            f"frames ({args.window / 30:.0f} s) of music and video, not {len(music)}"
+        )
     head_source, head = _head_targets(args, module, frames, oracle)
     model = module.model if args.no_ema else module.ema.module
     sampling = module.sampling.override(**sampling_overrides(args))

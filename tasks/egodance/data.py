@@ -11,6 +11,13 @@ Each complete sample folder gives one training window of ``window`` frames (150 
   in the same canonical frame, for oracle head guidance, the head error and training the head estimator;
 - ``head_rotation`` (T, 3, 3): the head joint's rotation (head-to-world) from the camera trajectory.
 
+With ``canonicalize_init_head`` the window is also turned about the vertical so that the head faces +z in
+frame 0 (the original code's ``--canonicalize_init_head``, EgoEgo's ``rotate_at_frame``): the first frame
+of the egocentric video then fixes the heading, as a SLAM trajectory relative to its first frame does, so
+the dance's facing direction can be learned from the video instead of being an unknowable world yaw
+(:func:`initial_heading`). Long videos are stitched in the world-yaw frame, so ``sm dance`` samples
+clips of at most one window from such a model.
+
 Splits are by motion *source* so windows of one sequence never straddle splits: an AIST++ sequence in the
 cross-modal test list is test; the other sources, ranked by a stable hash of their name, fill val
 (``val_fraction``) then train; without AIST++ sources (the synthetic generators) ``test_fraction`` of
@@ -31,15 +38,24 @@ from torch.utils.data import Dataset
 
 from skeleton_mamba.tasks.base_data import SplitDataModule
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
+from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
-__all__ = ["EgoDanceDataset", "EgoDanceDataModule", "SyntheticEgoDanceDataModule", "assign_splits"]
+__all__ = [
+    "EgoDanceDataset",
+    "EgoDanceDataModule",
+    "SyntheticEgoDanceDataModule",
+    "assign_splits",
+    "initial_heading",
+]
 
 REQUIRED_FILES = ("meta.json", "motion.npz", "camera.npz")
 
@@ -69,6 +85,13 @@ def assign_splits(sources: list[str], val_fraction: float, test_fraction: float)
     return out
 
 
+def initial_heading(head_rotation: np.ndarray) -> float:
+    """The heading (radians about +y) of the head's forward axis (its local +z) in frame 0 of (T, 3, 3)
+    head-to-world rotations: ``yaw_matrix(-heading)`` turns that axis onto +z."""
+    forward = head_rotation[0, :, 2]
+    return float(np.arctan2(forward[0], forward[2]))
+
+
 def _missing(folder: Path) -> list[str]:
     missing = [f for f in REQUIRED_FILES if not (folder / f).is_file()]
     if not (folder / "rgb.mp4").is_file() and not (folder / "rgb").is_dir():
@@ -92,9 +115,11 @@ class EgoDanceDataset(Dataset):
         image_size: int = 224,
         music_cache_dir: str | None = None,
         cache_frames: bool = False,
+        canonicalize_init_head: bool = False,
     ):
         self.folders = folders
         self.window = window
+        self.canonicalize_init_head = canonicalize_init_head
         self.load_frames = load_frames
         self.image_size = image_size
         self.cache_frames = cache_frames
@@ -124,6 +149,12 @@ class EgoDanceDataset(Dataset):
             positions = check_finite(cam["positions"][:t], source, "positions", ("frame",))
             rotations = check_finite(cam["rotations"][:t], source, "rotations", ("frame",))
         head, head_rotation = head_pose_from_camera(positions, rotations)
+        poses = torch.from_numpy(np.asarray(motion.poses[:t], dtype=np.float32))
+        if self.canonicalize_init_head:  # turn about +y (through the origin) so the head faces +z in frame 0
+            turn = yaw_matrix(-initial_heading(head_rotation))
+            root, head, head_rotation = root @ turn.T, head @ turn.T, turn @ head_rotation
+            orient = torch.from_numpy(turn).float() @ axis_angle_to_matrix(poses[:, 0])
+            poses = torch.cat([matrix_to_axis_angle(orient)[:, None], poses[:, 1:]], dim=1)
         shift = np.array([root[0, 0], meta.get("scene", {}).get("floor_height", 0.0), root[0, 2]])
         music_meta = meta.get("music") or {}
         if not music_meta.get("path"):
@@ -136,7 +167,6 @@ class EgoDanceDataset(Dataset):
         music = analysis.features[start : start + t]
         if music.shape[0] < t:  # the track ends inside the window: repeat the last frame
             music = np.concatenate([music, np.repeat(music[-1:], t - music.shape[0], axis=0)], axis=0)
-        poses = torch.from_numpy(np.asarray(motion.poses[:t], dtype=np.float32))
         return {
             "sample_id": meta.get("sample_id", folder.name),
             "motion": encode_motion(poses, torch.from_numpy((root - shift).astype(np.float32))),
@@ -179,6 +209,7 @@ class EgoDanceDataModule(SplitDataModule):
         test_fraction: share of non-AIST++ sources held out for testing.
         music_cache_dir: cache of music features (default ``~/.cache/skeleton_mamba/music``).
         cache_frames: keep the decoded frames in memory after their first use (small sets).
+        canonicalize_init_head: turn each window so the head faces +z in its first frame (module docstring).
     """
 
     def __init__(
@@ -194,6 +225,7 @@ class EgoDanceDataModule(SplitDataModule):
         test_fraction: float = 0.1,
         music_cache_dir: str | None = None,
         cache_frames: bool = False,
+        canonicalize_init_head: bool = False,
     ):
         super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
@@ -236,7 +268,14 @@ class EgoDanceDataModule(SplitDataModule):
         hp = self.hparams
         for name, folders in self.split_folders().items():
             self.datasets[name] = EgoDanceDataset(
-                folders, hp.window, hp.fps, hp.load_frames, hp.image_size, hp.music_cache_dir, hp.cache_frames
+                folders,
+                hp.window,
+                hp.fps,
+                hp.load_frames,
+                hp.image_size,
+                hp.music_cache_dir,
+                hp.cache_frames,
+                hp.canonicalize_init_head,
             )
         if len(self.datasets["train"]) == 0 and stage == "fit":
             raise DatasetNotFoundError(f"{self.root}: every sample fell into val/test; no training windows")
@@ -253,6 +292,8 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         frame_size: rendered egocentric frame size (pixels, square).
         num_rooms: procedural rooms to place the dances in.
         seed: generator seed.
+        swing_side: ``random`` or ``music`` (the music's bars decide which way the dancers swing;
+            :func:`~skeleton_mamba.tasks.motion.synthetic.synthesize_dance`).
         cache_frames: keep decoded frames in memory (default here: the set is small).
         Other arguments as :class:`EgoDanceDataModule`.
     """
@@ -265,6 +306,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         frame_size: int = 64,
         num_rooms: int = 2,
         seed: int = 0,
+        swing_side: str = "random",
         window: int = 150,
         fps: int = 30,
         batch_size: int = 4,
@@ -275,6 +317,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         test_fraction: float = 0.17,
         music_cache_dir: str | None = None,
         cache_frames: bool = True,
+        canonicalize_init_head: bool = False,
     ):
         super().__init__(
             str(Path(root) / "ego"),
@@ -288,6 +331,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             test_fraction,
             music_cache_dir,
             cache_frames,
+            canonicalize_init_head,
         )
         self.source_root = Path(root).resolve()
 
@@ -298,8 +342,21 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
 
         hp = self.hparams
         motions = self.source_root / "motions"
-        if not (motions.is_dir() and any(motions.glob("*.npz"))):
-            make_demo_set(motions, count=hp.count, duration_s=hp.duration_s, seed=hp.seed, fps=float(hp.fps))
+        settings = {"count": hp.count, "duration_s": hp.duration_s, "seed": hp.seed, "fps": float(hp.fps),
+                    "swing_side": hp.swing_side}  # fmt: skip
+        record = motions / "generator.json"
+        if motions.is_dir() and any(motions.glob("*.npz")):
+            found = json.loads(record.read_text(encoding="utf-8")) if record.is_file() else None
+            if found != settings:
+                raise ValueError(
+                    f"{motions} holds dances generated with {found or 'unrecorded settings'}, "
+                    f"not {settings}; "
+                    f"remove {self.source_root} to generate them again, or choose another data root"
+                )
+        else:
+            make_demo_set(motions, hp.count, hp.duration_s, hp.seed, float(hp.fps), hp.swing_side)
+            with atomic_open(record, "w", encoding="utf-8") as f:
+                f.write(json.dumps(settings))
         config = BuildConfig(
             out=str(self.source_root / "ego"),
             num_rooms=hp.num_rooms,

@@ -4,7 +4,8 @@
 from [DROID-SLAM] run on the egocentric video. A user's video has no ground-truth camera, so this module
 estimates the trajectory of the SMPL head joint (15) -- position (T, 3) and orientation (T, 3, 3) per frame --
 in the canonical frame of the training windows (floor at y = 0, root at x = z = 0 in frame 0, world yaw
-kept; :mod:`.data`), the frame :class:`.guidance.HeadGuidance` expects its targets in.
+kept, or the head facing +z in frame 0 with ``canonicalize_init_head``; :mod:`.data`), the frame
+:class:`.guidance.HeadGuidance` expects its targets in.
 
 Design (ours; justified against the alternatives):
 

@@ -21,9 +21,15 @@ __all__ = ["make_demo_set", "synthesize_dance", "synthesize_music", "write_dance
 
 
 def make_demo_set(
-    out_dir: str | PathLike[str], count: int = 4, duration_s: float = 20.0, seed: int = 0, fps: float = 30.0
+    out_dir: str | PathLike[str],
+    count: int = 4,
+    duration_s: float = 20.0,
+    seed: int = 0,
+    fps: float = 30.0,
+    swing_side: str = "random",
 ) -> list[tuple[Path, Path]]:
-    """Write ``count`` (dance ``.npz``, music ``.wav``) pairs, styles in turn, tempi in 90-140 BPM.
+    """Write ``count`` (dance ``.npz``, music ``.wav``) pairs, styles in turn, tempi in 90-140 BPM
+    (``swing_side``: see :func:`synthesize_dance`).
 
     Returns:
         The (motion path, music path) pairs.
@@ -33,7 +39,7 @@ def make_demo_set(
     pairs = []
     for k in range(count):
         bpm = float(rng.integers(90, 141))
-        motion = write_dance(out_dir, bpm, duration_s, styles[k % len(styles)], seed + k, fps)
+        motion = write_dance(out_dir, bpm, duration_s, styles[k % len(styles)], seed + k, fps, swing_side)
         music = write_music(motion.with_suffix(".wav"), synthesize_music(bpm, duration_s, seed=seed + k))
         pairs.append((motion, music))
     return pairs

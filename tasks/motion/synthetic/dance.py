@@ -8,9 +8,13 @@ angle and the root position are sums of ``cos(m * pi * phi)`` for ``m`` in {1, 2
 Every term has zero derivative at integer ``phi``, so all joints stop on every beat: the kinematic speed
 has its minima on the music beats (the "kinematic beats" of BeatAlign / MMV). ``m = 1`` swings once per
 two beats (left on one beat, right on the next), ``m = 2`` bounces once per beat. Styles differ in which
-joints move and how much (:data:`STYLES`); the seed scales each amplitude by a factor in [0.8, 1.2] and
-flips the side of the ``m = 1`` swings at random. Angles are about the SMPL joint's local axes (y-up,
-+z forward, +x the body's left); the rest pose has the arms lowered by 70 degrees from the T-pose.
+joints move and how much (:data:`STYLES`); the seed scales each amplitude by a factor in [0.8, 1.2] and,
+with ``swing_side="random"`` (the default), flips the side of each joint's ``m = 1`` swing at random. With
+``swing_side="music"`` every swing keeps its listed side, so the music alone decides it: ``cos(pi * phi)``
+is +1 on the even beats, which the synthetic music plays without snare (beats 1 and 3 of a bar,
+:mod:`.music`), so a dancer hearing the bar knows which way to swing. Angles are about the SMPL joint's
+local axes (y-up, +z forward, +x the body's left); the rest pose has the arms lowered by 70 degrees from the
+T-pose.
 """
 
 from __future__ import annotations
@@ -24,8 +28,9 @@ import torch
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.rotations import euler_to_matrix, matrix_to_axis_angle
 
-__all__ = ["STYLES", "ROOT_HEIGHT", "synthesize_dance", "write_dance", "beat_phase"]
+__all__ = ["STYLES", "ROOT_HEIGHT", "SWING_SIDES", "synthesize_dance", "write_dance", "beat_phase"]
 
+SWING_SIDES = ("random", "music")
 ROOT_HEIGHT = 0.93  # pelvis height (m) of the offset-table skeleton standing with straight legs
 
 # style -> {joint: ((base_x, base_y, base_z), (a_x, a_y, a_z), (b_x, b_y, b_z))} in degrees (XYZ Euler),
@@ -79,15 +84,22 @@ def beat_phase(num_frames: int, fps: float, bpm: float) -> np.ndarray:
 
 
 def synthesize_dance(
-    bpm: float, duration_s: float, fps: float = 30.0, style: str = "bounce", seed: int = 0
+    bpm: float,
+    duration_s: float,
+    fps: float = 30.0,
+    style: str = "bounce",
+    seed: int = 0,
+    swing_side: str = "random",
 ) -> MotionData:
     """A dance whose joints all stop on every beat (module docstring), as SMPL parameters (y-up, metres).
 
     Raises:
-        ValueError: unknown style or non-positive tempo/duration/fps.
+        ValueError: unknown style or swing side, or non-positive tempo/duration/fps.
     """
     if style not in STYLES:
         raise ValueError(f"unknown dance style {style!r}; known: {sorted(STYLES)}")
+    if swing_side not in SWING_SIDES:
+        raise ValueError(f"unknown swing side {swing_side!r}; known: {', '.join(SWING_SIDES)}")
     if bpm <= 0 or duration_s <= 0 or fps <= 0:
         raise ValueError(f"bpm, duration and fps must be positive, got {bpm}, {duration_s}, {fps}")
     rng = np.random.default_rng(seed)
@@ -100,7 +112,8 @@ def synthesize_dance(
     for joint, base in _ARMS_DOWN.items():
         euler[:, joint] += base
     for joint, (base, a, b) in spec["joints"].items():
-        side = rng.choice([-1.0, 1.0])
+        side = rng.choice([-1.0, 1.0])  # drawn either way: the seed's amplitudes stay the same
+        side = side if swing_side == "random" else 1.0
         scale = rng.uniform(0.8, 1.2)
         euler[:, joint] += np.asarray(base) + scale * (side * np.outer(c1, a) + np.outer(c2, b))
     (sway, bounce, _), yaw_amp = spec["root"]
@@ -122,8 +135,9 @@ def write_dance(
     style: str = "bounce",
     seed: int = 0,
     fps: float = 30.0,
+    swing_side: str = "random",
 ) -> Path:
     """Write ``synthetic_<style>_<bpm>bpm_s<seed>.npz`` (our motion format) and return its path."""
-    motion = synthesize_dance(bpm, duration_s, fps, style, seed)
+    motion = synthesize_dance(bpm, duration_s, fps, style, seed, swing_side)
     name = f"synthetic_{style}_{bpm:g}bpm_s{seed}.npz"
     return save_motion(Path(out_dir) / name, motion)
