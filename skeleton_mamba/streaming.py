@@ -31,8 +31,9 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from skeleton_mamba.frame_ops import FrameOps
 from skeleton_mamba.mixer import Mamba2Mixer
-from skeleton_mamba.ssd.discretize import compute_dtype
+from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
 
 
 @dataclass
@@ -96,30 +97,25 @@ def mixer_step(
     )
 
     # Causal depthwise convolution over the last d_conv inputs (shift the window left, append).
-    k = conv_state.shape[-1]
-    for s in range(k - 1):
-        conv_state[..., s].copy_(conv_state[..., s + 1])
-    conv_state[..., k - 1].copy_(xbc)
-    weight = mixer.conv1d.weight[:, 0]  # (conv_dim, k)
-    xbc = torch.einsum("bck,ck->bc", conv_state, weight)
+    window = torch.cat([conv_state[..., 1:], xbc[..., None]], dim=-1)
+    conv_state.copy_(window)
+    xbc = (window * mixer.conv1d.weight[:, 0]).sum(-1)  # (B, conv_dim)
     if mixer.conv1d.bias is not None:
         xbc = xbc + mixer.conv1d.bias
     x, B, C = torch.split(F.silu(xbc), [mixer.d_ssm, g * n, g * n], dim=-1)
 
     ct = ssm_state.dtype
-    delta = F.softplus(dt.to(ct) + mixer.dt_bias.to(ct))  # (B, H)
-    delta = delta.clamp(*mixer.dt_limit)  # as the sequence forward (mamba_ssm's own step skips the limit)
-    decay = torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))  # exp(Δ A), (B, H)
+    # Δ as the sequence forward (with dt_limit; mamba_ssm's own step skips the limit), (B, H)
+    delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)
     xh = x.to(ct).view(b, h, p)
-    # Head i reads B/C group i // (H / G).
-    Bh = B.to(ct).view(b, g, 1, n).expand(b, g, h // g, n).reshape(b * h, 1, n)
-    Ch = C.to(ct).view(b, g, 1, n).expand(b, g, h // g, n).reshape(b * h, n, 1)
-    state = ssm_state.view(b * h, p, n)
-    ssm_state.mul_(decay[:, :, None, None])
-    state.baddbmm_((xh * delta[:, :, None]).reshape(b * h, p, 1), Bh)  # += (Δ x) ⊗ B
+    ssm_state.mul_(torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))[:, :, None, None])  # exp(Δ A) h
+    # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
+    state = ssm_state.view(b * g, (h // g) * p, n)
+    state.baddbmm_((xh * delta[:, :, None]).view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
+    y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
     D = mixer.skip_weight().to(ct)  # (H,) or (H, P)
-    y = torch.bmm(state, Ch).view(b, h, p) + (D[:, None] if D.dim() == 1 else D) * xh
-    y = mixer.gate(y.to(u.dtype).reshape(b, mixer.d_ssm), z)
+    y = torch.addcmul(y, xh, D[:, None] if D.dim() == 1 else D)
+    y = mixer.gate(y.to(u.dtype).view(b, mixer.d_ssm), z)
     if mixer.d_mlp:
         y = torch.cat([F.silu(z0) * x0, y], dim=-1)
     return mixer.out_proj(y)
@@ -147,7 +143,7 @@ def block_step(
     if block.cross_attention is not None and context is None:
         raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
     b, j, d = x.shape
-    x = block.spatial(x[:, None])  # (B, 1, J, D): Group Scan and Joint Scan of this frame
+    x = block.spatial(x[:, None], FrameOps)  # (B, 1, J, D): Group Scan and Joint Scan of this frame
     scan = block.temporal_scan
     seq = block.norm_time(x).reshape(b * j, d)
     x = x + scan.proj(mixer_step(scan.forward_mixer, seq, conv_state, ssm_state)).view(b, 1, j, d)

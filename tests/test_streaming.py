@@ -134,3 +134,54 @@ def test_bad_use_is_explained():
     cond = _causal_model("ntu25", context_dim=4)
     with pytest.raises(ValueError, match="context"):
         cond.step(torch.randn(1, 25, 3, dtype=torch.float64), cond.init_state(1))
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"d_ssm": 16, "D_has_hdim": True},
+        {"norm_before_gate": True, "dt_limit": (0.01, 0.05)},
+        {"rmsnorm": False},
+    ],
+    ids=["default", "d_ssm+D_has_hdim", "norm_before_gate+dt_limit", "no_rmsnorm"],
+)
+@pytest.mark.parametrize("length", [1, 6, 40])
+def test_short_mix_equals_the_sequence_mix(options, length):
+    """The frame path's few-operation mixer equals ``Mamba2Mixer.mix`` (chunked / quadratic SSD)."""
+    from skeleton_mamba import Mamba2Mixer
+    from skeleton_mamba.frame_ops import short_mix
+
+    torch.manual_seed(0)
+    mixer = Mamba2Mixer(16, MixerConfig(d_state=4, headdim=4, ngroups=2, chunk_size=8, **options)).double()
+    for p in mixer.parameters():
+        p.data.add_(0.1 * torch.randn_like(p))
+    zxbcdt = torch.randn(3, length, mixer.in_proj.out_features, dtype=torch.float64)
+    with torch.no_grad():
+        torch.testing.assert_close(short_mix(mixer, zxbcdt), mixer.mix(zxbcdt), rtol=0, atol=1e-10)
+
+
+def test_frame_linear_equals_linear_for_large_float32_weights():
+    from skeleton_mamba.frame_ops import ONEDNN_MIN_WEIGHT, linear
+
+    torch.manual_seed(0)
+    layer = torch.nn.Linear(768, 1024)
+    assert layer.weight.numel() >= ONEDNN_MIN_WEIGHT  # the oneDNN path where available
+    x = torch.randn(1, 5, 768)
+    with torch.no_grad():
+        expected = x.double() @ layer.weight.double().t() + layer.bias.double()
+        torch.testing.assert_close(linear(layer, x).double(), expected, rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(linear(layer.double(), x.double()), expected, rtol=0, atol=1e-12)
+
+
+def test_a_non_finite_frame_streams_as_the_forward():
+    """A NaN in one joint of frame 5 makes frames 5.. NaN, in the stream as in the forward."""
+    model = _causal_model("smpl24")
+    torch.manual_seed(1)
+    x = torch.randn(1, 8, 24, 3, dtype=torch.float64)
+    x[0, 5, 7, 1] = float("nan")
+    with torch.no_grad():
+        full = model(x)
+    streamed, _ = _stream(model, x)
+    assert full[:, 5:].isnan().all() and not full[:, :5].isnan().any()
+    torch.testing.assert_close(streamed, full, rtol=0, atol=1e-10, equal_nan=True)
