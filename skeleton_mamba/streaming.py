@@ -138,12 +138,17 @@ def block_step(
     ssm_state: torch.Tensor,
     context: torch.Tensor | None = None,
     context_mask: torch.Tensor | None = None,
+    ops=FrameOps,
 ) -> torch.Tensor:
-    """One frame through a causal :class:`SkeletonMambaBlock`: x (B, J, D) -> (B, J, D)."""
+    """One frame through a causal :class:`SkeletonMambaBlock`: x (B, J, D) -> (B, J, D).
+
+    ``ops``: the operations of the frame-wise scans (:class:`FrameOps`; ``None``: the modules' own
+    sequence path, as in the batch forward; same result, more operations).
+    """
     if block.cross_attention is not None and context is None:
         raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
     b, j, d = x.shape
-    x = block.spatial(x[:, None], FrameOps)  # (B, 1, J, D): Group Scan and Joint Scan of this frame
+    x = block.spatial(x[:, None], ops)  # (B, 1, J, D): Group Scan and Joint Scan of this frame
     scan = block.temporal_scan
     seq = block.norm_time(x).reshape(b * j, d)
     x = x + scan.proj(mixer_step(scan.forward_mixer, seq, conv_state, ssm_state)).view(b, 1, j, d)
@@ -156,6 +161,7 @@ def step(
     state: StreamState,
     context: torch.Tensor | None = None,
     context_mask: torch.Tensor | None = None,
+    ops=FrameOps,
 ) -> tuple[torch.Tensor, StreamState]:
     """One frame through a causal :class:`SkeletonMamba` (inference only: no autograd).
 
@@ -164,6 +170,7 @@ def step(
         state: from :func:`init_state`; updated in place and returned.
         context: (B, S, Dc) the condition for this frame (see the module docstring).
         context_mask: (B, S) bool, True on valid condition tokens.
+        ops: the frame-wise scans' operations (see :func:`block_step`).
 
     Returns:
         (B, J, D or C_out) the output for this frame, and ``state``.
@@ -179,7 +186,7 @@ def step(
         if model.joint_embedding is not None:
             h = h + model.joint_embedding
         for block, conv, ssm in zip(model.blocks, state.conv, state.ssm):
-            h = block_step(block, h, conv, ssm, context, context_mask)
+            h = block_step(block, h, conv, ssm, context, context_mask, ops)
         y = model.output_proj(model.norm(h))
     state.frames += 1
     return y, state

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig, streaming
 from skeleton_mamba.skeletons import SKELETONS
 from skeleton_mamba.streaming import allocate_mixer_state, mixer_step
 
@@ -23,9 +23,12 @@ def _causal_model(skeleton: str, context_dim=None, mixer=TINY_MIXER, seed=0) -> 
     return model
 
 
-def _stream(model, x, context=None):
+def _stream(model, x, context=None, **kwargs):
     state = model.init_state(x.shape[0])
-    ys = [model.step(x[:, t], state, context)[0] for t in range(x.shape[1])]
+    if kwargs:
+        ys = [streaming.step(model, x[:, t], state, context, **kwargs)[0] for t in range(x.shape[1])]
+    else:
+        ys = [model.step(x[:, t], state, context)[0] for t in range(x.shape[1])]
     return torch.stack(ys, dim=1), state
 
 
@@ -42,6 +45,8 @@ def test_step_equals_causal_forward_for_every_skeleton(name, with_context):
     streamed, state = _stream(model, x, context)
     assert state.frames == 37
     torch.testing.assert_close(streamed, full, rtol=0, atol=1e-10)
+    if name == "smpl24":  # the frame-wise scans through the modules' sequence path (bench_stream's reference)
+        torch.testing.assert_close(_stream(model, x, context, ops=None)[0], full, rtol=0, atol=1e-10)
 
 
 def test_causal_forward_ignores_the_future_and_bidirectional_does_not():
