@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from skeleton_mamba.causal_conv import causal_conv_taps
 from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
 
 # Weights of at least this many entries go through oneDNN (fp32 on CPU): the Group Scan's in_proj
@@ -48,26 +49,6 @@ def linear(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
     if _ONEDNN and w.numel() >= ONEDNN_MIN_WEIGHT and x.dtype == w.dtype == torch.float32 and not x.is_cuda:
         return torch.ops.mkldnn._linear_pointwise(x, w, layer.bias, "none", [], "")
     return F.linear(x, w, layer.bias)
-
-
-def causal_conv_short(xbc: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> torch.Tensor:
-    """Causal depthwise convolution along dim 1 (as ``Mamba2Mixer.causal_conv``), inference only.
-
-    Args:
-        xbc: (b, L, C).
-        weight: (C, 1, k) the ``conv1d`` weight; bias: (C,) or ``None``.
-
-    Returns:
-        (b, L, C): ``out[t] = bias + Σ_s weight[:, s] · x[t - (k - 1) + s]`` (zeros before t = 0).
-    """
-    k, length = weight.shape[-1], xbc.shape[1]
-    taps = weight[:, 0].t()  # (k, C)
-    padded = F.pad(xbc, (0, 0, k - 1, 0))
-    last = padded[:, k - 1 :]
-    out = last * taps[k - 1] if bias is None else torch.addcmul(bias, last, taps[k - 1])
-    for s in range(k - 1):
-        out.addcmul_(padded[:, s : s + length], taps[s])
-    return out
 
 
 def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
@@ -88,7 +69,7 @@ def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
         zxbcdt, [mixer.d_mlp, mixer.d_mlp, mixer.d_ssm, mixer.d_ssm + 2 * G * N, H], dim=-1
     )
     ct = compute_dtype(xbc)
-    xbc = F.silu(causal_conv_short(xbc, mixer.conv1d.weight, mixer.conv1d.bias)).to(ct)
+    xbc = F.silu(causal_conv_taps(xbc, mixer.conv1d.weight[:, 0], mixer.conv1d.bias)).to(ct)
     x, B, C = torch.split(xbc, [mixer.d_ssm, G * N, G * N], dim=-1)
     x = x.view(b, L, H, P)
     delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)  # (b, L, H)
@@ -116,4 +97,4 @@ class FrameOps:
     mix = staticmethod(short_mix)
 
 
-__all__ = ["FrameOps", "causal_conv_short", "linear", "short_mix"]
+__all__ = ["FrameOps", "linear", "short_mix"]
