@@ -237,13 +237,19 @@ def main() -> int:
     p.add_argument("--memory-only", action="store_true", help="only the resident-memory figures (no timing)")
     p.add_argument("--profile", type=int, default=0, metavar="N",
                    help="print the N operators with the most self CPU time over 20 steps and exit")
+    p.add_argument("--adaptive-malloc", action="store_true",
+                   help="leave glibc's adaptive malloc thresholds (default: keep_freed_memory, as sm stream)")
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
     minutes = [float(m) for m in args.memory_minutes.split(",")]
     if args.width_only:
         import torch
 
+        from skeleton_mamba.streaming import keep_freed_memory
+
         torch.set_num_threads(args.threads)
+        if not args.adaptive_malloc:
+            keep_freed_memory()  # as `sm stream` does
         if args.profile:
             print(profile_table(build(args.width_only), args.profile), file=sys.stderr)
             print(json.dumps({"width": args.width_only, "profiled": True}))
@@ -266,6 +272,7 @@ def main() -> int:
         cmd += ["--frames", str(args.frames), "--window", str(args.window)]
         cmd += ["--window-repeats", str(args.window_repeats), "--memory-minutes", args.memory_minutes]
         cmd += ["--memory-only"] * args.memory_only + ["--profile", str(args.profile)]
+        cmd += ["--adaptive-malloc"] * args.adaptive_malloc
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         if args.omp_wait_policy != "inherit":
             env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
