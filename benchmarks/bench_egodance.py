@@ -21,7 +21,9 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
 - ``ddpm1000_wall_s`` (with ``--ddpm-run``): a real 1000-step DDPM run of one 150-frame sample as [EgoMusic]
   samples at test time (no classifier-free guidance), condition encoding included;
 - ``gemm``: this machine's fp32 matrix-product rate timed in the same process (before and after the
-  models), and ``*_fraction_of_gemm``: each model's achieved matrix-product rate as a fraction of it.
+  models), and ``*_fraction_of_gemm``: each model's achieved matrix-product rate as a fraction of it;
+- ``--profile N``: the operators of one guided EMM sampling step by self CPU time (``torch.profiler``)
+  and the share of it spent in matrix products.
 
     flock /tmp/bench.lock python benchmarks/bench_egodance.py --json              # paper sizes (slow on CPU)
     flock /tmp/bench.lock python benchmarks/bench_egodance.py --size tiny --json  # quick
@@ -42,7 +44,7 @@ from torch import nn
 from torch.utils.flop_counter import FlopCounterMode
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms  # noqa: E402
+from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, operator_profile  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
@@ -253,6 +255,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--profile", type=int, default=0, metavar="N",
+                    help="print the N operators with the most self CPU time in one guided EMM sampling step "
+                         "(and the matrix products' share of it), then exit")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -269,6 +274,15 @@ def main(argv: list[str] | None = None) -> int:
     with torch.inference_mode():  # the cached frozen-ResNet features of the training batch
         one = emm.vision_encoder.resnet(pixel_values=frames[0, :2]).pooler_output.flatten(1)
     features = torch.randn(b, n, one.shape[-1], device=device).abs()
+    if args.profile:
+        emm.eval()
+        with torch.inference_mode():
+            context = emm.encode_condition(music[:1], frames)
+            x, t = torch.randn(1, n, 24, 10, device=device), torch.full((1,), 500, device=device)
+            guided_x0(emm, x, t, context, 2.0)  # warm-up
+            table, gemm_share = operator_profile(lambda: guided_x0(emm, x, t, context, 2.0), args.profile)
+        print(f"{table}\nmatrix products: {100 * gemm_share:.0f} % of the self CPU time")
+        return 0
     gemm_before = gemm_gflop_per_s()
     result = {
         "machine": machine_info(),

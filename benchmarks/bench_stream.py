@@ -9,11 +9,19 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
 
 - ``step``: one :meth:`StreamDancer.step` per 30 fps frame fed its own previous pose and a music
   feature row; median / p99 / max latency over ``--frames`` frames, and frames per second;
+- ``step_sequence_path``: the same step with the frame-wise scans through the modules' sequence path
+  (``streaming.step(..., ops=None)``, the path before ``FrameOps``), timed on alternate frames of
+  the same run with its own state, and ``sequence_path_over_step`` the ratio of the medians;
 - ``windowed``: what a windowed model pays per new frame, re-running the same network's forward on
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
 - ``memory``: resident set size (VmRSS) after streaming ``--memory-minutes`` minutes of frames as
-  fast as possible (synthetic features), and the size of the recurrent state.
+  fast as possible (synthetic features; at the seed width 10 minutes are 18,000 steps, about as long
+  as the music itself; progress on stderr), and the size of the recurrent state;
+- ``tail``: what else happened during the timed steps, per frame: Python garbage collections (count,
+  total and longest pause, ``gc.callbacks``), minor page faults (fresh memory the allocator took from
+  the kernel) and involuntary context switches (the process was preempted: other load on the machine);
+- ``--profile N``: the N operators with the most self CPU time over 20 steps (``torch.profiler``).
 
 The machine load (``os.getloadavg``) before and after is printed beside the figures: on a shared
 machine the latencies are upper bounds; the ratios measured side by side are the robust part.
@@ -22,8 +30,10 @@ machine the latencies are upper bounds; the ratios measured side by side are the
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -56,11 +66,54 @@ def build(width: str):
     return StreamDancer(config).eval()
 
 
-def measure(width: str, frames: int, window: int, window_repeats: int, minutes: list[float]) -> dict:
+class GcPauses:
+    """Count and time the Python garbage collections while active (``gc.callbacks``)."""
+
+    def __init__(self) -> None:
+        self.pauses_ms: list[float] = []
+        self._start = 0.0
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._start = time.perf_counter()
+        else:
+            self.pauses_ms.append(1e3 * (time.perf_counter() - self._start))
+
+    def __enter__(self) -> GcPauses:
+        gc.callbacks.append(self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        gc.callbacks.remove(self)
+
+
+def profile_table(model, rows: int) -> str:
+    """Operators by self CPU time over 20 steps (after 5 warm-up steps), and the matrix products' share."""
+    import torch
+    from common import operator_profile
+
+    prev, music = torch.zeros(1, 24, 12), torch.randn(1, 34)
+    with torch.inference_mode():
+        state = model.init_state(1)
+        for _ in range(5):
+            prev, state = model.step(prev, music, state)
+
+        def steps():
+            nonlocal prev, state
+            for _ in range(20):
+                prev, state = model.step(prev, music, state)
+
+        table, gemm_share = operator_profile(steps, rows)
+    return f"{table}\nmatrix products: {100 * gemm_share:.0f} % of the self CPU time"
+
+
+def measure(width: str, frames: int, window: int, window_repeats: int, minutes: list[float],
+            memory_only: bool = False) -> dict:
     """All figures of one width (run in a subprocess)."""
     import numpy as np
     import torch
 
+    from skeleton_mamba import streaming
     from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
     from skeleton_mamba.tasks.stream.live import latency_summary
 
@@ -79,52 +132,90 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
             times.append(1e3 * (time.perf_counter() - start))
         return times
 
+    def run_both(count: int, state, reference_state) -> tuple[list[float], list[float]]:
+        """Alternate frames: ``model.step`` (FrameOps) and the sequence path, each with its own state."""
+        nonlocal prev
+        times, reference_times, reference_prev = [], [], prev
+        for _ in range(count):
+            start = time.perf_counter()
+            prev, state = model.step(prev, music, state)
+            times.append(1e3 * (time.perf_counter() - start))
+            start = time.perf_counter()
+            out, reference_state = streaming.step(
+                model.backbone, model._inputs(reference_prev, music), reference_state, ops=None
+            )
+            reference_times.append(1e3 * (time.perf_counter() - start))
+            reference_prev = out
+        return times, reference_times
+
+    result = {"width": width, "parameters": params, "threads": torch.get_num_threads()}
     with torch.inference_mode():
-        state = model.init_state(1)
-        run(10, state)  # warm-up
-        step_ms = np.asarray(run(frames, state))
-        history = torch.zeros(1, window, 24, 12)
-        music_window = torch.randn(1, window, 34)
-        model(history, music_window)
-        windowed = []
-        for _ in range(window_repeats):
-            start = time.perf_counter()
-            model(history, music_window)[:, -1]
-            windowed.append(1e3 * (time.perf_counter() - start))
-        extractor = CausalMusicFeatures(44100)
-        audio = np.random.default_rng(0).standard_normal(44100 * 2).astype(np.float32) * 0.1
-        hop = 44100 // 30
-        extractor.push(audio[: 4 * hop])
-        feature_ms = []
-        for s in range(4 * hop, len(audio) - hop, hop):
-            start = time.perf_counter()
-            extractor.push(audio[s : s + hop])
-            feature_ms.append(1e3 * (time.perf_counter() - start))
+        if not memory_only:
+            state = model.init_state(1)
+            run(10, state)  # warm-up
+            usage = resource.getrusage(resource.RUSAGE_SELF)
+            with GcPauses() as collections:
+                step_ms = np.asarray(run(frames, state))
+            after = resource.getrusage(resource.RUSAGE_SELF)
+            pauses = np.asarray(collections.pauses_ms)
+            summary = latency_summary(step_ms)
+            result["step"] = {
+                **{k: round(v, 3) for k, v in summary.items()},
+                "fps": round(1e3 / float(np.mean(step_ms)), 1),
+                "frames": frames,
+            }  # fmt: skip
+            both = run_both(frames, model.init_state(1), model.init_state(1))
+            paired, reference = (np.asarray(t) for t in both)
+            result["step_sequence_path"] = {
+                **{k: round(v, 3) for k, v in latency_summary(reference).items()},
+                "step_median_ms_same_frames": round(float(np.median(paired)), 3),
+                "sequence_path_over_step": round(float(np.median(reference) / np.median(paired)), 2),
+            }
+            result["tail"] = {
+                "gc_collections": len(pauses),
+                "gc_total_ms": round(float(pauses.sum()), 3),
+                "gc_max_ms": round(float(pauses.max()), 3) if len(pauses) else 0.0,
+                "minor_faults_per_frame": round((after.ru_minflt - usage.ru_minflt) / frames, 2),
+                "involuntary_switches_per_frame": round((after.ru_nivcsw - usage.ru_nivcsw) / frames, 2),
+                "frames_over_33ms": int((step_ms > 33.0).sum()),
+            }
+            history = torch.zeros(1, window, 24, 12)
+            music_window = torch.randn(1, window, 34)
+            model(history, music_window)
+            windowed = []
+            for _ in range(window_repeats):
+                start = time.perf_counter()
+                model(history, music_window)[:, -1]
+                windowed.append(1e3 * (time.perf_counter() - start))
+            result["windowed"] = {
+                "window_frames": window,
+                "median_ms_per_new_frame": round(float(np.median(windowed)), 2),
+            }
+            extractor = CausalMusicFeatures(44100)
+            audio = np.random.default_rng(0).standard_normal(44100 * 2).astype(np.float32) * 0.1
+            hop = 44100 // 30
+            extractor.push(audio[: 4 * hop])
+            feature_ms = []
+            for s in range(4 * hop, len(audio) - hop, hop):
+                start = time.perf_counter()
+                extractor.push(audio[s : s + hop])
+                feature_ms.append(1e3 * (time.perf_counter() - start))
+            result["features"] = {k: round(v, 3) for k, v in latency_summary(np.asarray(feature_ms)).items()}
         memory = {}
         state = model.init_state(1)
-        done = 0
+        done, start = 0, time.perf_counter()
         for m in sorted(minutes):
             target = int(round(m * 60 * 30))
-            run(target - done, state)
-            done = target
+            while done < target:  # one minute of frames at a time, with progress on stderr
+                chunk = min(target - done, 60 * 30)
+                run(chunk, state)
+                done += chunk
+                elapsed = time.perf_counter() - start
+                progress = f"{done / 1800:.1f} min of frames streamed in {elapsed:.0f} s"
+                print(f"[{width}] {progress}, RSS {rss_mib():.1f} MiB", file=sys.stderr, flush=True)
             memory[f"rss_mib_after_{m:g}_min"] = round(rss_mib(), 1)
-    summary = latency_summary(step_ms)
-    return {
-        "width": width,
-        "parameters": params,
-        "threads": torch.get_num_threads(),
-        "step": {
-            **{k: round(v, 3) for k, v in summary.items()},
-            "fps": round(1e3 / float(np.mean(step_ms)), 1),
-            "frames": frames,
-        },  # fmt: skip
-        "windowed": {
-            "window_frames": window,
-            "median_ms_per_new_frame": round(float(np.median(windowed)), 2),
-        },
-        "features": {k: round(v, 3) for k, v in latency_summary(np.asarray(feature_ms)).items()},
-        "memory": {**memory, "state_bytes": state.nbytes, "frames_streamed": done},
-    }
+    result["memory"] = {**memory, "state_bytes": state.nbytes, "frames_streamed": done}
+    return result
 
 
 def main() -> int:
@@ -143,14 +234,30 @@ def main() -> int:
         help="OMP_WAIT_POLICY of the measuring process (passive: idle threads sleep instead of spinning, "
         "which keeps 2 threads usable on a loaded machine)",
     )
+    p.add_argument("--memory-only", action="store_true", help="only the resident-memory figures (no timing)")
+    p.add_argument("--profile", type=int, default=0, metavar="N",
+                   help="print the N operators with the most self CPU time over 20 steps and exit")
+    p.add_argument("--adaptive-malloc", action="store_true",
+                   help="leave glibc's adaptive malloc thresholds (default: keep_freed_memory, as sm stream)")
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
     minutes = [float(m) for m in args.memory_minutes.split(",")]
     if args.width_only:
         import torch
 
+        from skeleton_mamba.streaming import keep_freed_memory
+
         torch.set_num_threads(args.threads)
-        print(json.dumps(measure(args.width_only, args.frames, args.window, args.window_repeats, minutes)))
+        if not args.adaptive_malloc:
+            keep_freed_memory()  # as `sm stream` does
+        if args.profile:
+            print(profile_table(build(args.width_only), args.profile), file=sys.stderr)
+            print(json.dumps({"width": args.width_only, "profiled": True}))
+            return 0
+        figures = measure(
+            args.width_only, args.frames, args.window, args.window_repeats, minutes, args.memory_only
+        )
+        print(json.dumps(figures))
         return 0
     results = {
         "machine": machine_info(),
@@ -164,12 +271,13 @@ def main() -> int:
         cmd = [sys.executable, __file__, "--width-only", width, "--threads", str(args.threads)]
         cmd += ["--frames", str(args.frames), "--window", str(args.window)]
         cmd += ["--window-repeats", str(args.window_repeats), "--memory-minutes", args.memory_minutes]
+        cmd += ["--memory-only"] * args.memory_only + ["--profile", str(args.profile)]
+        cmd += ["--adaptive-malloc"] * args.adaptive_malloc
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         if args.omp_wait_policy != "inherit":
             env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, env=env)  # progress: stderr
         if proc.returncode:
-            print(proc.stderr, file=sys.stderr)
             return proc.returncode
         results["widths"][width] = json.loads(proc.stdout.strip().splitlines()[-1])
     results["load_after"] = [round(v, 2) for v in os.getloadavg()]
@@ -179,13 +287,18 @@ def main() -> int:
     print(results["machine"])
     print(f"load (1/5/15 min) before {results['load_before']}, after {results['load_after']}")
     for width, r in results["widths"].items():
-        s, w = r["step"], r["windowed"]
-        print(
-            f"{width:5s} {r['parameters'] / 1e6:6.2f} M params, {r['threads']} threads: step median "
-            f"{s['median_ms']:.2f} ms, p99 {s['p99_ms']:.2f} ms, {s['fps']:.0f} fps | windowed "
-            f"({w['window_frames']} frames) {w['median_ms_per_new_frame']:.1f} ms/frame | features "
-            f"{r['features']['median_ms']:.2f} ms | {r['memory']}"
-        )
+        if "memory" not in r:
+            continue
+        line = f"{width:5s} {r['parameters'] / 1e6:6.2f} M params, {r['threads']} threads:"
+        if "step" in r:
+            s, w = r["step"], r["windowed"]
+            line += (
+                f" step median {s['median_ms']:.2f} ms, p99 {s['p99_ms']:.2f} ms, {s['fps']:.0f} fps"
+                f" | windowed ({w['window_frames']} frames) {w['median_ms_per_new_frame']:.1f} ms/frame"
+                f" | features {r['features']['median_ms']:.2f} ms | {r['tail']} | sequence path"
+                f" {r['step_sequence_path']['sequence_path_over_step']}x the step |"
+            )
+        print(f"{line} {r['memory']}")
     return 0
 
 

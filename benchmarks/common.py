@@ -76,3 +76,24 @@ def rate(gflop: float, ms: float, gemm: dict) -> dict:
     achieved = gflop / (ms / 1e3)
     return {"gflop": round(gflop, 3), "gflop_per_s": round(achieved, 1),
             "fraction_of_gemm": round(achieved / gemm["gflop_per_s"], 3)}
+
+
+# Matrix-product operators (the GEMM rate's work); the rest is element-wise work, copies and reductions.
+GEMM_OPERATORS = ("aten::mm", "aten::addmm", "aten::bmm", "aten::baddbmm", "aten::baddbmm_",
+                  "mkldnn::_linear_pointwise", "aten::_scaled_dot_product_flash_attention_for_cpu")
+
+
+def operator_profile(fn: Callable[[], object], rows: int = 25) -> tuple[str, float]:
+    """``fn()`` once under ``torch.profiler``: the ``rows`` operators with the most self CPU time (a table)
+    and the share of the self CPU time spent in matrix products (:data:`GEMM_OPERATORS`)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    with profile(activities=[ProfilerActivity.CPU], record_shapes=True) as prof:
+        fn()
+    events = prof.key_averages()
+    total = sum(e.self_cpu_time_total for e in events)
+    gemm = sum(e.self_cpu_time_total for e in events if e.key in GEMM_OPERATORS)
+    table = prof.key_averages(group_by_input_shape=True).table(
+        sort_by="self_cpu_time_total", row_limit=rows, max_name_column_width=30, max_shapes_column_width=70
+    )
+    return table, gemm / max(total, 1e-9)

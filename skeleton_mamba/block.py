@@ -96,11 +96,15 @@ class SkeletonMambaBlock(nn.Module):
         frames = slice_length(x, 1, b * j * width, self.slice_elements)
         return map_slices(lambda h: self.pointwise(h, context, context_mask), 1, frames, x)
 
-    def spatial(self, x: torch.Tensor) -> torch.Tensor:
-        """The frame-wise sublayers: Group Scan, then Joint Scan back to joints. (B, T, J, D)."""
+    def spatial(self, x: torch.Tensor, ops=None) -> torch.Tensor:
+        """The frame-wise sublayers: Group Scan, then Joint Scan back to joints. (B, T, J, D).
+
+        ``ops``: the scans' projections and mixers for one frame (:class:`~skeleton_mamba.frame_ops.FrameOps`,
+        see :meth:`GroupScan.forward`); ``None``: the modules' own.
+        """
         g = self.tokenizer(self.norm_group(x))
-        g = g + self.group_scan(g)
-        return x + self.inverse_tokenizer(self.joint_scan(self.norm_joint(g)))
+        g = g + self.group_scan(g, ops)
+        return x + self.inverse_tokenizer(self.joint_scan(self.norm_joint(g), ops))
 
     def pointwise(
         self, x: torch.Tensor, context: torch.Tensor | None, context_mask: torch.Tensor | None

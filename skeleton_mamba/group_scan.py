@@ -54,23 +54,28 @@ class GroupScan(nn.Module):
         """Elements per frame of the widest intermediate, the projected n*G-token path sequence."""
         return self.num_paths * self.num_groups * self.mixer.in_proj.out_features
 
-    def forward(self, g: torch.Tensor) -> torch.Tensor:
+    def forward(self, g: torch.Tensor, ops=None) -> torch.Tensor:
         """Same result as scanning ``mixer(g[:, path_index])``, at 1/n of the projection cost.
 
         The mixer's ``in_proj`` and ``out_proj`` act per token and are linear, so the n*G-token
         sequence's projections are computed on the G distinct group tokens and gathered, and the n
         path outputs are averaged before ``out_proj`` (mean and a linear map commute). Only the
-        causal conv, the SSD and the gated norm see the full n*G-token sequence.
+        causal conv, the SSD and the gated norm see the full n*G-token sequence. ``ops`` (the frame-by-frame
+        path passes :class:`~skeleton_mamba.frame_ops.FrameOps`) replaces the projections by
+        ``ops.linear(layer, x)`` and ``mixer.mix`` by ``ops.mix(mixer, zxbcdt)``.
         """
+        mixer = self.mixer
+        mix = type(mixer).mix if ops is None else ops.mix
+        project = nn.Linear.__call__ if ops is None else ops.linear
         lead = g.shape[:-2]
         g = g.reshape(-1, self.num_groups, g.shape[-1])  # (BT, G, E)
         # (BT, n*G, F): the projections of the n permuted group sequences, concatenated.
-        seq = torch.index_select(self.mixer.in_proj(g), 1, self.path_index)
+        seq = torch.index_select(project(mixer.in_proj, g), 1, self.path_index)
         if self.shared:
-            y = self.mixer.mix(rearrange(seq, "b (n g) f -> (b n) g f", n=self.num_paths))
+            y = mix(mixer, rearrange(seq, "b (n g) f -> (b n) g f", n=self.num_paths))
             y = rearrange(y, "(b n) g d -> b (n g) d", n=self.num_paths)
         else:
-            y = self.mixer.mix(seq)
+            y = mix(mixer, seq)
         # (G, n*G) @ (BT, n*G, d): un-permute each path and average over paths.
-        y = self.mixer.out_proj(torch.matmul(self.unpermute_mean.to(y.dtype), y))
+        y = project(mixer.out_proj, torch.matmul(self.unpermute_mean.to(y.dtype), y))
         return y.reshape(*lead, self.num_groups, y.shape[-1])

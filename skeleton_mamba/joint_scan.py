@@ -23,8 +23,12 @@ class JointScan(nn.Module):
         self.split = nn.Linear(group_size * dim, group_size * dim)
         self.mixer = Mamba2Mixer(dim, mixer)
 
-    def forward(self, g: torch.Tensor) -> torch.Tensor:
+    def forward(self, g: torch.Tensor, ops=None) -> torch.Tensor:
+        """``ops``: replaces the projections and ``mixer.mix`` (see :meth:`GroupScan.forward`)."""
         lead = g.shape[:-1]
-        joints = rearrange(self.split(g), "... (p d) -> (...) p d", p=self.group_size)
-        y = self.mixer(joints)
+        if ops is None:
+            y = self.mixer(rearrange(self.split(g), "... (p d) -> (...) p d", p=self.group_size))
+        else:
+            joints = rearrange(ops.linear(self.split, g), "... (p d) -> (...) p d", p=self.group_size)
+            y = ops.linear(self.mixer.out_proj, ops.mix(self.mixer, ops.linear(self.mixer.in_proj, joints)))
         return y.reshape(*lead, self.group_size, y.shape[-1])

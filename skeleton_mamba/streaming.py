@@ -26,13 +26,16 @@ Nothing else is kept, so the state's size is fixed whatever the number of frames
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 
+from skeleton_mamba.frame_ops import FrameOps
 from skeleton_mamba.mixer import Mamba2Mixer
-from skeleton_mamba.ssd.discretize import compute_dtype
+from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
 
 
 @dataclass
@@ -96,30 +99,25 @@ def mixer_step(
     )
 
     # Causal depthwise convolution over the last d_conv inputs (shift the window left, append).
-    k = conv_state.shape[-1]
-    for s in range(k - 1):
-        conv_state[..., s].copy_(conv_state[..., s + 1])
-    conv_state[..., k - 1].copy_(xbc)
-    weight = mixer.conv1d.weight[:, 0]  # (conv_dim, k)
-    xbc = torch.einsum("bck,ck->bc", conv_state, weight)
+    window = torch.cat([conv_state[..., 1:], xbc[..., None]], dim=-1)
+    conv_state.copy_(window)
+    xbc = (window * mixer.conv1d.weight[:, 0]).sum(-1)  # (B, conv_dim)
     if mixer.conv1d.bias is not None:
         xbc = xbc + mixer.conv1d.bias
     x, B, C = torch.split(F.silu(xbc), [mixer.d_ssm, g * n, g * n], dim=-1)
 
     ct = ssm_state.dtype
-    delta = F.softplus(dt.to(ct) + mixer.dt_bias.to(ct))  # (B, H)
-    delta = delta.clamp(*mixer.dt_limit)  # as the sequence forward (mamba_ssm's own step skips the limit)
-    decay = torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))  # exp(Δ A), (B, H)
+    # Δ as the sequence forward (with dt_limit; mamba_ssm's own step skips the limit), (B, H)
+    delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)
     xh = x.to(ct).view(b, h, p)
-    # Head i reads B/C group i // (H / G).
-    Bh = B.to(ct).view(b, g, 1, n).expand(b, g, h // g, n).reshape(b * h, 1, n)
-    Ch = C.to(ct).view(b, g, 1, n).expand(b, g, h // g, n).reshape(b * h, n, 1)
-    state = ssm_state.view(b * h, p, n)
-    ssm_state.mul_(decay[:, :, None, None])
-    state.baddbmm_((xh * delta[:, :, None]).reshape(b * h, p, 1), Bh)  # += (Δ x) ⊗ B
+    ssm_state.mul_(torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))[:, :, None, None])  # exp(Δ A) h
+    # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
+    state = ssm_state.view(b * g, (h // g) * p, n)
+    state.baddbmm_((xh * delta[:, :, None]).view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
+    y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
     D = mixer.skip_weight().to(ct)  # (H,) or (H, P)
-    y = torch.bmm(state, Ch).view(b, h, p) + (D[:, None] if D.dim() == 1 else D) * xh
-    y = mixer.gate(y.to(u.dtype).reshape(b, mixer.d_ssm), z)
+    y = torch.addcmul(y, xh, D[:, None] if D.dim() == 1 else D)
+    y = mixer.gate(y.to(u.dtype).view(b, mixer.d_ssm), z)
     if mixer.d_mlp:
         y = torch.cat([F.silu(z0) * x0, y], dim=-1)
     return mixer.out_proj(y)
@@ -142,12 +140,17 @@ def block_step(
     ssm_state: torch.Tensor,
     context: torch.Tensor | None = None,
     context_mask: torch.Tensor | None = None,
+    ops=FrameOps,
 ) -> torch.Tensor:
-    """One frame through a causal :class:`SkeletonMambaBlock`: x (B, J, D) -> (B, J, D)."""
+    """One frame through a causal :class:`SkeletonMambaBlock`: x (B, J, D) -> (B, J, D).
+
+    ``ops``: the operations of the frame-wise scans (:class:`FrameOps`; ``None``: the modules' own
+    sequence path, as in the batch forward; same result, more operations).
+    """
     if block.cross_attention is not None and context is None:
         raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
     b, j, d = x.shape
-    x = block.spatial(x[:, None])  # (B, 1, J, D): Group Scan and Joint Scan of this frame
+    x = block.spatial(x[:, None], ops)  # (B, 1, J, D): Group Scan and Joint Scan of this frame
     scan = block.temporal_scan
     seq = block.norm_time(x).reshape(b * j, d)
     x = x + scan.proj(mixer_step(scan.forward_mixer, seq, conv_state, ssm_state)).view(b, 1, j, d)
@@ -160,6 +163,7 @@ def step(
     state: StreamState,
     context: torch.Tensor | None = None,
     context_mask: torch.Tensor | None = None,
+    ops=FrameOps,
 ) -> tuple[torch.Tensor, StreamState]:
     """One frame through a causal :class:`SkeletonMamba` (inference only: no autograd).
 
@@ -168,6 +172,7 @@ def step(
         state: from :func:`init_state`; updated in place and returned.
         context: (B, S, Dc) the condition for this frame (see the module docstring).
         context_mask: (B, S) bool, True on valid condition tokens.
+        ops: the frame-wise scans' operations (see :func:`block_step`).
 
     Returns:
         (B, J, D or C_out) the output for this frame, and ``state``.
@@ -183,10 +188,44 @@ def step(
         if model.joint_embedding is not None:
             h = h + model.joint_embedding
         for block, conv, ssm in zip(model.blocks, state.conv, state.ssm):
-            h = block_step(block, h, conv, ssm, context, context_mask)
+            h = block_step(block, h, conv, ssm, context, context_mask, ops)
         y = model.output_proj(model.norm(h))
     state.frames += 1
     return y, state
 
 
-__all__ = ["StreamState", "allocate_mixer_state", "block_step", "init_state", "mixer_step", "step"]
+# glibc mallopt parameters (malloc.h) and the values keep_freed_memory sets.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+MMAP_THRESHOLD = 32 << 20  # the largest glibc accepts on 64-bit
+TRIM_THRESHOLD = 1 << 30
+
+
+def keep_freed_memory() -> bool:
+    """Let glibc keep freed memory for reuse instead of returning it to the kernel (process-wide).
+
+    A step allocates and frees the same few hundred kB buffers every frame. With glibc's adaptive
+    defaults, blocks above the mmap threshold are fresh mappings and the top of the heap is trimmed
+    when enough is free, so a frame could start with thousands of minor page faults (measured: about
+    4,000 per seed-width frame, 16 MB of zero-filled pages) depending on the order of allocations.
+    Fixed thresholds (mmap above 32 MiB, trim above 1 GiB) keep the blocks in the heap: 0 faults per
+    frame, and the resident memory stays at its high-water mark (flat). Returns False (nothing done)
+    where the C library has no ``mallopt`` (not glibc).
+    """
+    path = ctypes.util.find_library("c")
+    try:
+        mallopt = ctypes.CDLL(path).mallopt
+    except (OSError, AttributeError, TypeError):
+        return False
+    mmap_set = bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD))
+    return mmap_set and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
+__all__ = [
+    "StreamState",
+    "allocate_mixer_state",
+    "block_step",
+    "init_state",
+    "keep_freed_memory",
+    "mixer_step",
+    "step",
+]

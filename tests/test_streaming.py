@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig, streaming
 from skeleton_mamba.skeletons import SKELETONS
 from skeleton_mamba.streaming import allocate_mixer_state, mixer_step
 
@@ -23,9 +23,12 @@ def _causal_model(skeleton: str, context_dim=None, mixer=TINY_MIXER, seed=0) -> 
     return model
 
 
-def _stream(model, x, context=None):
+def _stream(model, x, context=None, **kwargs):
     state = model.init_state(x.shape[0])
-    ys = [model.step(x[:, t], state, context)[0] for t in range(x.shape[1])]
+    if kwargs:
+        ys = [streaming.step(model, x[:, t], state, context, **kwargs)[0] for t in range(x.shape[1])]
+    else:
+        ys = [model.step(x[:, t], state, context)[0] for t in range(x.shape[1])]
     return torch.stack(ys, dim=1), state
 
 
@@ -42,6 +45,8 @@ def test_step_equals_causal_forward_for_every_skeleton(name, with_context):
     streamed, state = _stream(model, x, context)
     assert state.frames == 37
     torch.testing.assert_close(streamed, full, rtol=0, atol=1e-10)
+    if name == "smpl24":  # the frame-wise scans through the modules' sequence path (bench_stream's reference)
+        torch.testing.assert_close(_stream(model, x, context, ops=None)[0], full, rtol=0, atol=1e-10)
 
 
 def test_causal_forward_ignores_the_future_and_bidirectional_does_not():
@@ -134,3 +139,78 @@ def test_bad_use_is_explained():
     cond = _causal_model("ntu25", context_dim=4)
     with pytest.raises(ValueError, match="context"):
         cond.step(torch.randn(1, 25, 3, dtype=torch.float64), cond.init_state(1))
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"d_ssm": 16, "D_has_hdim": True},
+        {"norm_before_gate": True, "dt_limit": (0.01, 0.05)},
+        {"rmsnorm": False},
+    ],
+    ids=["default", "d_ssm+D_has_hdim", "norm_before_gate+dt_limit", "no_rmsnorm"],
+)
+@pytest.mark.parametrize("length", [1, 6, 40])
+def test_short_mix_equals_the_sequence_mix(options, length):
+    """The frame path's few-operation mixer equals ``Mamba2Mixer.mix`` (chunked / quadratic SSD)."""
+    from skeleton_mamba import Mamba2Mixer
+    from skeleton_mamba.frame_ops import short_mix
+
+    torch.manual_seed(0)
+    mixer = Mamba2Mixer(16, MixerConfig(d_state=4, headdim=4, ngroups=2, chunk_size=8, **options)).double()
+    for p in mixer.parameters():
+        p.data.add_(0.1 * torch.randn_like(p))
+    zxbcdt = torch.randn(3, length, mixer.in_proj.out_features, dtype=torch.float64)
+    with torch.no_grad():
+        torch.testing.assert_close(short_mix(mixer, zxbcdt), mixer.mix(zxbcdt), rtol=0, atol=1e-10)
+
+
+def test_frame_linear_equals_linear_for_large_float32_weights():
+    from skeleton_mamba.frame_ops import ONEDNN_MIN_WEIGHT, linear
+
+    torch.manual_seed(0)
+    layer = torch.nn.Linear(768, 1024)
+    assert layer.weight.numel() >= ONEDNN_MIN_WEIGHT  # the oneDNN path where available
+    x = torch.randn(1, 5, 768)
+    with torch.no_grad():
+        expected = x.double() @ layer.weight.double().t() + layer.bias.double()
+        torch.testing.assert_close(linear(layer, x).double(), expected, rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(linear(layer.double(), x.double()), expected, rtol=0, atol=1e-12)
+
+
+def test_a_non_finite_frame_streams_as_the_forward():
+    """A NaN in one joint of frame 5 makes frames 5.. NaN, in the stream as in the forward."""
+    model = _causal_model("smpl24")
+    torch.manual_seed(1)
+    x = torch.randn(1, 8, 24, 3, dtype=torch.float64)
+    x[0, 5, 7, 1] = float("nan")
+    with torch.no_grad():
+        full = model(x)
+    streamed, _ = _stream(model, x)
+    assert full[:, 5:].isnan().all() and not full[:, :5].isnan().any()
+    torch.testing.assert_close(streamed, full, rtol=0, atol=1e-10, equal_nan=True)
+
+
+def test_keep_freed_memory_stops_the_page_faults_of_a_repeated_allocation():
+    """glibc: the blocks a frame frees are reused; with the adaptive defaults the top of the heap was
+    trimmed after such a frame and the next one faulted its pages in again (about 1,000 faults here)."""
+    import platform
+    import subprocess
+    import sys
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        pytest.skip("glibc's mallopt only")
+    code = (
+        "import resource, torch\n"
+        "from skeleton_mamba.streaming import keep_freed_memory\n"
+        "assert keep_freed_memory()\n"
+        "def frame():\n"
+        "    a, b, c = (torch.empty(n << 20).fill_(1) for n in (2, 3, 1))\n"
+        "for _ in range(3): frame()\n"
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+        "for _ in range(50): frame()\n"
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n"
+    )
+    child = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert int(child.stdout) < 50

@@ -153,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
+    from skeleton_mamba.streaming import keep_freed_memory
+
+    keep_freed_memory()  # no page faults from the allocator in the per-frame path
     try:
         if args.task == "recognition":
             from skeleton_mamba.tasks.stream.online_recognition import stream_recognition

@@ -1,0 +1,101 @@
+"""Inference operations for one frame of a stream: the frame-wise scans' projections and mixers.
+
+In a stream, every frame runs the Group Scan (one sequence of n·G = 40 group tokens per stream) and
+the Joint Scan (G sequences of P = 6 joint tokens) from a zero state. :class:`FrameOps` is what
+:meth:`SkeletonMambaBlock.spatial` uses then instead of the modules' own calls:
+
+- :func:`linear`: a Linear on a few tokens. The step of the seed-size model is bound by reading its
+  weights (about 150 MB per frame, most of it the Group Scan's projections, each applied to 5
+  tokens). oneDNN's inner product reads a (out, in) weight faster than the default CPU GEMM at
+  such shapes (0.71x the time at 5 x 768 x 3224, 0.74x at 5 x 1536 x 768; ``benchmarks/README.md``,
+  Streaming), so the large fp32 projections go through it; small ones and other dtypes stay on
+  ``F.linear``, which was as fast or faster there.
+- :func:`short_mix`: at such sizes the cost of the sequence path (:meth:`Mamba2Mixer.mix`:
+  autograd functions, tiling, the finiteness check of the SSD matrix forms) is the number of
+  operations, not arithmetic. It computes the same quantity, ``mixer.mix(zxbcdt)``, by the
+  quadratic SSD form in one block with no autograd machinery ([Mamba-2] SSD, "attention-like"
+  form), per head h of B/C group g:
+
+    y = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + D ⊙ x,    Lmask_ij = exp(cs_i - cs_j) for i ≥ j, else 0,
+
+  with cs the inclusive cumulative sum of Δ·A, formed in float64 (|cs| reaches the hundreds: an fp32
+  cs would put an error of u·|cs| on the mask), so the mask is exact to the compute dtype's rounding.
+
+Inference only (no autograd), cost O(L²) per head: meant for L up to a few dozen. A non-finite
+token makes the whole sequence's output non-finite (the matrix form multiplies it by the zeros of
+the mask), where the sequence path confines it to the later tokens
+(``skeleton_mamba/ssd/non_finite.py``). In a frame this changes nothing: the Group Scan's
+un-permuting average mixes every path position into every group, so one NaN joint makes the whole
+frame NaN either way (``tests/test_streaming.py``).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from skeleton_mamba.causal_conv import causal_conv_taps
+from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
+
+# Weights of at least this many entries go through oneDNN (fp32 on CPU): the Group Scan's in_proj
+# and out_proj and the Joint Scan's split at the seed width; below it F.linear was as fast or faster.
+ONEDNN_MIN_WEIGHT = 1 << 19
+_ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
+
+
+def linear(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
+    """``layer(x)`` for a few tokens x (..., in) at inference; oneDNN for large fp32 CPU weights."""
+    w = layer.weight
+    if _ONEDNN and w.numel() >= ONEDNN_MIN_WEIGHT and x.dtype == w.dtype == torch.float32 and not x.is_cuda:
+        return torch.ops.mkldnn._linear_pointwise(x, w, layer.bias, "none", [], "")
+    return F.linear(x, w, layer.bias)
+
+
+def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
+    """``mixer.mix(zxbcdt)`` (a :class:`~skeleton_mamba.mixer.Mamba2Mixer`) from a zero state, inference only.
+
+    Args:
+        mixer: the mixer whose weights are used.
+        zxbcdt: (b, L, F) its ``in_proj`` output.
+
+    Returns:
+        (b, L, d_inner) the gated SSM output (with the gated-MLP channels in front when d_ssm < d_inner),
+        what :meth:`Mamba2Mixer.mix` returns, to the rounding of the compute dtype.
+    """
+    b, L, _ = zxbcdt.shape
+    H, P, G, N = mixer.nheads, mixer.headdim, mixer.ngroups, mixer.d_state
+    R = H // G
+    z0, x0, z, xbc, dt = torch.split(
+        zxbcdt, [mixer.d_mlp, mixer.d_mlp, mixer.d_ssm, mixer.d_ssm + 2 * G * N, H], dim=-1
+    )
+    ct = compute_dtype(xbc)
+    xbc = F.silu(causal_conv_taps(xbc, mixer.conv1d.weight[:, 0], mixer.conv1d.bias)).to(ct)
+    x, B, C = torch.split(xbc, [mixer.d_ssm, G * N, G * N], dim=-1)
+    x = x.view(b, L, H, P)
+    delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)  # (b, L, H)
+    # float64 cumulative log decays, per head: cs (b, H, L); mask (b, H, L, L), causal.
+    A = -torch.exp(mixer.A_log.to(torch.float64))
+    cs = (delta.to(torch.float64) * A).cumsum(dim=1).transpose(1, 2)
+    upper = torch.ones(L, L, dtype=torch.bool, device=x.device).triu_(1)
+    mask = (cs[..., :, None] - cs[..., None, :]).masked_fill_(upper, -torch.inf).exp_().to(ct)
+    # C Bᵀ once per B/C group, shared by its R heads: (b, G, L, L).
+    cb = torch.matmul(C.view(b, L, G, N).transpose(1, 2), B.view(b, L, G, N).permute(0, 2, 3, 1))
+    weight = mask.view(b, G, R, L, L).mul_(cb[:, :, None]).view(b, H, L, L)
+    y = torch.matmul(weight, (x * delta[..., None]).transpose(1, 2)).transpose(1, 2)  # (b, L, H, P)
+    D = mixer.skip_weight().to(ct)
+    y = torch.addcmul(y, x, D[:, None] if D.dim() == 1 else D)
+    y = mixer.gate(y.reshape(b, L, mixer.d_ssm).to(zxbcdt.dtype), z)
+    if mixer.d_mlp:
+        y = torch.cat([F.silu(z0) * x0, y], dim=-1)
+    return y
+
+
+class FrameOps:
+    """The operations :meth:`SkeletonMambaBlock.spatial` takes for one frame (``ops=FrameOps``)."""
+
+    linear = staticmethod(linear)
+    mix = staticmethod(short_mix)
+
+
+__all__ = ["FrameOps", "linear", "short_mix"]
