@@ -16,7 +16,7 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
 - ``memory``: resident set size (VmRSS) after streaming ``--memory-minutes`` minutes of frames as
-  fast as possible (synthetic features; at the seed width 10 minutes are 18,000 steps, about as long
+  fast as possible (synthetic features; at the paper width 10 minutes are 18,000 steps, about as long
   as the music itself; progress on stderr), and the size of the recurrent state;
 - ``tail``: what else happened during the timed steps, per frame: Python garbage collections (count,
   total and longest pause, ``gc.callbacks``), minor page faults (fresh memory the allocator took from

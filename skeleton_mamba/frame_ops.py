@@ -39,7 +39,7 @@ from skeleton_mamba.causal_conv import causal_conv_taps
 from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
 
 # Weights of at least this many entries go through oneDNN (fp32 on CPU): the Group Scan's in_proj
-# and out_proj and the Joint Scan's split at the seed width; below it F.linear was as fast or faster.
+# and out_proj and the Joint Scan's split at the paper width; below it F.linear was as fast or faster.
 ONEDNN_MIN_WEIGHT = 1 << 19
 _ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
 

@@ -206,7 +206,7 @@ def keep_freed_memory() -> bool:
     A step allocates and frees the same few hundred kB buffers every frame. With glibc's adaptive
     defaults, blocks above the mmap threshold are fresh mappings and the top of the heap is trimmed
     when enough is free, so a frame could start with thousands of minor page faults (measured: about
-    4,000 per seed-width frame, 16 MB of zero-filled pages) depending on the order of allocations.
+    4,000 per paper-width frame, 16 MB of zero-filled pages) depending on the order of allocations.
     Fixed thresholds (mmap above 32 MiB, trim above 1 GiB) keep the blocks in the heap: 0 faults per
     frame, and the resident memory stays at its high-water mark (flat). Returns False (nothing done)
     where the C library has no ``mallopt`` (not glibc).
