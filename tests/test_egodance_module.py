@@ -208,15 +208,15 @@ def test_demo_recipe_through_sm(tmp_path):
     args = [
         str(sm), "fit", "--recipe", "egodance_demo.yaml", "--trainer.max_steps", "2",
         "--trainer.log_every_n_steps", "1", "--trainer.limit_val_batches", "0",
-        "--data.init_args.count", "2", "--data.init_args.duration_s", "5",
+        "--data.init_args.count", "7", "--data.init_args.duration_s", "5",
         "--data.init_args.frame_size", "32", "--data.init_args.image_size", "32",
         "--model.init_args.image_size", "32", "--data.init_args.val_fraction", "0",
-        "--data.init_args.test_fraction", "0.5", "--data.init_args.music_cache_dir", str(tmp_path / "cache"),
+        "--data.init_args.test_fraction", "0.1", "--data.init_args.music_cache_dir", str(tmp_path / "cache"),
         "--model.init_args.sampling_steps", "2",
     ]  # fmt: skip
     proc = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert len(list((tmp_path / "runs/egodance_demo/data/ego/samples").iterdir())) == 2
+    assert len(list((tmp_path / "runs/egodance_demo/data/ego/samples").iterdir())) == 7
     run = tmp_path / "runs/egodance_demo/version_0"
     assert (run / "checkpoints/last.ckpt").is_file()
     rows = list(csv.DictReader((run / "metrics.csv").open()))
@@ -225,7 +225,8 @@ def test_demo_recipe_through_sm(tmp_path):
     aligns = [float(r["train/align"]) for r in rows if r.get("train/align")]
     assert len(aligns) == 2 and all(v > 0 for v in aligns)  # the alignment loss is part of training
 
-    # the DanceDemo callback: a held-out (test split) window danced, written as npz + bvh + mp4, labelled
+    # the DanceDemo callback: the held-out window (arms, middle tempo: the stratified split) danced,
+    # written as npz + bvh + mp4, labelled
     import imageio.v3 as iio
 
     from skeleton_mamba.tasks.motion.bvh import load_bvh
@@ -234,6 +235,7 @@ def test_demo_recipe_through_sm(tmp_path):
     demo = run / "demo"
     summary = json.loads((demo / "demo.json").read_text())
     assert summary["synthetic"] is True and summary["held_out_split"] == "test"
+    assert summary["samples"][0]["sample_id"].startswith("synthetic_arms_103bpm_s3")  # 93 < 103 < 133 bpm
     files = {k: tmp_path / v for k, v in summary["samples"][0]["dance"].items()}
     assert all(Path(files[k]).name.startswith("synthetic_") for k in ("npz", "bvh", "mp4"))
     assert "SYNTHETIC" in proc.stdout and str(Path(files["mp4"]).name) in proc.stdout
@@ -244,7 +246,7 @@ def test_demo_recipe_through_sm(tmp_path):
     assert _audio_streams(files["mp4"]) == 1  # the music is muxed in
     # scored beside the ground truth and the baselines, printed and in demo.json
     scores = summary["scores"]
-    assert scores["held_out_windows"] == 1 and scores["training_windows"] == 1
+    assert scores["held_out_windows"] == 1 and scores["training_windows"] == 6
     assert scores["ground_truth"]["mpjpe_m"] == 0.0 and scores["random_clip"]["plausibility_m"] < 1e-9
     assert all(np.isfinite(v) for column in ("dance", "mean_pose") for v in scores[column].values())
     assert set(summary["checks"]) and "pose plausibility" in proc.stdout

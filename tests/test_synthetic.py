@@ -104,3 +104,28 @@ def test_music_has_the_requested_tempo(tmp_path):
     times = librosa.times_like(envelope, sr=sr, hop_length=hop)
     top = times[np.argsort(envelope)[-len(track.beats) // 2 :]]
     assert np.abs(top[:, None] - track.beats[None]).min(axis=1).max() < 0.05
+
+
+def test_stratified_holdout_keeps_each_styles_tempo_range_in_training():
+    from skeleton_mamba.tasks.motion.synthetic.splits import parse_demo_name, stratified_holdout
+
+    bpms = {"arms": (93, 103, 133), "bounce": (90, 105, 122), "sway": (92, 98, 116, 130)}
+    names = [f"m/synthetic_{s}_{bpm}bpm_s{i}.npz" for s, row in bpms.items() for i, bpm in enumerate(row)]
+    split = stratified_holdout(names, val=1, test=2)
+    held = [n for n in names if split[n] != "train"]
+    assert sorted(split[n] for n in held) == ["test", "test", "val"]
+    # one per style, never a style's slowest or fastest, and for 3 dances the middle tempo
+    assert sorted(parse_demo_name(n)[0] for n in held) == ["arms", "bounce", "sway"]
+    for name in held:
+        style, bpm, _ = parse_demo_name(name)
+        assert min(bpms[style]) < bpm < max(bpms[style])
+        if len(bpms[style]) == 3:
+            assert bpm == sorted(bpms[style])[1]
+    # a fourth held-out dance can only be sway's other inner tempo; a fifth does not exist
+    four = stratified_holdout(names, val=2, test=2)
+    assert {n for n, v in four.items() if v != "train"} == set(held) | {"m/synthetic_sway_116bpm_s2.npz"}
+    with pytest.raises(ValueError, match="fewer than 3 test \\+ 2 val"):
+        stratified_holdout(names, val=2, test=3)
+    with pytest.raises(ValueError, match="not a generated demo dance"):
+        stratified_holdout(["m/dance.npz"], val=0, test=0)
+    assert set(stratified_holdout(names, val=0, test=0).values()) == {"train"}

@@ -21,7 +21,8 @@ clips of at most one window from such a model.
 Splits are by motion *source* so windows of one sequence never straddle splits: an AIST++ sequence in the
 cross-modal test list is test; the other sources, ranked by a stable hash of their name, fill val
 (``val_fraction``) then train; without AIST++ sources (the synthetic generators) ``test_fraction`` of
-them go to test first (:func:`assign_splits`).
+them go to test first (:func:`assign_splits`). The generated demo set holds out dances stratified by style
+instead (:meth:`SyntheticEgoDanceDataModule.assign_splits`).
 """
 
 from __future__ import annotations
@@ -256,11 +257,15 @@ class EgoDanceDataModule(SplitDataModule):
         for folder in folders:
             meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
             sources.append((meta.get("motion") or {}).get("source") or folder.name)
-        split_of = assign_splits(sources, self.hparams.val_fraction, self.hparams.test_fraction)
+        split_of = self.assign_splits(sources)
         splits: dict[str, list[Path]] = {"train": [], "val": [], "test": []}
         for folder, source in zip(folders, sources, strict=True):
             splits[split_of[source]].append(folder)
         return splits
+
+    def assign_splits(self, sources: list[str]) -> dict[str, str]:
+        """Motion source -> split (:func:`assign_splits`)."""
+        return assign_splits(sources, self.hparams.val_fraction, self.hparams.test_fraction)
 
     def setup(self, stage: str) -> None:
         if self.datasets:
@@ -294,6 +299,8 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         seed: generator seed.
         swing_side: ``random`` or ``music`` (the music's bars decide which way the dancers swing;
             :func:`~skeleton_mamba.tasks.motion.synthetic.synthesize_dance`).
+        val_fraction, test_fraction: ``ceil(fraction * count)`` dances are held out, stratified by
+            style (:func:`~skeleton_mamba.tasks.motion.synthetic.splits.stratified_holdout`).
         cache_frames: keep decoded frames in memory (default here: the set is small).
         Other arguments as :class:`EgoDanceDataModule`.
     """
@@ -301,7 +308,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
     def __init__(
         self,
         root: str = "runs/egodance_demo/data",
-        count: int = 6,
+        count: int = 9,
         duration_s: float = 10.0,
         frame_size: int = 64,
         num_rooms: int = 2,
@@ -313,8 +320,8 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         num_workers: int = 0,
         load_frames: bool = True,
         image_size: int = 64,
-        val_fraction: float = 0.17,
-        test_fraction: float = 0.17,
+        val_fraction: float = 0.1,
+        test_fraction: float = 0.2,
         music_cache_dir: str | None = None,
         cache_frames: bool = True,
         canonicalize_init_head: bool = False,
@@ -334,6 +341,14 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             canonicalize_init_head,
         )
         self.source_root = Path(root).resolve()
+
+    def assign_splits(self, sources: list[str]) -> dict[str, str]:
+        """Generated dance -> split, stratified by style (class docstring)."""
+        from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
+
+        n = len(set(sources))
+        val, test = (math.ceil(f * n) for f in (self.hparams.val_fraction, self.hparams.test_fraction))
+        return stratified_holdout(sources, val, test)
 
     def prepare_data(self) -> None:
         """Generate and build the set unless a finished build is already there."""
