@@ -132,7 +132,8 @@ def _conditions(
         return item["music"], item.get("frames"), item["head"]
     from skeleton_mamba.tasks.motion.music import extract_music_features
 
-    music = torch.from_numpy(extract_music_features(args.music, fps=30).features.astype(np.float32))
+    fps = module.hparams.get("fps", 30)  # the frame rate the model was trained at
+    music = torch.from_numpy(extract_music_features(args.music, fps=fps).features.astype(np.float32))
     frames = None
     if vision:
         if not args.video:
@@ -176,6 +177,7 @@ def main(argv: list[str] | None = None) -> int:
 
     module = load_module(EgoDanceModule, args.ckpt).eval()  # checked: local, weights_only, project classes
     hp = module.hparams
+    fps = hp.get("fps", 30)
     canonical = _canonical_heading(args.ckpt)
     try:
         music, frames, oracle = _conditions(args, module, canonical)
@@ -185,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(
             f"{args.ckpt} was trained on windows turned to face their first frame's head heading "
             f"(canonicalize_init_head), which long-form stitching cannot join: give at most {args.window} "
-            f"frames ({args.window / 30:.0f} s) of music and video, not {len(music)}"
+            f"frames ({args.window / fps:.0f} s) of music and video, not {len(music)}"
         )
     head_source, head = _head_targets(args, module, frames, oracle)
     model = module.model if args.no_ema else module.ema.module
@@ -218,14 +220,15 @@ def main(argv: list[str] | None = None) -> int:
         style=RenderStyle(width=width, height=height),
         title=f"EMM {Path(args.ckpt).name}",
         progress=args.progress,
+        fps=fps,
     )
-    seconds = tokens.shape[0] / 30
+    seconds = tokens.shape[0] / fps
     guidance = {
         "estimate": "head guidance from the head trajectory estimated from the video",
         "oracle": "head guidance from the ORACLE (ground-truth) camera path",
         "none": "no head guidance",
     }[head_source]
     print(f"sm dance: {guidance}")
-    print(f"sm dance: {tokens.shape[0]} frames ({seconds:.1f} s at 30 fps) written to", out_dir)
+    print(f"sm dance: {tokens.shape[0]} frames ({seconds:.1f} s at {fps:g} fps) written to", out_dir)
     print("\n".join(files.lines()))
     return 0
