@@ -51,13 +51,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, operator_profile  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
-from skeleton_mamba.compiling import compile_for_inference  # noqa: E402
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
 from skeleton_mamba.tasks.diffusion.samplers import guided_x0  # noqa: E402
 from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa: E402
 from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
+from skeleton_mamba.tasks.egodance.sampling import CompiledDenoiser  # noqa: E402
 
 SIZES = {
     # [EgoMusic] supp. Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones
@@ -120,21 +120,6 @@ class TransformerDenoiser(nn.Module):
         pos = sinusoidal_embedding(torch.arange(n), h.shape[-1])
         memory = torch.cat([temb[:, None], self.cond_proj(context)], dim=1)
         return self.output_proj(self.decoder(h + pos, memory)).unflatten(2, (24, 10))
-
-
-class CompiledDenoiser:
-    """A denoiser's call ``(x_t, t, context) -> x0`` compiled for inference (weights frozen), still
-    :class:`~skeleton_mamba.tasks.diffusion.samplers.NullConditioned`: guidance stays one doubled call."""
-
-    def __init__(self, model: nn.Module):
-        self.model = model
-        self.forward = compile_for_inference(model)
-
-    def __call__(self, x_t, t, context):
-        return self.forward(x_t, t, context)
-
-    def null_condition(self, context):
-        return self.model.null_condition(context)
 
 
 def denoiser_params(model: nn.Module) -> int:

@@ -65,3 +65,25 @@ def test_compiled_emm_denoiser_equals_eager():
         got = compile_for_inference(model)(x, t, context)
     assert torch.isfinite(eager).all()
     torch.testing.assert_close(got, eager, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.slow  # compiles a one-block EMM: about a minute on 2 CPU cores
+def test_sample_dance_compiled_equals_eager():
+    from skeleton_mamba.tasks.diffusion import GaussianDiffusion
+    from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
+    from skeleton_mamba.tasks.egodance.sampling import sample_dance
+
+    torch._dynamo.reset()
+    torch.manual_seed(1)
+    backbone = SkeletonMambaConfig(
+        dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
+    )
+    model = EMM(backbone, EMMConfig(context_dim=16, use_vision=False, heads=2, transformer_ff=32)).eval()
+    diffusion, music = GaussianDiffusion(10), torch.randn(2, 12, 35)
+    options = dict(sampler="ddim", sampling_steps=3, guidance_weight=2.0)
+    eager = sample_dance(model, diffusion, music, generator=torch.Generator().manual_seed(3), **options)
+    got = sample_dance(
+        model, diffusion, music, generator=torch.Generator().manual_seed(3), compile=True, **options
+    )
+    assert eager.shape == (2, 12, 24, 10) and torch.isfinite(eager).all()
+    torch.testing.assert_close(got, eager, rtol=1e-4, atol=1e-5)
