@@ -22,6 +22,10 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
   samples at test time (no classifier-free guidance), condition encoding included;
 - ``gemm``: this machine's fp32 matrix-product rate timed in the same process (before and after the
   models), and ``*_fraction_of_gemm``: each model's achieved matrix-product rate as a fraction of it;
+- ``--compile``: also the guided step of each denoiser compiled (``torch.compile``, inductor, weights
+  frozen: ``skeleton_mamba/compiling.py``) in the same run: ``compiled_sample_step_ms``, its
+  ``fraction_of_gemm``, ``compile_s`` (the first call) and ``compiled_max_abs_diff`` (against the
+  eager step's output);
 - ``--profile N``: the operators of one guided EMM sampling step by self CPU time (``torch.profiler``)
   and the share of it spent in matrix products.
 
@@ -53,6 +57,7 @@ from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa:
 from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
+from skeleton_mamba.tasks.egodance.sampling import CompiledDenoiser  # noqa: E402
 
 SIZES = {
     # [EgoMusic] supp. Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones
@@ -182,7 +187,8 @@ def time_train_step(
 
 @torch.inference_mode()
 def time_sampling(
-    model, music, frames, diffusion, ddim_steps: int, step_repeats: int, max_run_s: float, ddpm_run: bool
+    model, music, frames, diffusion, ddim_steps: int, step_repeats: int, max_run_s: float, ddpm_run: bool,
+    compile: bool = False,
 ) -> dict:
     """Condition encoding, the median guided step, and a real full DDIM run, for one sample.
 
@@ -195,17 +201,23 @@ def time_sampling(
     encode_s = time.perf_counter() - start
     shape = (1, music.shape[1], 24, 10)
     x = torch.randn(shape, device=music.device)
-    times = []
-    for i in range(step_repeats + 1):  # the first call warms up
-        t = torch.full((1,), diffusion.num_steps - 1 - 37 * i, dtype=torch.long, device=music.device)
-        start = time.perf_counter()
-        guided_x0(model, x, t, context, 2.0)
-        synchronize()
-        times.append(time.perf_counter() - start)
-    step_ms = statistics.median(times[1:]) * 1e3
+    step_ms, out = time_guided_step(model, x, context, diffusion, step_repeats)
     with FlopCounterMode(display=False) as counter:  # matrix products (mm, bmm, attention, conv)
-        guided_x0(model, x, t, context, 2.0)
+        guided_x0(model, x, out[1], context, 2.0)
     step_gflop = counter.get_total_flops() / 1e9
+    compiled = {}
+    if compile:
+        start = time.perf_counter()
+        denoiser = CompiledDenoiser(model)
+        got = guided_x0(denoiser, x, out[1], context, 2.0)  # compiles
+        compiled["compile_s"] = time.perf_counter() - start
+        ms, _ = time_guided_step(denoiser, x, context, diffusion, step_repeats)  # its 2nd call is slow too
+        compiled.update(
+            compiled_sample_step_ms=ms,
+            compiled_sample_step_gflop_per_s=step_gflop / (ms / 1e3),
+            compiled_over_eager=step_ms / ms,
+            compiled_max_abs_diff=(got - out[0]).abs().max().item(),
+        )
     ddim_estimate = encode_s + step_ms * ddim_steps / 1e3
     ddim_s = None
     if ddim_estimate <= max_run_s:
@@ -231,7 +243,21 @@ def time_sampling(
         f"ddim{ddim_steps}_extrapolated_s": ddim_estimate,
         f"ddpm{diffusion.num_steps}_extrapolated_s": encode_s + step_ms * diffusion.num_steps / 1e3,
         f"ddpm{diffusion.num_steps}_wall_s": ddpm_s,
+        **compiled,
     }
+
+
+def time_guided_step(denoiser, x, context, diffusion, repeats: int):
+    """Median ms of guided steps at spread timesteps after one untimed call; (that, (the last output, its
+    timestep))."""
+    times = []
+    for i in range(repeats + 1):
+        t = torch.full((1,), diffusion.num_steps - 1 - 37 * i, dtype=torch.long, device=x.device)
+        start = time.perf_counter()
+        out = guided_x0(denoiser, x, t, context, 2.0)
+        synchronize()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times[1:]) * 1e3, (out, t)
 
 
 def synchronize() -> None:
@@ -255,6 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--compile", action="store_true",
+                    help="also time each denoiser's guided step compiled (torch.compile, weights frozen)")
     ap.add_argument("--profile", type=int, default=0, metavar="N",
                     help="print the N operators with the most self CPU time in one guided EMM sampling step "
                          "(and the matrix products' share of it), then exit")
@@ -306,7 +334,7 @@ def main(argv: list[str] | None = None) -> int:
         r.update(
             time_sampling(
                 model, music[:1], frames, diffusion, args.ddim_steps, args.step_repeats, args.max_run_s,
-                args.ddpm_run,
+                args.ddpm_run, args.compile,
             )
         )
         result["models"][name] = r
@@ -314,14 +342,15 @@ def main(argv: list[str] | None = None) -> int:
             print(name, r, flush=True)
     result["gemm"] = {"before": gemm_before, "after": gemm_gflop_per_s()}
     for r in result["models"].values():
-        for key in ("sample_step", "train_step"):
+        for key in ("sample_step", "train_step", "compiled_sample_step"):
             if f"{key}_gflop_per_s" in r:
                 r[f"{key}_fraction_of_gemm"] = r[f"{key}_gflop_per_s"] / gemm_before["gflop_per_s"]
     e, t = result["models"]["emm_skeleton_mamba"], result["models"]["edge_transformer"]
     result["ratios_emm_over_transformer"] = {
         k: e[k] / t[k]
         for k in e
-        if k not in ("denoiser_params", "condition_encode_s") and e[k] is not None and t.get(k) is not None
+        if k not in ("denoiser_params", "condition_encode_s", "compiled_max_abs_diff")
+        and e[k] is not None and t.get(k) is not None
     }
     print(json.dumps(result, indent=2) if args.json else result["ratios_emm_over_transformer"])
     return 0

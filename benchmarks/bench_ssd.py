@@ -13,6 +13,8 @@ inputs once per call (the fast path of ``skeleton_mamba/ssd/non_finite.py``); ``
 divides it by ``ssd_ms``. The recurrence
 (one Python step per time step) is timed at the first length, and at later lengths only when the
 per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
+``--compile`` adds the SSD compiled by inductor (``compiled_*``: compile seconds, median ms, error, ratios)
+in the same run.
 
     python benchmarks/bench_ssd.py --json
     python benchmarks/bench_ssd.py --lengths 150 --batch 64 --repeats 3
@@ -21,9 +23,11 @@ per-step cost measured so far predicts less than ``--recurrence-budget-s``; othe
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 import torch
@@ -88,8 +92,26 @@ def sdpa_gflop(batch: int, T: int) -> float:
     return (sdpa_flop_count(shape, shape, shape) + sdpa_backward_flop_count(shape, shape, shape, shape)) / 1e9
 
 
+def compiled_columns(inp: dict, small: dict, y_ref: torch.Tensor, chunk_size: int, impl: str, repeats: int,
+                     ssd_ms: float, sdpa_ms: float) -> dict:
+    """The SSD forward + backward compiled by inductor (``torch.compile``, static shapes): its compile time
+    (the first call), median ms, ratios and error against the float64 recurrence."""
+    compiled = torch.compile(functools.partial(ssd, chunk_size=chunk_size, impl=impl), dynamic=False)
+    run = fwd_bwd(compiled, inp)
+    start = time.perf_counter()
+    run()
+    compile_s = time.perf_counter() - start
+    ms = median_ms(run, repeats=repeats)
+    with torch.no_grad():
+        err = (compiled(**small).double() - y_ref).abs().max().item()
+    return dict(compiled_compile_s=round(compile_s, 1), compiled_ssd_ms=round(ms, 2),
+                compiled_max_abs_err=err, sdpa_over_compiled_ssd=round(sdpa_ms / ms, 2),
+                ssd_over_compiled_ssd=round(ssd_ms / ms, 2))
+
+
 def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step_s: float | None,
-              err_batch: int, chunk_size: int, impl: str, gemm: dict) -> tuple[dict, float | None]:
+              err_batch: int, chunk_size: int, impl: str, gemm: dict,
+              compile: bool = False) -> tuple[dict, float | None]:
     """One row; ``step_s`` is the recurrence time per time step measured on an earlier row."""
     inp = make_inputs(batch, T)
     ssd_run = fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl)
@@ -120,6 +142,8 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
                recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1),
                ssd_rate=rate(matmul_gflop(ssd_run), ssd_ms, gemm),
                sdpa_rate=rate(sdpa_gflop(batch, T), sdpa_ms, gemm))
+    if compile:
+        row.update(compiled_columns(inp, small, y_ref, chunk_size, impl, repeats, ssd_ms, sdpa_ms))
     return row, step_s
 
 
@@ -140,6 +164,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="skip the recurrence (null) where the cost measured at an earlier length "
                              "predicts more than this many seconds")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--compile", action="store_true",
+                        help="also time the SSD compiled (torch.compile, inductor) in the same run")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     batches = args.batch or [max(1, TOKENS // T) for T in args.lengths]
@@ -151,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     rows, step_s = [], None
     for T, batch in zip(args.lengths, batches):
         row, step_s = bench_row(T, batch, args.repeats, args.recurrence_budget_s, step_s, args.err_batch,
-                                args.chunk_size, args.impl, gemm_before)
+                                args.chunk_size, args.impl, gemm_before, args.compile)
         rows.append(row)
         if not args.json:
             print(row, flush=True)

@@ -6,7 +6,9 @@ x.split(n, dim)], dim)``. On a CPU, one call over a long sequence creates interm
 of MB: each is a fresh ``mmap`` that the kernel zero-fills page by page (glibc serves every block
 above its 32 MB threshold that way), which made the backbone grow faster than linearly in T and
 spend most of a short sequence's time in page faults. Slices of a few MB stay in cache and are
-served again and again from the heap. On CUDA the whole input goes through in one call.
+served again and again from the heap. On CUDA the whole input goes through in one call, and so it
+does under ``torch.compile``: the slices would be traced one by one (a graph many times the size of
+one call's, compiling for many minutes), and the compiled code fuses most intermediates away.
 """
 
 from __future__ import annotations
@@ -26,10 +28,11 @@ def slice_length(x: torch.Tensor, dim: int, elements_per_index: int, budget: int
         budget: at most this many elements of that intermediate per slice (``None``: no slicing).
 
     Returns:
-        ``x.shape[dim]`` (one call) on CUDA, without a budget or when it all fits; else at least 1.
+        ``x.shape[dim]`` (one call) on CUDA, under ``torch.compile``, without a budget or when it all
+        fits; else at least 1.
     """
     length = x.shape[dim]
-    if budget is None or x.device.type != "cpu":
+    if budget is None or x.device.type != "cpu" or torch.compiler.is_compiling():
         return length
     return max(1, min(length, budget // max(1, elements_per_index)))
 

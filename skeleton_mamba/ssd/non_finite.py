@@ -20,6 +20,11 @@ padding that lets garbage in the padding reach the valid steps.
 
   A non-finite A, D, dt_bias or initial state (parameters and state, not data) is passed on unchanged.
   Where the recurrence would give ±Inf the wrapper gives NaN; the finite outputs are the same.
+
+Under ``torch.compile`` the data-dependent choice would break the graph at every call, and the second
+path made unconditional cost more than the whole compiled step (its ``cummax``), so compiled code runs
+the form unchecked: non-finite inputs are NOT confined there (they reach the earlier steps of their
+block). Compiled inference is meant for finite inputs such as diffusion sampling.
 """
 
 from __future__ import annotations
@@ -61,7 +66,7 @@ def confine_non_finite(form: Callable) -> Callable:
                  initial_state=None, return_final_state=False, **kwargs):  # fmt: skip
         kwargs.update(D=D, dt_bias=dt_bias, dt_softplus=dt_softplus, dt_limit=dt_limit,
                       initial_state=initial_state, return_final_state=return_final_state)  # fmt: skip
-        if inputs_finite(x, dt, B, C):
+        if torch.compiler.is_compiling() or inputs_finite(x, dt, B, C):
             return form(x, dt, A, B, C, **kwargs)
         check_inputs(x, dt, A, B, C, D, dt_bias, initial_state)
         R = x.shape[2] // B.shape[2]  # heads per B/C group

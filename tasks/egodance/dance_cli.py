@@ -68,6 +68,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ema", action="store_true", help="use the raw weights instead of the EMA")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--progress", action="store_true", help="show a progress bar")
+    p.add_argument(
+        "--compile",
+        action="store_true",
+        help="run the denoiser compiled (torch.compile, weights frozen): about 2 minutes of CPU to compile "
+        "at the paper size, then about 1.26x less CPU per step (measured on 1 thread; worth it for DDPM's "
+        "1000 steps); same dance to float32 rounding",
+    )
     return p
 
 
@@ -205,6 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         head_guidance_steps=hp.head_guidance_steps,
         generator=torch.Generator().manual_seed(args.seed),
         progress=args.progress,
+        compile=args.compile,
     )
     out = Path(args.out)
     out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
