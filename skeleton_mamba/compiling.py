@@ -36,7 +36,7 @@ from torch import nn
 from skeleton_mamba import streaming
 from skeleton_mamba.streaming import StreamState
 
-__all__ = ["CompiledStep", "compile_for_inference", "compile_step_or_eager"]
+__all__ = ["CompiledStep", "compile_for_inference", "compile_step_or_eager", "inductor_unavailable"]
 
 
 def compile_for_inference(fn: Callable, *, freezing: bool = True, mode: str | None = None) -> Callable:
@@ -55,6 +55,17 @@ def compile_for_inference(fn: Callable, *, freezing: bool = True, mode: str | No
     options = dict(torch._inductor.list_mode_options(mode)) if mode else {}
     options["freezing"] = freezing
     return torch.compile(fn, backend="inductor", fullgraph=True, dynamic=False, options=options)
+
+
+def inductor_unavailable() -> str | None:
+    """Why inductor cannot compile for the CPU here (no C++ compiler found), or None if it can."""
+    try:
+        from torch._inductor.cpp_builder import get_cpp_compiler
+
+        get_cpp_compiler()
+    except Exception as err:  # no C++ compiler, or an inductor without its CPU backend
+        return f"inductor cannot compile for the CPU here ({type(err).__name__}: {err})"
+    return None
 
 
 def _weight_versions(model: nn.Module) -> tuple[int, ...]:
@@ -127,13 +138,16 @@ def compile_step_or_eager(
     """``model``'s step compiled now for ``batch`` streams, or ``model.step`` if compiling fails.
 
     Compiles by stepping a zero frame through a throwaway state (with ``context``, if the backbone
-    reads one); ``options`` go to :class:`CompiledStep`. If anything goes wrong (no C++ compiler, an
-    operator inductor cannot lower), a ``RuntimeWarning`` says why and the eager ``model.step`` is
-    returned: the caller runs either way.
+    reads one); ``options`` go to :class:`CompiledStep`. If compiling cannot work here
+    (:func:`inductor_unavailable`) or fails (an operator inductor cannot lower, a compiler error), a
+    ``RuntimeWarning`` says why and the eager ``model.step`` is returned: the caller runs either way.
 
     Returns:
         the step function (``model.step``'s signature) and the compile time in seconds (None: eager).
     """
+    if (reason := inductor_unavailable()) is not None:
+        warnings.warn(f"{reason}; running the frame step eagerly", RuntimeWarning, 2)
+        return model.step, None
     weight = next(model.parameters())
     x = weight.new_zeros(batch, model.skeleton.num_joints, model.config.in_channels)
     start = time.perf_counter()

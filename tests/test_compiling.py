@@ -4,25 +4,13 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.compiling import CompiledStep, compile_step_or_eager
+from skeleton_mamba.compiling import CompiledStep, compile_step_or_eager, inductor_unavailable
 
-
-def _inductor_reason() -> str | None:
-    """Why inductor cannot compile for the CPU here (None: it can)."""
-    try:
-        from torch._inductor.cpp_builder import get_cpp_compiler
-
-        get_cpp_compiler()
-    except Exception as err:  # no C++ compiler, or an inductor without its CPU backend
-        return f"inductor cannot compile for the CPU here: {type(err).__name__}: {err}"
-    return None
-
-
-needs_inductor = pytest.mark.skipif(_inductor_reason() is not None, reason=str(_inductor_reason()))
+needs_inductor = pytest.mark.skipif(inductor_unavailable() is not None, reason=str(inductor_unavailable()))
 
 
 def _tiny_model(context_dim=None) -> SkeletonMamba:
-    """One block at tiny widths (a compile of seconds), random weights (fp32, the streaming dtype)."""
+    """One block at tiny widths (a short compile: 10 to 40 s), random weights (fp32, the streaming dtype)."""
     torch.manual_seed(0)
     cfg = SkeletonMambaConfig(
         skeleton="smpl24", in_channels=3, out_channels=5, dim=16, depth=1, mlp_dim=32,
