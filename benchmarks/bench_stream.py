@@ -2,6 +2,7 @@
 
     python benchmarks/bench_stream.py --json
     python benchmarks/bench_stream.py --json --widths tiny --memory-minutes 1,10
+    python benchmarks/bench_stream.py --json --compile     # + the step compiled with torch.compile
 
 For each backbone width (``paper``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
 skeleton_mamba_tiny.yaml) the causal dance network (:class:`StreamDancer`, SMPL-24, random weights)
@@ -12,6 +13,11 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
 - ``step_sequence_path``: the same step with the frame-wise scans through the modules' sequence path
   (``streaming.step(..., ops=None)``, the path before ``FrameOps``), timed on alternate frames of
   the same run with its own state, and ``sequence_path_over_step`` the ratio of the medians;
+- ``compiled`` (``--compile [MODE]``): the step compiled with :mod:`skeleton_mamba.compiling` (inductor,
+  frozen weights, as ``sm stream --compile``): ``compile_seconds``, then compiled and eager steps on
+  alternate frames of the same run, each with its own state and both fed the eager step's previous pose:
+  median / p99 / max / fps of both, the ratios eager over compiled (median, p99), frames over 33 ms, and
+  the largest difference of their outputs (fp32 rounding); the memory run below then streams compiled;
 - ``windowed``: what a windowed model pays per new frame, re-running the same network's forward on
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
@@ -173,6 +179,8 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
         print(f"[{width}] compiling the step ({compile_mode})...", file=sys.stderr, flush=True)
         backbone_step, seconds = compile_step_or_eager(model.backbone, mode=mode)
         result["compiled"] = {"mode": compile_mode, "compile_seconds": seconds and round(seconds, 1)}
+        if seconds is not None:
+            print(f"[{width}] compiled in {seconds:.0f} s; timing", file=sys.stderr, flush=True)
         if seconds is None:
             backbone_step = None
             result["compiled"]["error"] = "compiling failed (the warning on stderr says why): eager only"
