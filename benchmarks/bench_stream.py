@@ -172,12 +172,13 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
 
     backbone_step = None  # the eager step
     result = {"width": width, "parameters": params, "threads": torch.get_num_threads()}
-    if compile_mode:
+    if compile_mode:  # under inference_mode as the timed steps (inference tensors: one signature)
         from skeleton_mamba.compiling import compile_step_or_eager
 
         mode = None if compile_mode == "default" else compile_mode
         print(f"[{width}] compiling the step ({compile_mode})...", file=sys.stderr, flush=True)
-        backbone_step, seconds = compile_step_or_eager(model.backbone, mode=mode)
+        with torch.inference_mode():
+            backbone_step, seconds = compile_step_or_eager(model.backbone, mode=mode)
         result["compiled"] = {"mode": compile_mode, "compile_seconds": seconds and round(seconds, 1)}
         if seconds is not None:
             print(f"[{width}] compiled in {seconds:.0f} s; timing", file=sys.stderr, flush=True)

@@ -12,13 +12,16 @@ projections for oneDNN and fuses the element-wise operators into C++ loops.
   a few 1e-6 at the paper width), the same :class:`~skeleton_mamba.streaming.StreamState` (layout
   unchanged, updated in place: the compiled graph writes the new convolution and SSD states back
   into the state's tensors).
-- Compiling happens on the first call and takes about a minute at the paper width (about 8 s at a
-  one-block tiny width); it needs a C++ compiler (inductor's CPU backend).
-- The graph is specialised to the input signature: batch size, dtype, device and the context's shape.
-  A new signature compiles again (another minute). After ``torch._dynamo.config.recompile_limit``
-  signatures of the same code (8 by default, counted over every :class:`CompiledStep` of the process)
-  the call raises ``torch._dynamo.exc.FailOnRecompileLimitHit`` instead of dynamo's default of
-  running eagerly from then on without saying so.
+- Compiling happens on the first call. It needs a C++ compiler (inductor's CPU backend) and takes
+  a minute or more at the paper width on 2 cores (measured: about 70 s on a quiet machine, 10 minutes
+  on one loaded with other jobs); inductor keeps the compiled kernels on disk
+  (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``), so compiling the same model
+  again is faster.
+- The graph is specialised to the input signature: batch size, dtype, device, the context's shape,
+  and whether the tensors are inference tensors (made under ``torch.inference_mode``) or not: make the
+  frames and the state the same way as for the first call. A new signature compiles again. After
+  ``torch._dynamo.config.recompile_limit`` signatures (8 by default, per :class:`CompiledStep`) the
+  call raises a RuntimeError, where dynamo's default would run eagerly from then on without saying so.
 - The weights are copied into the graph: a change of any parameter or buffer after compiling (a
   ``load_state_dict``, a training step) makes the call raise; build a new :class:`CompiledStep`.
 - Inference only, ``torch.inference_mode`` inside, as :func:`~skeleton_mamba.streaming.step`.
@@ -27,6 +30,7 @@ projections for oneDNN and fuses the element-wise operators into C++ loops.
 from __future__ import annotations
 
 import time
+import types
 import warnings
 from collections.abc import Callable
 
@@ -97,6 +101,9 @@ class CompiledStep:
         def frame(x, conv, ssm, context, context_mask):
             return streaming.frame_forward(model, x, conv, ssm, context, context_mask)
 
+        # A code object of its own: dynamo counts versions per code object, so the recompile limit
+        # applies to this CompiledStep alone (not to every CompiledStep of the process).
+        frame = types.FunctionType(frame.__code__.replace(), frame.__globals__, None, None, frame.__closure__)
         self._frame = compile_for_inference(frame, freezing=freezing, mode=mode)
         self._versions = _weight_versions(model)
 
@@ -113,8 +120,9 @@ class CompiledStep:
             raise RuntimeError("the model's weights changed after its step was compiled: compile it again")
         if context is None and any(block.cross_attention is not None for block in self.model.blocks):
             raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
+        tensors = (x, context, context_mask, state.conv[0])
         signature = tuple(
-            None if t is None else (tuple(t.shape), t.dtype, t.device) for t in (x, context, context_mask)
+            None if t is None else (tuple(t.shape), t.dtype, t.device, t.is_inference()) for t in tensors
         )
         if signature not in self.signatures:
             self.signatures.append(signature)
@@ -138,7 +146,8 @@ def compile_step_or_eager(
     """``model``'s step compiled now for ``batch`` streams, or ``model.step`` if compiling fails.
 
     Compiles by stepping a zero frame through a throwaway state (with ``context``, if the backbone
-    reads one); ``options`` go to :class:`CompiledStep`. If compiling cannot work here
+    reads one), made in the caller's mode: call it under ``torch.inference_mode`` if the frames and the
+    state will be inference tensors. ``options`` go to :class:`CompiledStep`. If compiling cannot work here
     (:func:`inductor_unavailable`) or fails (an operator inductor cannot lower, a compiler error), a
     ``RuntimeWarning`` says why and the eager ``model.step`` is returned: the caller runs either way.
 
