@@ -13,10 +13,9 @@ projections for oneDNN and fuses the element-wise operators into C++ loops.
   unchanged, updated in place: the compiled graph writes the new convolution and SSD states back
   into the state's tensors).
 - Compiling happens on the first call. It needs a C++ compiler (inductor's CPU backend) and takes
-  a minute or more at the paper width on 2 cores (measured: about 70 s on a quiet machine, 10 minutes
-  on one loaded with other jobs); inductor keeps the compiled kernels on disk
-  (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``), so compiling the same model
-  again is faster.
+  a minute or more at the paper width on 2 cores (measured: 60 to 70 s on a quiet machine, 10 minutes
+  the first time on one loaded with other jobs); inductor keeps the compiled graph and kernels on disk
+  (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``): 23 to 36 s the next time.
 - The graph is specialised to the input signature: batch size, dtype, device, the context's shape,
   and whether the tensors are inference tensors (made under ``torch.inference_mode``) or not: make the
   frames and the state the same way as for the first call. A new signature compiles again. After
