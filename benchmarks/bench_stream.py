@@ -2,6 +2,7 @@
 
     python benchmarks/bench_stream.py --json
     python benchmarks/bench_stream.py --json --widths tiny --memory-minutes 1,10
+    python benchmarks/bench_stream.py --json --compile     # + the step compiled with torch.compile
 
 For each backbone width (``paper``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
 skeleton_mamba_tiny.yaml) the causal dance network (:class:`StreamDancer`, SMPL-24, random weights)
@@ -12,6 +13,11 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
 - ``step_sequence_path``: the same step with the frame-wise scans through the modules' sequence path
   (``streaming.step(..., ops=None)``, the path before ``FrameOps``), timed on alternate frames of
   the same run with its own state, and ``sequence_path_over_step`` the ratio of the medians;
+- ``compiled`` (``--compile [MODE]``): the step compiled with :mod:`skeleton_mamba.compiling` (inductor,
+  frozen weights, as ``sm stream --compile``): ``compile_seconds``, then compiled and eager steps on
+  alternate frames of the same run, each with its own state and both fed the eager step's previous pose:
+  median / p99 / max / fps of both, the ratios eager over compiled (median, p99), frames over 33 ms, and
+  the largest difference of their outputs (fp32 rounding); the memory run below then streams compiled;
 - ``windowed``: what a windowed model pays per new frame, re-running the same network's forward on
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
@@ -107,9 +113,50 @@ def profile_table(model, rows: int) -> str:
     return f"{table}\nmatrix products: {100 * gemm_share:.0f} % of the self CPU time"
 
 
+def compiled_and_eager(model, backbone_step, count: int) -> dict:
+    """Alternate frames of the compiled and the eager step, each with its own state, both fed the eager
+    step's previous pose (the same inputs): latencies of both, their ratios, and the largest difference."""
+    import numpy as np
+    import torch
+
+    from skeleton_mamba.tasks.stream.live import latency_summary
+
+    music = torch.randn(1, 34)
+    prev = torch.zeros(1, 24, 12)
+    state, eager_state = model.init_state(1), model.init_state(1)
+    times, eager_times, difference = [], [], 0.0
+    for i in range(count + 10):  # 10 warm-up frames
+        start = time.perf_counter()
+        out, state = model.step(prev, music, state, backbone_step)
+        elapsed = 1e3 * (time.perf_counter() - start)
+        start = time.perf_counter()
+        prev, eager_state = model.step(prev, music, eager_state)
+        eager_elapsed = 1e3 * (time.perf_counter() - start)
+        difference = max(difference, float((out - prev).abs().max()))
+        if i >= 10:
+            times.append(elapsed)
+            eager_times.append(eager_elapsed)
+    times, eager_times = np.asarray(times), np.asarray(eager_times)
+    compiled, eager = latency_summary(times), latency_summary(eager_times)
+    return {
+        **{k: round(v, 3) for k, v in compiled.items()},
+        "fps": round(1e3 / float(np.mean(times)), 1),
+        "frames_over_33ms": int((times > 33.0).sum()),
+        **{f"eager_{k}_same_frames": round(v, 3) for k, v in eager.items()},
+        "eager_fps_same_frames": round(1e3 / float(np.mean(eager_times)), 1),
+        "eager_frames_over_33ms": int((eager_times > 33.0).sum()),
+        "eager_over_compiled_median": round(eager["median_ms"] / compiled["median_ms"], 2),
+        "eager_over_compiled_p99": round(eager["p99_ms"] / compiled["p99_ms"], 2),
+        "max_abs_difference": float(f"{difference:.3g}"),
+        "output_max_abs": round(float(prev.abs().max()), 3),
+        "frames": count,
+    }
+
+
 def measure(width: str, frames: int, window: int, window_repeats: int, minutes: list[float],
-            memory_only: bool = False) -> dict:
-    """All figures of one width (run in a subprocess)."""
+            memory_only: bool = False, compile_mode: str | None = None) -> dict:
+    """All figures of one width (run in a subprocess); ``compile_mode``: None, or "default" (or a
+    ``torch.compile`` mode) to add the compiled step."""
     import numpy as np
     import torch
 
@@ -123,12 +170,28 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
     music = torch.randn(1, 34)
     prev = torch.zeros(1, 24, 12)
 
+    backbone_step = None  # the eager step
+    result = {"width": width, "parameters": params, "threads": torch.get_num_threads()}
+    if compile_mode:  # under inference_mode as the timed steps (inference tensors: one signature)
+        from skeleton_mamba.compiling import compile_step_or_eager
+
+        mode = None if compile_mode == "default" else compile_mode
+        print(f"[{width}] compiling the step ({compile_mode})...", file=sys.stderr, flush=True)
+        with torch.inference_mode():
+            backbone_step, seconds = compile_step_or_eager(model.backbone, mode=mode)
+        result["compiled"] = {"mode": compile_mode, "compile_seconds": seconds and round(seconds, 1)}
+        if seconds is not None:
+            print(f"[{width}] compiled in {seconds:.0f} s; timing", file=sys.stderr, flush=True)
+        if seconds is None:
+            backbone_step = None
+            result["compiled"]["error"] = "compiling failed (the warning on stderr says why): eager only"
+
     def run(count: int, state) -> list[float]:
         nonlocal prev
         times = []
         for _ in range(count):
             start = time.perf_counter()
-            prev, state = model.step(prev, music, state)
+            prev, state = model.step(prev, music, state, backbone_step)
             times.append(1e3 * (time.perf_counter() - start))
         return times
 
@@ -148,8 +211,10 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
             reference_prev = out
         return times, reference_times
 
-    result = {"width": width, "parameters": params, "threads": torch.get_num_threads()}
     with torch.inference_mode():
+        if not memory_only and backbone_step is not None:
+            result["compiled"].update(compiled_and_eager(model, backbone_step, frames))
+        compiled_step, backbone_step = backbone_step, None  # the eager step for the figures below
         if not memory_only:
             state = model.init_state(1)
             run(10, state)  # warm-up
@@ -202,6 +267,7 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
                 feature_ms.append(1e3 * (time.perf_counter() - start))
             result["features"] = {k: round(v, 3) for k, v in latency_summary(np.asarray(feature_ms)).items()}
         memory = {}
+        backbone_step = compiled_step  # as `sm stream` runs it
         state = model.init_state(1)
         done, start = 0, time.perf_counter()
         for m in sorted(minutes):
@@ -214,6 +280,7 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
                 progress = f"{done / 1800:.1f} min of frames streamed in {elapsed:.0f} s"
                 print(f"[{width}] {progress}, RSS {rss_mib():.1f} MiB", file=sys.stderr, flush=True)
             memory[f"rss_mib_after_{m:g}_min"] = round(rss_mib(), 1)
+    memory["step"] = "eager" if compiled_step is None else "compiled"
     result["memory"] = {**memory, "state_bytes": state.nbytes, "frames_streamed": done}
     return result
 
@@ -239,6 +306,15 @@ def main() -> int:
                    help="print the N operators with the most self CPU time over 20 steps and exit")
     p.add_argument("--adaptive-malloc", action="store_true",
                    help="leave glibc's adaptive malloc thresholds (default: keep_freed_memory, as sm stream)")
+    p.add_argument(
+        "--compile",
+        nargs="?",
+        const="default",
+        default=None,
+        metavar="MODE",
+        help="also time the step compiled with torch.compile (skeleton_mamba.compiling; MODE: a "
+        "torch.compile mode, default 'default') side by side with the eager step; memory run compiled",
+    )
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
     minutes = [float(m) for m in args.memory_minutes.split(",")]
@@ -255,7 +331,8 @@ def main() -> int:
             print(json.dumps({"width": args.width_only, "profiled": True}))
             return 0
         figures = measure(
-            args.width_only, args.frames, args.window, args.window_repeats, minutes, args.memory_only
+            args.width_only, args.frames, args.window, args.window_repeats, minutes, args.memory_only,
+            args.compile,
         )
         print(json.dumps(figures))
         return 0
@@ -273,6 +350,7 @@ def main() -> int:
         cmd += ["--window-repeats", str(args.window_repeats), "--memory-minutes", args.memory_minutes]
         cmd += ["--memory-only"] * args.memory_only + ["--profile", str(args.profile)]
         cmd += ["--adaptive-malloc"] * args.adaptive_malloc
+        cmd += ["--compile", args.compile] if args.compile else []
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         if args.omp_wait_policy != "inherit":
             env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
@@ -299,6 +377,18 @@ def main() -> int:
                 f" {r['step_sequence_path']['sequence_path_over_step']}x the step |"
             )
         print(f"{line} {r['memory']}")
+        c = r.get("compiled")
+        if c and "median_ms" in c:
+            print(
+                f"      compiled ({c['mode']}, {c['compile_seconds']:.0f} s to compile):"
+                f" median {c['median_ms']:.2f} ms, p99 {c['p99_ms']:.2f} ms, {c['fps']:.0f} fps"
+                f" | eager on the alternate frames: median {c['eager_median_ms_same_frames']:.2f} ms,"
+                f" p99 {c['eager_p99_ms_same_frames']:.2f} ms"
+                f" ({c['eager_over_compiled_median']}x, p99 {c['eager_over_compiled_p99']}x)"
+                f" | max difference {c['max_abs_difference']:.2g}"
+            )
+        elif c:
+            print(f"      compiled: {c.get('error')}")
     return 0
 
 

@@ -45,9 +45,14 @@ _ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_l
 
 
 def linear(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
-    """``layer(x)`` for a few tokens x (..., in) at inference; oneDNN for large fp32 CPU weights."""
+    """``layer(x)`` for a few tokens x (..., in) at inference; oneDNN for large fp32 CPU weights.
+
+    Under ``torch.compile`` always ``F.linear``: inductor cannot lower the eager oneDNN call, and with
+    frozen weights it packs them for oneDNN itself (:mod:`skeleton_mamba.compiling`).
+    """
     w = layer.weight
-    if _ONEDNN and w.numel() >= ONEDNN_MIN_WEIGHT and x.dtype == w.dtype == torch.float32 and not x.is_cuda:
+    large_fp32 = w.numel() >= ONEDNN_MIN_WEIGHT and x.dtype == w.dtype == torch.float32 and not x.is_cuda
+    if _ONEDNN and large_fp32 and not torch.compiler.is_compiling():
         return torch.ops.mkldnn._linear_pointwise(x, w, layer.bias, "none", [], "")
     return F.linear(x, w, layer.bias)
 

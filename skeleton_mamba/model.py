@@ -8,6 +8,7 @@ from torch.utils.checkpoint import checkpoint
 
 from skeleton_mamba import streaming
 from skeleton_mamba.block import SkeletonMambaBlock
+from skeleton_mamba.compiling import CompiledStep
 from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.padding import zero_padding
 from skeleton_mamba.skeletons import get_skeleton
@@ -128,3 +129,10 @@ class SkeletonMamba(nn.Module):
         when every step gets the ``context`` of the batch call. Inference only (no autograd).
         """
         return streaming.step(self, x, state, context, context_mask)
+
+    def compile_step(self, freezing: bool = True, mode: str | None = None) -> CompiledStep:
+        """:meth:`step` through ``torch.compile`` (inductor, frozen weights; compiles on the first call).
+
+        Same signature and results as :meth:`step`; see :mod:`skeleton_mamba.compiling`.
+        """
+        return CompiledStep(self, freezing, mode)

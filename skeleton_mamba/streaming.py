@@ -157,6 +157,38 @@ def block_step(
     return block.pointwise(x, context, context_mask)[:, 0]
 
 
+def check_frame(model, x: torch.Tensor, state: StreamState) -> None:
+    """Raise a ValueError unless ``x`` is one frame (B, J, C) of ``state``'s streams of ``model``."""
+    j = model.skeleton.num_joints
+    if x.dim() != 3 or x.shape[0] != state.batch or x.shape[1] != j:
+        raise ValueError(
+            f"expected one frame (B={state.batch}, {j}, C) for skeleton {model.skeleton.name}, "
+            f"got {tuple(x.shape)}"
+        )
+
+
+def frame_forward(
+    model,
+    x: torch.Tensor,
+    conv: list[torch.Tensor],
+    ssm: list[torch.Tensor],
+    context: torch.Tensor | None = None,
+    context_mask: torch.Tensor | None = None,
+    ops=FrameOps,
+) -> torch.Tensor:
+    """The computation of :func:`step` (no checks, no counter): x (B, J, C_in) -> (B, J, D or C_out).
+
+    ``conv`` and ``ssm`` (the :class:`StreamState` lists, one tensor per block) are updated in place.
+    This is the function :class:`~skeleton_mamba.compiling.CompiledStep` compiles.
+    """
+    h = model.input_proj(x)
+    if model.joint_embedding is not None:
+        h = h + model.joint_embedding
+    for block, conv_state, ssm_state in zip(model.blocks, conv, ssm):
+        h = block_step(block, h, conv_state, ssm_state, context, context_mask, ops)
+    return model.output_proj(model.norm(h))
+
+
 def step(
     model,
     x: torch.Tensor,
@@ -177,19 +209,9 @@ def step(
     Returns:
         (B, J, D or C_out) the output for this frame, and ``state``.
     """
-    j = model.skeleton.num_joints
-    if x.dim() != 3 or x.shape[0] != state.batch or x.shape[1] != j:
-        raise ValueError(
-            f"expected one frame (B={state.batch}, {j}, C) for skeleton {model.skeleton.name}, "
-            f"got {tuple(x.shape)}"
-        )
+    check_frame(model, x, state)
     with torch.inference_mode():
-        h = model.input_proj(x)
-        if model.joint_embedding is not None:
-            h = h + model.joint_embedding
-        for block, conv, ssm in zip(model.blocks, state.conv, state.ssm):
-            h = block_step(block, h, conv, ssm, context, context_mask, ops)
-        y = model.output_proj(model.norm(h))
+        y = frame_forward(model, x, state.conv, state.ssm, context, context_mask, ops)
     state.frames += 1
     return y, state
 
@@ -224,6 +246,8 @@ __all__ = [
     "StreamState",
     "allocate_mixer_state",
     "block_step",
+    "check_frame",
+    "frame_forward",
     "init_state",
     "keep_freed_memory",
     "mixer_step",

@@ -191,3 +191,38 @@ def test_training_features_are_what_the_live_stream_computes(tmp_path):
     live = CausalMusicFeatures(source.sample_rate)
     rows = [live.push(c.samples) for c in source] + [live.push(np.zeros(0, np.float32), last=True)]
     np.testing.assert_array_equal(np.concatenate(rows)[:60], music.numpy())
+
+
+def test_sm_stream_compile_equals_the_eager_stream(checkpoint, tmp_path, capsys):
+    """``--compile``: the frame step through torch.compile (a one-block tiny model: a short compile)."""
+    from skeleton_mamba.compiling import inductor_unavailable
+    from skeleton_mamba.tasks.stream.cli import main
+
+    if (reason := inductor_unavailable()) is not None:
+        pytest.skip(reason)
+    wav = write_music(tmp_path / "song.wav", synthesize_music(120.0, 1.0, sr=22050, seed=4))
+    common = ["--ckpt", str(checkpoint), "--music", str(wav), "--no-render"]
+    assert main([*common, "--out", str(tmp_path / "eager")]) == 0
+    assert main([*common, "--out", str(tmp_path / "compiled"), "--compile"]) == 0
+    err = capsys.readouterr().err
+    assert "about a minute" in err and "frame step compiled in" in err
+    report = json.loads((tmp_path / "compiled" / "song_stream.json").read_text())
+    assert report["compiled"] and report["compile_seconds"] > 0 and report["frames"] == 30
+    eager, compiled = (load_motion(tmp_path / d / "song.npz") for d in ("eager", "compiled"))
+    np.testing.assert_allclose(compiled.joints, eager.joints, atol=1e-4)
+
+
+def test_sm_stream_compile_falls_back_to_the_eager_step_with_a_warning(checkpoint, tmp_path, monkeypatch):
+    from skeleton_mamba.compiling import CompiledStep
+    from skeleton_mamba.tasks.stream.cli import main
+
+    def no_compiler(self, *args, **kwargs):
+        raise RuntimeError("InductorError: CppCompileError: C++ compile error")
+
+    monkeypatch.setattr(CompiledStep, "__call__", no_compiler)
+    wav = write_music(tmp_path / "song.wav", synthesize_music(120.0, 1.0, sr=22050, seed=4))
+    args = ["--ckpt", str(checkpoint), "--music", str(wav), "--no-render", "--out", str(tmp_path)]
+    with pytest.warns(RuntimeWarning, match="compiling the frame step failed .*running it eagerly"):
+        assert main([*args, "--compile"]) == 0
+    report = json.loads((tmp_path / "song_stream.json").read_text())
+    assert not report["compiled"] and report["compile_seconds"] is None and report["frames"] == 30

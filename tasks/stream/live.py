@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer
 
@@ -42,16 +43,23 @@ class LiveDancer:
     Args:
         model: the network (put in eval mode here).
         sample_rate: rate of the pushed audio.
+        compile: step the backbone through ``torch.compile`` (:mod:`skeleton_mamba.compiling`),
+            compiled here (about a minute at the paper width); if compiling fails, a warning and the
+            eager step. ``compile_seconds`` is the compile time (None: eager).
     """
 
     model: StreamDancer
     sample_rate: int
+    compile: bool = False
     poses: list[torch.Tensor] = field(default_factory=list)
     music: list[np.ndarray] = field(default_factory=list)
     latency_ms: list[float] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.model.eval()
+        self.backbone_step, self.compile_seconds = self.model.backbone.step, None
+        if self.compile:
+            self.backbone_step, self.compile_seconds = compile_step_or_eager(self.model.backbone)
         self.features = CausalMusicFeatures(self.sample_rate)
         self.state = self.model.init_state(1)
         weight = next(self.model.parameters())
@@ -61,7 +69,8 @@ class LiveDancer:
     def _warm_up(self) -> None:
         """One throwaway frame (librosa filters, torch kernels), so the first live frame is not slower."""
         row = CausalMusicFeatures(self.sample_rate).push(np.zeros(self.sample_rate // 10, np.float32))[:1]
-        self.model.step(self.prev, torch.from_numpy(row).to(self.prev), self.model.init_state(1))
+        music = torch.from_numpy(row).to(self.prev)
+        self.model.step(self.prev, music, self.model.init_state(1), self.backbone_step)
 
     def push(self, samples: np.ndarray, arrival: float | None = None, last: bool = False) -> int:
         """Feed audio delivered at wall time ``arrival`` (default now); returns the poses emitted."""
@@ -69,7 +78,7 @@ class LiveDancer:
         frames = self.features.push(samples, last=last)
         for row in frames:
             music = torch.from_numpy(row).to(self.prev)[None]
-            self.prev, self.state = self.model.step(self.prev, music, self.state)
+            self.prev, self.state = self.model.step(self.prev, music, self.state, self.backbone_step)
             self.latency_ms.append((time.perf_counter() - arrival) * 1e3)
             self.poses.append(self.prev[0].clone())
             self.music.append(row)

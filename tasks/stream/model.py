@@ -17,6 +17,7 @@ constant memory) equals :meth:`forward` (a whole sequence).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -120,10 +121,18 @@ class StreamDancer(nn.Module):
         return self.backbone.init_state(batch)
 
     def step(
-        self, prev: torch.Tensor, music: torch.Tensor, state: StreamState
+        self,
+        prev: torch.Tensor,
+        music: torch.Tensor,
+        state: StreamState,
+        backbone_step: Callable | None = None,
     ) -> tuple[torch.Tensor, StreamState]:
-        """One frame: previous pose (B, 24, 12) and music (B, music_dim) -> pose (B, 24, 12)."""
-        return self.backbone.step(self._inputs(prev, music), state)
+        """One frame: previous pose (B, 24, 12) and music (B, music_dim) -> pose (B, 24, 12).
+
+        ``backbone_step``: the backbone's step function (default ``self.backbone.step``; e.g. its
+        :meth:`~skeleton_mamba.SkeletonMamba.compile_step`).
+        """
+        return (backbone_step or self.backbone.step)(self._inputs(prev, music), state)
 
     @torch.inference_mode()
     def rollout(self, music: torch.Tensor) -> torch.Tensor:

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.stream.live import latency_summary
 
@@ -31,12 +32,21 @@ __all__ = ["OnlineRecognizer", "stream_recognition"]
 
 
 class OnlineRecognizer:
-    """Per-frame class probabilities of a causal :class:`ActionRecognizer`, ``batch`` streams of M bodies."""
+    """Per-frame class probabilities of a causal :class:`ActionRecognizer`, ``batch`` streams of M bodies.
 
-    def __init__(self, model: ActionRecognizer, batch: int = 1, bodies: int = 1) -> None:
+    ``compile``: step the backbone through ``torch.compile`` (:mod:`skeleton_mamba.compiling`),
+    compiled here; if compiling fails, a warning and the eager step (``compile_seconds``: None).
+    """
+
+    def __init__(
+        self, model: ActionRecognizer, batch: int = 1, bodies: int = 1, compile: bool = False
+    ) -> None:
         if not model.backbone.config.causal:
             raise ValueError("online recognition needs a causal backbone (backbone.causal: true)")
         self.model = model.eval()
+        self.backbone_step, self.compile_seconds = model.backbone.step, None
+        if compile:
+            self.backbone_step, self.compile_seconds = compile_step_or_eager(model.backbone, batch * bodies)
         self.batch, self.bodies = batch, bodies
         self.state = model.backbone.init_state(batch * bodies)
         width = model.backbone.out_channels
@@ -52,7 +62,7 @@ class OnlineRecognizer:
         if (b, m) != (self.batch, self.bodies):
             expected = f"({self.batch}, {self.bodies}, J, C)"
             raise ValueError(f"expected a frame of {expected}, got {tuple(frame.shape)}")
-        y, self.state = self.model.backbone.step(frame.flatten(0, 1), self.state)  # (B*M, J, D)
+        y, self.state = self.backbone_step(frame.flatten(0, 1), self.state)  # (B*M, J, D)
         self.feature_sum += y.mean(dim=1).view(b, m, -1)
         self.present |= frame.flatten(2).ne(0).any(dim=-1)
         self.frames += 1
@@ -95,6 +105,7 @@ def _plot(prob: np.ndarray, names: list[str], path: Path) -> None:
 def stream_recognition(args: argparse.Namespace) -> int:
     """``sm stream --task recognition`` (see the module docstring)."""
     from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
+    from skeleton_mamba.tasks.stream.cli import announce_compile, report_compile
 
     if not args.skeleton:
         print("sm stream: --skeleton FILE.npy is required for --task recognition", file=sys.stderr)
@@ -108,7 +119,8 @@ def stream_recognition(args: argparse.Namespace) -> int:
     if (j, c) != expected:
         raise ValueError(f"{path}: keypoints have (J, C) = {(j, c)}, the model reads {expected}")
     names = list(module.hparams.get("class_names") or [str(k) for k in range(model.head.out_features)])
-    online = OnlineRecognizer(model, 1, m)
+    online = OnlineRecognizer(model, 1, m, compile=announce_compile(args.compile))
+    report_compile(online.compile_seconds, args.compile)
     frames = torch.from_numpy(keypoints).permute(1, 0, 2, 3)[:, None]  # (T, 1, M, J, C)
     probs, latency = [], []
     for frame in frames:
