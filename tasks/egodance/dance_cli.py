@@ -72,7 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--compile",
         action="store_true",
         help="run the denoiser compiled (torch.compile, weights frozen): about 2 minutes of CPU to compile "
-        "at the paper size, then about 1.26x less CPU per step (measured on 1 thread; worth it for DDPM's "
+        "at the paper size, then about 1.3 to 1.4x less time per step (measured; worth it for DDPM's "
         "1000 steps); same dance to float32 rounding",
     )
     return p
