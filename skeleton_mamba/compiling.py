@@ -128,11 +128,9 @@ class CompiledStep:
         context_mask: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, StreamState]:
         """One frame (B, J, C_in) -> (B, J, D or C_out), ``state`` updated in place (as ``step``)."""
-        streaming.check_frame(self.model, x, state)
+        streaming.check_frame(self.model, x, state, context)
         if _weight_versions(self.model) != self._versions:
             raise RuntimeError("the model's weights changed after its step was compiled: compile it again")
-        if context is None and any(block.cross_attention is not None for block in self.model.blocks):
-            raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
         tensors = (x, context, context_mask, state.conv[0])
         signature = tuple(
             None if t is None else (tuple(t.shape), t.dtype, t.device, t.is_inference()) for t in tensors

@@ -157,14 +157,17 @@ def block_step(
     return block.pointwise(x, context, context_mask)[:, 0]
 
 
-def check_frame(model, x: torch.Tensor, state: StreamState) -> None:
-    """Raise a ValueError unless ``x`` is one frame (B, J, C) of ``state``'s streams of ``model``."""
+def check_frame(model, x: torch.Tensor, state: StreamState, context: torch.Tensor | None = None) -> None:
+    """Raise a ValueError unless ``x`` is one frame (B, J, C) of ``state``'s streams of ``model``, with a
+    ``context`` when the backbone was built with cross-attention."""
     j = model.skeleton.num_joints
     if x.dim() != 3 or x.shape[0] != state.batch or x.shape[1] != j:
         raise ValueError(
             f"expected one frame (B={state.batch}, {j}, C) for skeleton {model.skeleton.name}, "
             f"got {tuple(x.shape)}"
         )
+    if context is None and any(block.cross_attention is not None for block in model.blocks):
+        raise ValueError("this backbone was built with context_dim: pass a context (B, S, Dc)")
 
 
 def frame_forward(
@@ -209,7 +212,7 @@ def step(
     Returns:
         (B, J, D or C_out) the output for this frame, and ``state``.
     """
-    check_frame(model, x, state)
+    check_frame(model, x, state, context)
     with torch.inference_mode():
         y = frame_forward(model, x, state.conv, state.ssm, context, context_mask, ops)
     state.frames += 1

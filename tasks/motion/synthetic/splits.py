@@ -52,10 +52,10 @@ def stratified_holdout(sources: Sequence[str], val: int, test: int) -> dict[str,
         by_style.setdefault(style, []).append((bpm, src))
     queues = []
     for style in sorted(by_style, key=lambda s: (_stable(s), s)):
-        dances = sorted(by_style[style])
-        inner = dances[1:-1]  # the slowest and fastest stay in training
+        dances = sorted(by_style[style])  # by tempo
         middle = (len(dances) - 1) / 2
-        queues.append([src for _, src in sorted(inner, key=lambda d: (abs(dances.index(d) - middle), d))])
+        inner = list(enumerate(dances))[1:-1]  # the slowest and fastest stay in training
+        queues.append([src for _, (_, src) in sorted(inner, key=lambda d: (abs(d[0] - middle), d[1]))])
     candidates = [q[r] for r in range(max(map(len, queues), default=0)) for q in queues if r < len(q)]
     if len(candidates) < val + test:
         raise ValueError(
