@@ -137,6 +137,7 @@ def _conditions(
             [folder], window=num_frames, load_frames=vision, image_size=size, canonicalize_init_head=canonical
         )[0]
         return item["music"], item.get("frames"), item["head"]
+    from skeleton_mamba.tasks.egodance.frames import resize_frames
     from skeleton_mamba.tasks.motion.music import extract_music_features
 
     fps = module.hparams.get("fps", 30)  # the frame rate the model was trained at
@@ -145,12 +146,10 @@ def _conditions(
     if vision:
         if not args.video:
             raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
-        import kornia
-
         rgb = torch.from_numpy(_read_video(Path(args.video))).permute(0, 3, 1, 2)
         n = min(len(rgb), len(music))
         music = music[:n]
-        frames = kornia.geometry.transform.resize(rgb[:n].float() / 255.0, (size, size), antialias=True)
+        frames = resize_frames(rgb[:n].float() / 255.0, size)
     return music, frames, None
 
 

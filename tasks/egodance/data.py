@@ -32,7 +32,6 @@ import math
 import zlib
 from pathlib import Path
 
-import kornia
 import numpy as np
 import torch
 from torch.utils.data import Dataset
@@ -40,6 +39,7 @@ from torch.utils.data import Dataset
 from skeleton_mamba.tasks.base_data import SplitDataModule
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
+from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
@@ -187,8 +187,7 @@ class EgoDanceDataset(Dataset):
             frames = self._frames.get(index)
             if frames is None:
                 rgb = torch.from_numpy(read_frames(self.folders[index])[: self.window]).permute(0, 3, 1, 2)
-                size = (self.image_size, self.image_size)
-                frames = kornia.geometry.transform.resize(rgb.float() / 255.0, size, antialias=True)
+                frames = resize_frames(rgb.float() / 255.0, self.image_size)
                 if self.cache_frames:
                     self._frames[index] = frames
             item["frames"] = frames

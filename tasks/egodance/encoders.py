@@ -23,6 +23,7 @@ from torch import nn
 from transformers import ResNetConfig, ResNetModel
 
 from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
+from skeleton_mamba.tasks.egodance.frames import resize_frames
 
 __all__ = [
     "transformer_encoder",
@@ -145,8 +146,7 @@ class VisionEncoder(nn.Module):
         flat = frames.flatten(0, 1).float()
         feats = []
         for i in range(0, flat.shape[0], self.chunk):
-            x = kornia.geometry.transform.resize(flat[i : i + self.chunk], (self.image_size,) * 2)
-            x = self.normalize(x)
+            x = self.normalize(resize_frames(flat[i : i + self.chunk], self.image_size))  # contiguous NCHW
             with torch.set_grad_enabled(torch.is_grad_enabled() and not self.freeze):
                 pooled = self.resnet(pixel_values=x).pooler_output.flatten(1)
             feats.append(pooled)

@@ -40,10 +40,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import kornia
 import torch
 from torch import nn
 
+from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.motion.rotations import rotation_6d_to_matrix
 
 __all__ = [
@@ -101,8 +101,7 @@ class HeadTrajectoryEstimator(nn.Module):
             raise ValueError(f"expected frames (B, T, 3, H, W), got {tuple(frames.shape)}")
         b, t = frames.shape[:2]
         size = (self.config.input_size,) * 2
-        small = kornia.geometry.transform.resize(frames.flatten(0, 1).float(), size, antialias=True)
-        small = small.reshape(b, t, 3, *size)
+        small = resize_frames(frames.flatten(0, 1).float(), size).reshape(b, t, 3, *size)
         diff = torch.cat([torch.zeros_like(small[:, :1]), small[:, 1:] - small[:, :-1]], dim=1)
         x = torch.cat([small - 0.5, diff], dim=2).flatten(0, 1)
         feats = [self.cnn(x[i : i + self.config.chunk]) for i in range(0, x.shape[0], self.config.chunk)]

@@ -1,0 +1,80 @@
+"""Frame resizing for the EMM's vision inputs: values, antialiasing, and the contiguous layout."""
+
+import pytest
+import torch
+
+from skeleton_mamba.tasks.egodance.frames import resize_frames
+
+
+def _channels_last(images: torch.Tensor) -> torch.Tensor:
+    """(N, 3, H, W) with the memory layout of decoded video permuted from (N, H, W, 3)."""
+    return images.permute(0, 2, 3, 1).contiguous().permute(0, 3, 1, 2)
+
+
+def test_same_size_keeps_the_values_and_makes_channels_last_frames_contiguous():
+    images = _channels_last(torch.rand(5, 3, 12, 12))
+    assert not images.is_contiguous()
+    out = resize_frames(images, 12)
+    assert out.is_contiguous() and torch.equal(out, images)
+
+
+def test_shrinking_is_antialiased_and_exact_on_a_linear_ramp():
+    # A pixel-level checkerboard has no content below the new Nyquist limit: antialiased shrinking by 2
+    # must give flat grey (plain bilinear sampling at the new pixel centres would alias it).
+    y, x = torch.meshgrid(torch.arange(32), torch.arange(32), indexing="ij")
+    board = ((x + y) % 2).float().expand(2, 3, 32, 32)
+    out = resize_frames(_channels_last(board.contiguous()), 16)
+    assert out.shape == (2, 3, 16, 16) and out.is_contiguous()
+    torch.testing.assert_close(out[..., 1:-1, 1:-1], torch.full_like(out[..., 1:-1, 1:-1], 0.5))
+    # A linear ramp is reproduced exactly at the new pixel centres (x' = 2 i + 0.5 in input pixels),
+    # away from the border where the filter is renormalised.
+    ramp = x.double().expand(1, 3, 32, 32)
+    out = resize_frames(ramp, (32, 16))
+    centres = 2 * torch.arange(16, dtype=torch.float64) + 0.5
+    torch.testing.assert_close(out[0, 0, :, 1:-1], centres[1:-1].expand(32, 14))
+
+
+def test_growing_is_bilinear_and_bad_shapes_are_refused():
+    images = torch.rand(2, 3, 8, 8)
+    torch.testing.assert_close(
+        resize_frames(images, 16),
+        torch.nn.functional.interpolate(images, size=(16, 16), mode="bilinear", align_corners=False),
+    )
+    with pytest.raises(ValueError, match=r"\(N, C, H, W\)"):
+        resize_frames(torch.rand(3, 8, 8), 4)
+
+
+def test_vision_encoder_feeds_its_resnet_contiguous_frames():
+    # oneDNN's convolution backward corrupted the heap on channels-last input (torch 2.13, CPU).
+    from transformers import ResNetConfig
+
+    from skeleton_mamba.tasks.egodance.encoders import VisionEncoder
+
+    config = ResNetConfig(embedding_size=8, hidden_sizes=[8], depths=[1], layer_type="basic")
+    with pytest.warns(UserWarning, match="randomly initialised"):
+        encoder = VisionEncoder(16, resnet_config=config, image_size=16, freeze=False, chunk=4)
+    seen = []
+    encoder.resnet.register_forward_pre_hook(
+        lambda module, args, kwargs: seen.append(kwargs["pixel_values"].is_contiguous()), with_kwargs=True
+    )
+    frames = _channels_last(torch.rand(6, 3, 16, 16)).reshape(2, 3, 3, 16, 16)
+    assert not frames.flatten(0, 1).is_contiguous()
+    features = encoder(frames)
+    features.square().sum().backward()
+    assert features.shape == (2, 3, 16) and seen == [True, True]
+    expected = encoder(frames.contiguous())
+    torch.testing.assert_close(features, expected)
+
+
+def test_data_set_frames_are_contiguous(tmp_path):
+    from skeleton_mamba.tasks.egodance.data import SyntheticEgoDanceDataModule
+
+    data = SyntheticEgoDanceDataModule(
+        root=str(tmp_path / "data"), count=1, duration_s=5.0, frame_size=16, image_size=8,
+        val_fraction=0.0, test_fraction=0.0, music_cache_dir=str(tmp_path / "cache"),
+    )  # fmt: skip
+    data.prepare_data()
+    data.setup("fit")
+    frames = data.datasets["train"][0]["frames"]
+    assert frames.shape == (150, 3, 8, 8) and frames.is_contiguous()
+    assert 0.0 <= float(frames.min()) and float(frames.max()) <= 1.0
