@@ -38,6 +38,7 @@ __all__ = [
     "check_class_paths",
     "load_checkpoint",
     "load_module",
+    "load_module_and_checkpoint",
 ]
 
 # Module prefixes a class path in a checkpoint may name. Short names without a dot
@@ -144,6 +145,14 @@ def load_module(cls: type[ModuleT], path: str | PathLike[str], map_location: Any
     Raises:
         CheckpointError: as :func:`load_checkpoint`, or when the file holds another module class.
     """
+    return load_module_and_checkpoint(cls, path, map_location)[0]
+
+
+def load_module_and_checkpoint(
+    cls: type[ModuleT], path: str | PathLike[str], map_location: Any = "cpu"
+) -> tuple[ModuleT, dict]:
+    """:func:`load_module`, and the checkpoint's dict as read (e.g. its ``datamodule_hyper_parameters``),
+    from one read of the file."""
     p = check_checkpoint_path(path)
     data = p.read_bytes()
     checkpoint = _torch_load(data, str(p), map_location)
@@ -155,6 +164,7 @@ def load_module(cls: type[ModuleT], path: str | PathLike[str], map_location: Any
     if isinstance(stored, str) and stored.rsplit(".", 1)[-1] != cls.__name__:
         raise CheckpointError(f"{p}: holds a {stored}, not a {cls.__name__}")
     try:
-        return cls.load_from_checkpoint(io.BytesIO(data), map_location=map_location, weights_only=True)  # type: ignore[attr-defined]
+        module = cls.load_from_checkpoint(io.BytesIO(data), map_location=map_location, weights_only=True)  # type: ignore[attr-defined]
     except (KeyError, TypeError, RuntimeError) as err:
         raise CheckpointError(f"{p}: does not fit {cls.__name__} ({type(err).__name__}: {err})") from err
+    return module, checkpoint

@@ -24,7 +24,7 @@ import pytest
 import torch
 
 from skeleton_mamba.cli import main as sm_main
-from skeleton_mamba.tasks.checkpoints import load_module
+from skeleton_mamba.tasks.checkpoints import load_module, load_module_and_checkpoint
 from skeleton_mamba.tasks.egodance.model import EMMConfig
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.qean.model import QEANConfig
@@ -141,6 +141,10 @@ def test_sm_dance_loader_reads_a_flat_checkpoint(flat_checkpoint):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         _same_module(load_module(EgoDanceModule, path), reference)
+        module, checkpoint = load_module_and_checkpoint(EgoDanceModule, path)  # what `sm dance` calls
+    _same_module(module, reference)
+    assert checkpoint["state_dict"].keys() == module.state_dict().keys()
+    assert checkpoint["hyper_parameters"]["image_size"] == 64
 
 
 def test_sm_test_ckpt_path_builds_the_flat_checkpoints_network(flat_checkpoint, monkeypatch):

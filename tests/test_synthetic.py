@@ -43,6 +43,7 @@ def test_swing_side_music_fixes_the_side_of_the_two_beat_swing():
     with pytest.raises(ValueError, match="swing side"):
         synthesize_dance(120.0, 1.0, 30.0, "arms", 0, "left")
 
+
 @pytest.mark.parametrize("style", sorted(STYLES))
 def test_dance_velocity_minima_fall_on_beats(style):
     fps, bpm = 60.0, 120.0  # a beat every 30 frames

@@ -110,14 +110,6 @@ def _music_source(args) -> tuple[str | None, float]:
     return music.get("path"), float(music.get("start_s", 0.0))
 
 
-def _canonical_heading(ckpt: str) -> bool:
-    """Whether the checkpoint's data module turned windows to their first head heading."""
-    from skeleton_mamba.tasks.checkpoints import load_checkpoint
-
-    data = load_checkpoint(ckpt).get("datamodule_hyper_parameters") or {}
-    return bool(data.get("canonicalize_init_head", False))
-
-
 def _conditions(
     args, module, canonical: bool = False
 ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
@@ -175,16 +167,19 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
-    from skeleton_mamba.tasks.checkpoints import load_module
+    from skeleton_mamba.tasks.checkpoints import load_module_and_checkpoint
     from skeleton_mamba.tasks.egodance.export import write_dance
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
     from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
     from skeleton_mamba.tasks.motion.render import RenderStyle
 
-    module = load_module(EgoDanceModule, args.ckpt).eval()  # checked: local, weights_only, project classes
+    # checked: local, weights_only, project classes; read once
+    module, checkpoint = load_module_and_checkpoint(EgoDanceModule, args.ckpt)
+    module.eval()
     hp = module.hparams
     fps = hp.get("fps", 30)
-    canonical = _canonical_heading(args.ckpt)
+    data_hparams = checkpoint.get("datamodule_hyper_parameters") or {}
+    canonical = bool(data_hparams.get("canonicalize_init_head", False))  # windows faced their first heading
     try:
         music, frames, oracle = _conditions(args, module, canonical)
     except ValueError as err:  # the music, video or sample files (their readers name the file)
