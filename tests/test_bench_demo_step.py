@@ -1,0 +1,35 @@
+"""benchmarks/bench_demo_step.py builds the demo recipe's module and times a real training step."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import torch
+
+
+def _load_benchmark():
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_demo_step.py"
+    spec = importlib.util.spec_from_file_location("bench_demo_step", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_demo_step_benchmark_trains_the_recipes_module(capsys):
+    bench = _load_benchmark()
+    module, data = bench.build_module()
+    assert module.model.vision_encoder.image_size == data["image_size"] == 64
+    batch = bench.demo_batch(data)
+    assert batch["frames"].shape == (4, 150, 3, 64, 64) and batch["frames"].is_contiguous()
+    before = [p.detach().clone() for p in module.parameters()]
+    optimizer = torch.optim.AdamW(module.parameters(), lr=1e-3)
+    optimizer.zero_grad()
+    loss = module.training_step(batch, 0)
+    loss.backward()
+    optimizer.step()
+    assert torch.isfinite(loss)
+    assert any(not torch.equal(a, b) for a, b in zip(before, module.parameters(), strict=True))
+    assert bench.main(["--repeats", "1", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["train_step_ms"] > 0 and abs(result["steps_per_s"] - 1e3 / result["train_step_ms"]) < 0.01
+    assert result["vision_encoder_ms"] > 0 and result["head_estimator_ms"] > 0
