@@ -17,7 +17,9 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
   frozen weights, as ``sm stream --compile``): ``compile_seconds``, then compiled and eager steps on
   alternate frames of the same run, each with its own state and both fed the eager step's previous pose:
   median / p99 / max / fps of both, the ratios eager over compiled (median, p99), frames over 33 ms, and
-  the largest difference of their outputs (fp32 rounding); the memory run below then streams compiled;
+  the largest difference of their outputs (fp32 rounding); ``compiled.alone``: the compiled step by
+  itself, frame after frame as ``sm stream --compile`` runs it (no eager step in between to evict its
+  weights from the caches); the memory run below then streams compiled;
 - ``windowed``: what a windowed model pays per new frame, re-running the same network's forward on
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
@@ -214,6 +216,18 @@ def measure(width: str, frames: int, window: int, window_repeats: int, minutes: 
     with torch.inference_mode():
         if not memory_only and backbone_step is not None:
             result["compiled"].update(compiled_and_eager(model, backbone_step, frames))
+            state = model.init_state(1)
+            run(10, state)  # warm-up
+            usage = resource.getrusage(resource.RUSAGE_SELF)
+            alone_ms = np.asarray(run(frames, state))
+            after = resource.getrusage(resource.RUSAGE_SELF)
+            result["compiled"]["alone"] = {
+                **{k: round(v, 3) for k, v in latency_summary(alone_ms).items()},
+                "fps": round(1e3 / float(np.mean(alone_ms)), 1),
+                "frames_over_33ms": int((alone_ms > 33.0).sum()),
+                "involuntary_switches_per_frame": round((after.ru_nivcsw - usage.ru_nivcsw) / frames, 2),
+                "frames": frames,
+            }
         compiled_step, backbone_step = backbone_step, None  # the eager step for the figures below
         if not memory_only:
             state = model.init_state(1)
