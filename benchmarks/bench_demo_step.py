@@ -26,24 +26,20 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms, operator_profile  # noqa: E402
 
-from skeleton_mamba.tasks.backbone_config import backbone_config  # noqa: E402
-from skeleton_mamba.tasks.egodance.head_estimator import HeadEstimatorConfig  # noqa: E402
-from skeleton_mamba.tasks.egodance.model import EMMConfig  # noqa: E402
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS  # noqa: E402
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES  # noqa: E402
-
-RECIPES = Path(__file__).resolve().parents[1] / "recipes"
+from skeleton_mamba.tasks.recipe_resolution import packaged_recipe_dir  # noqa: E402
 
 
 def build_module() -> tuple[EgoDanceModule, dict]:
-    """The demo recipe's module (image size linked from its data section) and its data settings."""
-    recipe = yaml.safe_load((RECIPES / "egodance_demo.yaml").read_text())
+    """The demo recipe's module (image size linked from its data section, as ``sm fit`` links it) and its
+    data settings; the module turns the recipe's plain mappings into its config dataclasses itself."""
+    recipes = packaged_recipe_dir()
+    recipe = yaml.safe_load((recipes / "egodance_demo.yaml").read_text())
     args = dict(recipe["model"]["init_args"])
     data = recipe["data"]["init_args"]
-    args["backbone"] = backbone_config(yaml.safe_load((RECIPES / args["backbone"]).read_text()))
-    args["network"] = EMMConfig(**args["network"])
-    args["head_estimator"] = HeadEstimatorConfig(**args["head_estimator"])
+    args["backbone"] = yaml.safe_load((recipes / args["backbone"]).read_text())
     args["image_size"] = data["image_size"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the random (not pretrained) ResNet
