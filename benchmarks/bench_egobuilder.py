@@ -15,7 +15,7 @@
 3. Peak memory (``--only-memory`` runs this alone): the peak resident set size of ``sm make-ego`` (its
    own process, 1 worker; the kernel's ``ru_maxrss`` of that child) with each ray caster
    (``SKELETON_MAMBA_RAY_CASTER=embree`` and ``trimesh``), on the EgoMusic demo's data (a generated dance
-   in 2 procedural rooms at 64 x 64, as ``egodance_demo.yaml`` builds it) and on a real scene mesh at
+   in 2 procedural rooms at 64 x 64, twice the side ``egodance_demo.yaml`` builds) and on a real scene mesh at
    256 x 256 (``--scene``, default ``../shared/data/scenes/simple_room.glb``, z-up). One motion of
    ``--rss-window`` seconds keeps the slow fallback short; windows are built one after another, so the
    peak does not grow with their number.

@@ -18,9 +18,10 @@ def _load_benchmark():
 def test_demo_step_benchmark_trains_the_recipes_module(capsys):
     bench = _load_benchmark()
     module, data = bench.build_module()
-    assert module.model.vision_encoder.image_size == data["image_size"] == 64
+    assert module.model.vision_encoder.image_size == data["image_size"] == 32
+    assert module.model.frame_condition is not None  # the recipe's network, not EMMConfig's defaults
     batch = bench.demo_batch(data)
-    assert batch["frames"].shape == (4, 150, 3, 64, 64) and batch["frames"].is_contiguous()
+    assert batch["frames"].shape == (4, 150, 3, 32, 32) and batch["frames"].is_contiguous()
     before = [p.detach().clone() for p in module.parameters()]
     optimizer = torch.optim.AdamW(module.parameters(), lr=1e-3)
     optimizer.zero_grad()

@@ -121,7 +121,7 @@ def test_head_guidance_moves_head_toward_target():
     torch.testing.assert_close(late.adjust_x0(x0, x0, torch.tensor([5])), x0)  # t >= 0.2 T: unchanged
 
 
-def _tiny_emm(use_vision: bool = True) -> EMM:
+def _tiny_emm(use_vision: bool = True, frame_condition: bool = False) -> EMM:
     backbone = SkeletonMambaConfig(
         dim=16, depth=1, mlp_dim=32, heads=2, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
     )
@@ -135,6 +135,7 @@ def _tiny_emm(use_vision: bool = True) -> EMM:
             freeze_resnet=False,
             heads=2,
             transformer_ff=32,
+            frame_condition=frame_condition,
         )
         return EMM(backbone, network, image_size=32)
 
@@ -249,3 +250,60 @@ def test_batched_classifier_free_guidance_equals_two_calls():
         cond, unc = model(x_t, t, context), model(x_t, t, None)
         batched = guided_x0(model, x_t, t, context, 2.0)  # EMM.null_condition: one call on 2B samples
     torch.testing.assert_close(batched, unc + 2.0 * (cond - unc), rtol=1e-4, atol=1e-5)
+
+
+def test_music_features_are_standardised_with_training_statistics():
+    from skeleton_mamba.tasks.egodance.encoders import MusicEncoder
+
+    torch.manual_seed(0)
+    encoder = MusicEncoder(music_dim=3, dim=8, layers=1, heads=2, ff_dim=16, dropout=0.0).eval()
+    # channels on the scales of librosa's: MFCC 0 (-300 +- 165), a one-hot beat, a constant channel
+    mfcc0, beat = -300 + 165 * torch.randn(2, 50), (torch.rand(2, 50) < 0.1).float()
+    music = torch.stack([mfcc0, beat, torch.ones(2, 50)], -1)
+    raw_state = {k: v.clone() for k, v in encoder.state_dict().items()}
+    encoder.set_statistics(music)
+    flat = music.reshape(-1, 3).double()
+    mean, std = flat.mean(0), flat.std(0, unbiased=False).clamp(min=1e-3)  # the constant channel: floor
+    torch.testing.assert_close(encoder.feature_mean, mean.float())
+    torch.testing.assert_close(encoder.feature_std, std.float())
+    seen = {}
+    encoder.proj.register_forward_pre_hook(lambda module, args: seen.setdefault("x", args[0]))
+    with torch.no_grad():
+        encoder(music)
+    torch.testing.assert_close(seen["x"], ((music.double() - mean) / std).float(), rtol=1e-5, atol=1e-5)
+    assert seen["x"][..., :2].reshape(-1, 2).std(0).sub(1).abs().max() < 0.02  # unit scale, not hundreds
+    # a checkpoint from before the standardisation loads with the identity statistics: its outputs unchanged
+    old = {k: v for k, v in raw_state.items() if not k.startswith("feature_")}
+    encoder.load_state_dict(old)
+    assert torch.equal(encoder.feature_mean, torch.zeros(3))
+    assert torch.equal(encoder.feature_std, torch.ones(3))
+    with pytest.raises(ValueError, match="NaN"):
+        encoder.set_statistics(torch.full((1, 4, 3), float("nan")))
+
+
+def test_frame_condition_adds_condition_t_to_the_pose_embedding_of_frame_t():
+    torch.manual_seed(0)
+    model = _tiny_emm(use_vision=False, frame_condition=True).eval()
+    assert _tiny_emm(use_vision=False).frame_condition is None  # off by default ([EgoMusic]'s network)
+    x_t, t = torch.randn(1, 8, 24, 10), torch.tensor([7])
+    context = torch.randn(1, 8, 16)
+    inputs = []
+    model.backbone.register_forward_pre_hook(lambda module, args: inputs.append(args[0].clone()))
+    changed = context.clone()
+    changed[0, 3] += 1.0
+    with torch.no_grad():
+        model(x_t, t, context)
+        model(x_t, t, changed)
+    delta = inputs[1] - inputs[0]  # (1, T, J, D): the pose embeddings fed to the backbone
+    expected = model.frame_condition.weight @ torch.ones(16)  # W (c_3 + 1) - W c_3
+    assert delta[0, [0, 1, 2, 4, 5, 6, 7]].abs().max() == 0  # no other frame moves
+    # every joint of frame 3 moves by W 1
+    torch.testing.assert_close(delta[0, 3], expected.expand(24, -1), rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="one condition token per frame"):
+        model(x_t, t, context[:, :5])
+    # a checkpoint saved without frame_condition loads with zero weights there: the network it trained
+    plain = _tiny_emm(use_vision=False).eval()
+    model.load_state_dict(plain.state_dict())
+    assert model.frame_condition.weight.abs().max() == 0 and model.frame_condition.bias.abs().max() == 0
+    with torch.no_grad():
+        torch.testing.assert_close(model(x_t, t, context), plain(x_t, t, context))

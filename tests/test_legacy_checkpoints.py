@@ -155,7 +155,7 @@ def test_sm_test_ckpt_path_builds_the_flat_checkpoints_network(flat_checkpoint, 
     args += ["--data.init_args.root", str(path.parent / "data")]  # not read: Trainer.test is replaced
     model = _sm_model(monkeypatch, args)
     assert model.model.config == NETWORK  # the demo recipe's network has transformer_ff 64 too, dropout 0.1
-    assert model.hparams.image_size == 64 and model.hparams.fps == 30  # linked from the data module
+    assert model.hparams.image_size == 32 and model.hparams.fps == 30  # linked from the recipe's data module
     _ = reference  # the weights are loaded by Trainer.test itself (replaced here)
 
 

@@ -77,7 +77,13 @@ def load_resnet(name_or_path: str) -> ResNetModel:
 
 
 class MusicEncoder(nn.Module):
-    """(B, T, music_dim) -> (B, T, Dc)."""
+    """(B, T, music_dim) -> (B, T, Dc).
+
+    The features are standardised per channel with the training set's statistics
+    (:meth:`set_statistics`; identity until set) before the projection: the 35 librosa features span five
+    orders of magnitude (MFCC 0 about -300 +- 165, the beat and onset-peak one-hots 0 or 1), and raw, the
+    projection is all loudness and the beats -- where the dance's phase is -- are drowned.
+    """
 
     def __init__(
         self,
@@ -91,9 +97,28 @@ class MusicEncoder(nn.Module):
         super().__init__()
         self.proj = nn.Linear(music_dim, dim)
         self.encoder = transformer_encoder(dim, layers, heads, ff_dim, dropout)
+        self.register_buffer("feature_mean", torch.zeros(music_dim))
+        self.register_buffer("feature_std", torch.ones(music_dim))
+
+    @torch.no_grad()
+    def set_statistics(self, music: torch.Tensor, min_std: float = 1e-3) -> None:
+        """Per-channel mean and standard deviation (floored at ``min_std``) of training music (..., L)."""
+        flat = music.reshape(-1, music.shape[-1]).double()
+        if flat.shape[-1] != self.feature_mean.shape[0]:
+            raise ValueError(f"music has {flat.shape[-1]} features, the encoder {self.feature_mean.shape[0]}")
+        if not torch.isfinite(flat).all():
+            raise ValueError("music statistics: the features contain NaN or inf")
+        self.feature_mean.copy_(flat.mean(0).float())
+        self.feature_std.copy_(flat.std(0, correction=0).clamp(min=min_std).float())
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        # checkpoints from before the standardisation: the identity statistics, i.e. the same outputs
+        state_dict.setdefault(prefix + "feature_mean", torch.zeros_like(self.feature_mean))
+        state_dict.setdefault(prefix + "feature_std", torch.ones_like(self.feature_std))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def forward(self, music: torch.Tensor) -> torch.Tensor:
-        h = self.proj(music)
+        h = self.proj((music - self.feature_mean.to(music.dtype)) / self.feature_std.to(music.dtype))
         pos = sinusoidal_embedding(torch.arange(music.shape[1], device=music.device), h.shape[-1])
         return self.encoder(h + pos.to(h.dtype))
 

@@ -142,7 +142,10 @@ class EgoDanceModule(BackboneModule):
         **flat_network: Any,
     ) -> None:
         super().__init__()
-        network = with_flat_fields(config_from(EMMConfig, network), flat_network, FLAT_NETWORK_RENAMES)
+        network = config_from(EMMConfig, network)
+        if flat_network:  # a checkpoint from before `network` existed also predates frame_condition
+            network = dataclasses.replace(network, frame_condition=False)
+        network = with_flat_fields(network, flat_network, FLAT_NETWORK_RENAMES)
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         if head_source not in HEAD_SOURCES:
@@ -191,12 +194,15 @@ class EgoDanceModule(BackboneModule):
 
     # ------------------------------------------------------------------ training
     def setup(self, stage: str) -> None:
-        """Fit: the denoiser's preconditioning statistics from the training windows' motion."""
+        """Fit: the denoiser's preconditioning statistics from the training windows' motion, and the music
+        encoder's from their music."""
         datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
         train = (getattr(datamodule, "datasets", None) or {}).get("train")
         if stage == "fit" and train is not None and len(train) > 0:
-            self.model.set_data_statistics(torch.stack([item["motion"] for item in train.items]))
-            self.ema.module.skip_x0.load_state_dict(self.model.skip_x0.state_dict())
+            motion = torch.stack([item["motion"] for item in train.items])
+            music = torch.stack([item["music"] for item in train.items])
+            for model in (self.model, self.ema.module):
+                model.set_data_statistics(motion, music)
 
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]
