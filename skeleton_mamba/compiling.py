@@ -68,10 +68,21 @@ def compile_for_inference(
             part of it eagerly).
 
     Shapes are static (``dynamic=False``: a new shape compiles again).
+
+    Freezing is set in inductor's configuration around every call (compiling happens inside the call),
+    not as a ``torch.compile`` option: passed as an option (torch 2.13) it has no effect, the weights
+    stay inputs of the graph and its matrix products plain ``mm`` on them (measured: 26.5 vs 22.4 ms
+    per paper-width stream frame, ``benchmarks/README.md``). ``tests/test_compiling.py`` checks that
+    frozen weights are constants of the compiled function.
     """
     options = dict(torch._inductor.list_mode_options(mode)) if mode else {}
-    options["freezing"] = freezing
-    return torch.compile(fn, backend="inductor", fullgraph=fullgraph, dynamic=False, options=options)
+    compiled = torch.compile(fn, backend="inductor", fullgraph=fullgraph, dynamic=False, options=options)
+
+    def call(*args, **kwargs):
+        with torch._inductor.config.patch(freezing=freezing):
+            return compiled(*args, **kwargs)
+
+    return call
 
 
 def inductor_unavailable() -> str | None:

@@ -81,7 +81,11 @@ def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
     delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)  # (b, L, H)
     # float64 cumulative log decays, per head: cs (b, H, L); mask (b, H, L, L), causal.
     A = -torch.exp(mixer.A_log.to(torch.float64))
-    cs = (delta.to(torch.float64) * A).cumsum(dim=1).transpose(1, 2)
+    a = (delta.to(torch.float64) * A).transpose(1, 2)  # (b, H, L)
+    if torch.compiler.is_compiling():  # a reduction inductor fuses (its cumsum is a library call)
+        cs = (a[..., None, :] * torch.ones(L, L, dtype=a.dtype, device=a.device).tril_()).sum(-1)
+    else:
+        cs = a.cumsum(dim=-1)
     upper = torch.ones(L, L, dtype=torch.bool, device=x.device).triu_(1)
     mask = (cs[..., :, None] - cs[..., None, :]).masked_fill_(upper, -torch.inf).exp_().to(ct)
     # C Bᵀ once per B/C group, shared by its R heads: (b, G, L, L).

@@ -110,17 +110,39 @@ def mixer_step(
     # Δ as the sequence forward (with dt_limit; mamba_ssm's own step skips the limit), (B, H)
     delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)
     xh = x.to(ct).view(b, h, p)
-    ssm_state.mul_(torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))[:, :, None, None])  # exp(Δ A) h
-    # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
-    state = ssm_state.view(b * g, (h // g) * p, n)
-    state.baddbmm_((xh * delta[:, :, None]).view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
-    y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
+    decay = torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))  # exp(Δ A), (B, H)
+    if torch.compiler.is_compiling():
+        y = _state_update_pointwise(ssm_state, decay, xh * delta[:, :, None], B.to(ct), C.to(ct), g)
+    else:
+        ssm_state.mul_(decay[:, :, None, None])
+        # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
+        state = ssm_state.view(b * g, (h // g) * p, n)
+        xd = (xh * delta[:, :, None]).view(b * g, -1, 1)
+        state.baddbmm_(xd, B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
+        y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
     D = mixer.skip_weight().to(ct)  # (H,) or (H, P)
     y = torch.addcmul(y, xh, D[:, None] if D.dim() == 1 else D)
     y = mixer.gate(y.to(u.dtype).view(b, mixer.d_ssm), z)
     if mixer.d_mlp:
         y = torch.cat([F.silu(z0) * x0, y], dim=-1)
     return mixer.out_proj(y)
+
+
+def _state_update_pointwise(
+    ssm_state: torch.Tensor, decay: torch.Tensor, xd: torch.Tensor, B: torch.Tensor, C: torch.Tensor, g: int
+) -> torch.Tensor:
+    """h <- exp(Δ A) h + (Δ x) ⊗ B in place, and y = h C, as element-wise work and a reduction.
+
+    The form for compiled code (:class:`~skeleton_mamba.compiling.CompiledStep`): inductor computes the
+    new state directly into ``ssm_state``'s storage (no matrix product whose result is copied back).
+    ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G*N) -> y (B, H, P).
+    """
+    b, h, p, n = ssm_state.shape
+    r = h // g
+    new = (ssm_state * decay[:, :, None, None]).view(b, g, r, p, n)
+    new = new + xd.view(b, g, r, p, 1) * B.view(b, g, 1, 1, n)
+    ssm_state.copy_(new.view(b, h, p, n))
+    return (new * C.view(b, g, 1, 1, n)).sum(-1).view(b, h, p)
 
 
 def init_state(model, batch: int, dtype: torch.dtype | None = None, device=None) -> StreamState:

@@ -117,3 +117,26 @@ def test_the_frame_linear_compiles_for_large_float32_weights():
         y = compiled(x)
     expected = x.double() @ layer.weight.double().t() + layer.bias.double()
     torch.testing.assert_close(y.double(), expected, rtol=1e-5, atol=1e-5)
+
+
+@needs_inductor
+def test_compile_for_inference_freezes_the_weights():
+    """Frozen means the weights are constants of the compiled graph (what lets inductor prepack them):
+    changing a parameter in place afterwards does not change the compiled function's output."""
+    from skeleton_mamba.compiling import compile_for_inference
+
+    torch.manual_seed(0)
+    layer = torch.nn.Linear(64, 32).eval()
+    x = torch.randn(3, 64)
+    frozen = compile_for_inference(lambda x: layer(x))
+    live = compile_for_inference(lambda x: layer(x) + 0.0, freezing=False)
+    with torch.inference_mode():
+        before, live_before = frozen(x), live(x)
+    with torch.no_grad():
+        layer.weight.add_(1.0)
+    with torch.inference_mode():
+        after, live_after = frozen(x), live(x)
+        eager = layer(x)
+    torch.testing.assert_close(after, before)
+    torch.testing.assert_close(live_after, eager)
+    assert (live_after - live_before).abs().max() > 1.0

@@ -100,7 +100,10 @@ def test_state_size_does_not_grow_with_the_frames_seen():
     ],
     ids=["default", "d_ssm+D_has_hdim", "norm_before_gate+dt_limit+biases", "no_rmsnorm"],
 )
-def test_mixer_step_with_grouped_B_and_C_equals_the_sequence_mixer(options):
+@pytest.mark.parametrize("compiled_form", [False, True], ids=["eager", "compiled_form"])
+def test_mixer_step_with_grouped_B_and_C_equals_the_sequence_mixer(options, compiled_form, monkeypatch):
+    """Also in the form the step takes under torch.compile (the state updated element-wise,
+    ``_state_update_pointwise``), run eagerly here."""
     torch.manual_seed(0)
     from skeleton_mamba import Mamba2Mixer
 
@@ -111,6 +114,7 @@ def test_mixer_step_with_grouped_B_and_C_equals_the_sequence_mixer(options):
     with torch.no_grad():
         full = mixer(u)
         conv, ssm = allocate_mixer_state(mixer, 3)
+        monkeypatch.setattr(torch.compiler, "is_compiling", lambda: compiled_form)
         steps = torch.stack([mixer_step(mixer, u[:, t], conv, ssm) for t in range(21)], dim=1)
     torch.testing.assert_close(steps, full, rtol=0, atol=1e-10)
 
@@ -152,8 +156,10 @@ def test_bad_use_is_explained():
     ids=["default", "d_ssm+D_has_hdim", "norm_before_gate+dt_limit", "no_rmsnorm"],
 )
 @pytest.mark.parametrize("length", [1, 6, 40])
-def test_short_mix_equals_the_sequence_mix(options, length):
-    """The frame path's few-operation mixer equals ``Mamba2Mixer.mix`` (chunked / quadratic SSD)."""
+@pytest.mark.parametrize("compiled_form", [False, True], ids=["eager", "compiled_form"])
+def test_short_mix_equals_the_sequence_mix(options, length, compiled_form, monkeypatch):
+    """The frame path's few-operation mixer equals ``Mamba2Mixer.mix`` (chunked / quadratic SSD), also in
+    the form it takes under torch.compile (the cumulative sums as a reduction), run eagerly here."""
     from skeleton_mamba import Mamba2Mixer
     from skeleton_mamba.frame_ops import short_mix
 
@@ -163,7 +169,9 @@ def test_short_mix_equals_the_sequence_mix(options, length):
         p.data.add_(0.1 * torch.randn_like(p))
     zxbcdt = torch.randn(3, length, mixer.in_proj.out_features, dtype=torch.float64)
     with torch.no_grad():
-        torch.testing.assert_close(short_mix(mixer, zxbcdt), mixer.mix(zxbcdt), rtol=0, atol=1e-10)
+        expected = mixer.mix(zxbcdt)
+        monkeypatch.setattr(torch.compiler, "is_compiling", lambda: compiled_form)
+        torch.testing.assert_close(short_mix(mixer, zxbcdt), expected, rtol=0, atol=1e-10)
 
 
 def test_frame_linear_equals_linear_for_large_float32_weights():
