@@ -226,3 +226,16 @@ def test_sm_stream_compile_falls_back_to_the_eager_step_with_a_warning(checkpoin
         assert main([*args, "--compile"]) == 0
     report = json.loads((tmp_path / "song_stream.json").read_text())
     assert not report["compiled"] and report["compile_seconds"] is None and report["frames"] == 30
+
+
+def test_a_stream_slower_than_real_time_suggests_compiling():
+    from skeleton_mamba.tasks.stream.cli import realtime_hint
+
+    slow = {"median_ms": 30.0, "p99_ms": 41.0, "max_ms": 60.0}
+    fast = {"median_ms": 20.0, "p99_ms": 30.0, "max_ms": 40.0}
+    hint = realtime_hint(slow, compiled=False, fps=30)
+    assert hint is not None and "41 ms" in hint and "33.3 ms" in hint and "--compile" in hint
+    assert realtime_hint(slow, compiled=True, fps=30) is None  # compiling is all the hint could offer
+    assert realtime_hint(fast, compiled=False, fps=30) is None
+    assert realtime_hint(fast, compiled=False, fps=60) is not None
+    assert realtime_hint({k: float("nan") for k in fast}, compiled=False, fps=30) is None
