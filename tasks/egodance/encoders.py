@@ -24,6 +24,7 @@ from transformers import ResNetConfig, ResNetModel
 
 from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.egodance.frames import resize_frames
+from skeleton_mamba.tasks.motion.statistics import channel_statistics
 
 __all__ = [
     "transformer_encoder",
@@ -103,13 +104,12 @@ class MusicEncoder(nn.Module):
     @torch.no_grad()
     def set_statistics(self, music: torch.Tensor, min_std: float = 1e-3) -> None:
         """Per-channel mean and standard deviation (floored at ``min_std``) of training music (..., L)."""
-        flat = music.reshape(-1, music.shape[-1]).double()
-        if flat.shape[-1] != self.feature_mean.shape[0]:
-            raise ValueError(f"music has {flat.shape[-1]} features, the encoder {self.feature_mean.shape[0]}")
-        if not torch.isfinite(flat).all():
-            raise ValueError("music statistics: the features contain NaN or inf")
-        self.feature_mean.copy_(flat.mean(0).float())
-        self.feature_std.copy_(flat.std(0, correction=0).clamp(min=min_std).float())
+        expected = self.feature_mean.shape[0]
+        if music.shape[-1] != expected:
+            raise ValueError(f"music has {music.shape[-1]} features, the encoder {expected}")
+        mean, std = channel_statistics(music, min_std=min_std, name="music")
+        self.feature_mean.copy_(mean)
+        self.feature_std.copy_(std)
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         # checkpoints from before the standardisation: the identity statistics, i.e. the same outputs

@@ -29,6 +29,7 @@ from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
+from skeleton_mamba.tasks.motion.statistics import channel_statistics
 
 __all__ = ["EMM", "EMMConfig"]
 
@@ -135,8 +136,8 @@ class EMM(nn.Module):
     def set_data_statistics(self, motion: torch.Tensor, music: torch.Tensor | None = None) -> None:
         """Per-channel mean and standard deviation of training motion tokens (N, T, 24, 10) (the
         preconditioning) and of their music features (N, T, L) (the music encoder's standardisation)."""
-        flat = motion.reshape(-1, NUM_JOINTS, NUM_CHANNELS).double()
-        self.skip_x0.set_statistics(flat.mean(dim=0).float(), flat.std(dim=0, correction=0).float())
+        tokens = motion.reshape(-1, NUM_JOINTS, NUM_CHANNELS)
+        self.skip_x0.set_statistics(*channel_statistics(tokens, channel_dims=2, name="motion"))
         if music is not None:
             self.music_encoder.set_statistics(music)
 

@@ -27,6 +27,7 @@ from torch import nn
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.tasks.motion.motion_file import MotionData
+from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.qean.representation import features_to_joints, features_to_smpl, motion_to_features
 from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
 
@@ -100,9 +101,10 @@ class StreamDancer(nn.Module):
         self.register_buffer("music_std", torch.ones(music_dim))
 
     def set_music_statistics(self, music: torch.Tensor) -> None:
-        """Per-feature mean and standard deviation of training music (N, music_dim)."""
-        self.music_mean.copy_(music.mean(dim=0))
-        self.music_std.copy_(music.std(dim=0).clamp_min(1e-3))
+        """Per-feature mean and standard deviation (floored at 1e-3) of training music (N, music_dim)."""
+        mean, std = channel_statistics(music, min_std=1e-3, name="music")
+        self.music_mean.copy_(mean)
+        self.music_std.copy_(std)
 
     def _inputs(self, prev: torch.Tensor, music: torch.Tensor) -> torch.Tensor:
         """(..., 24, 12) previous poses and (..., music_dim) music -> (..., 24, 12 + music_dim)."""

@@ -34,6 +34,7 @@ from torch import nn
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
+from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 
 __all__ = [
@@ -172,8 +173,7 @@ class TextToMotionDenoiser(nn.Module):
     def set_data_statistics(self, features: torch.Tensor) -> None:
         """Per-feature mean and std of normalised training features (N, 263) for the preconditioning (the
         group-wise normalisation of HumanML3D leaves them off 0 and 1)."""
-        flat = features.reshape(-1, FEATURE_DIM).double()
-        self.skip_x0.set_statistics(flat.mean(dim=0).float(), flat.std(dim=0, correction=0).float())
+        self.skip_x0.set_statistics(*channel_statistics(features.reshape(-1, FEATURE_DIM), name="features"))
 
     def forward(
         self,
