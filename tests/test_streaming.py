@@ -216,9 +216,12 @@ def test_keep_freed_memory_stops_the_page_faults_of_a_repeated_allocation():
         "def frame():\n"
         "    a, b, c = (torch.empty(n << 20).fill_(1) for n in (2, 3, 1))\n"
         "for _ in range(3): frame()\n"
-        "before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
-        "for _ in range(50): frame()\n"
-        "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n"
+        "for _ in range(3):\n"
+        "    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+        "    for _ in range(50): frame()\n"
+        "    print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n"
     )
     child = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert int(child.stdout) < 50
+    # The best of three rounds of 50 frames: the glibc defaults fault in every round (about 9,000 faults
+    # here); the kernel's own memory reclaim can add a stray 1,024 to one round on a busy machine.
+    assert min(int(line) for line in child.stdout.split()) < 50

@@ -6,9 +6,8 @@ Per chunk k, with ā the inclusive cumulative sum of a = Δ·A inside the chunk 
 
 1. Y_diag: the quadratic form inside the chunk (:func:`intra_chunk`);
 2. s_k = Σ_s exp(T_k - ā_s) Δ_s x_s ⊗ B_s, the state at the end of chunk k from zero;
-3. S_{k+1} = exp(T_k) S_k + s_k with S_0 the initial state, evaluated as one product with the
-   (c+1)×(c+1) matrix exp(segsum(0, T_0, ..., T_{c-1})) (stable segment sums; one operation
-   instead of a Python loop over chunks);
+3. S_{k+1} = exp(T_k) S_k + s_k with S_0 the initial state, a scan over the chunks
+   (:class:`StatePassing`: c multiply-adds of states, no c×c matrix of decays);
 4. Y_off[l] = exp(ā_l) S_k C_l.
 
 Tensors stay in the (chunk, position, head, channel) layout of the input, so B and C are used
@@ -18,13 +17,10 @@ without copies and heads of one B/C group share one matrix product.
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
-from einops import rearrange
 
 from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.non_finite import confine_non_finite
-from skeleton_mamba.ssd.segsum import segsum_stable
 
 
 def chunk_states(x: torch.Tensor, weight: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
@@ -45,10 +41,48 @@ def chunk_states(x: torch.Tensor, weight: torch.Tensor, B: torch.Tensor) -> torc
     return s.reshape(n, H, P, N)
 
 
+class StatePassing(torch.autograd.Function):
+    """Step 3 as a scan over the chunks, S_{k+1} = d_k S_k + s_k (d_k = exp(T_k)), with its own backward.
+
+    One multiply-add per chunk on the (b, H, P, N) states, in the states' layout: no (c+1)×(c+1) matrix
+    of decays (O(c²) work, and at long lengths full of subnormal numbers, slow on a CPU) and no
+    layout copies. Backward, with G_k = dL/dS_k: G_c = dL/dS_final, G_k = dL/dS_in[k] + d_k G_{k+1},
+    then ds_k = G_{k+1}, dd_k = Σ_{P,N} G_{k+1} ⊙ S_k, dS_0 = G_0.
+    Layouts: s (b, c, H, P, N), d (b, c, H), h0 (b, H, P, N) -> S_in (b, c, H, P, N), final (b, H, P, N).
+    """
+
+    @staticmethod
+    def forward(ctx, s, d, h0):
+        b, c = s.shape[:2]
+        states = s.new_empty(b, c + 1, *s.shape[2:])
+        states[:, 0].copy_(h0)
+        for k in range(c):
+            torch.addcmul(s[:, k], states[:, k], d[:, k, :, None, None], out=states[:, k + 1])
+        ctx.save_for_backward(states, d)
+        return states[:, :c], states[:, c]
+
+    @staticmethod
+    def backward(ctx, g_in, g_final):
+        states, d = ctx.saved_tensors
+        c = d.shape[1]
+        G = torch.empty_like(states)
+        if g_final is None:
+            G[:, c].zero_()
+        else:
+            G[:, c].copy_(g_final)
+        for k in range(c - 1, -1, -1):
+            if g_in is None:
+                torch.mul(G[:, k + 1], d[:, k, :, None, None], out=G[:, k])
+            else:
+                torch.addcmul(g_in[:, k], G[:, k + 1], d[:, k, :, None, None], out=G[:, k])
+        dd = torch.linalg.vecdot(G[:, 1:].flatten(3), states[:, :c].flatten(3))  # (b, c, H)
+        return G[:, 1:], dd, G[:, 0]
+
+
 def pass_states(
     s: torch.Tensor, totals: torch.Tensor, initial_state: torch.Tensor | None
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Step 3: the states entering every chunk, S_{k+1} = exp(T_k) S_k + s_k.
+    """Step 3: the states entering every chunk, S_{k+1} = exp(T_k) S_k + s_k (:class:`StatePassing`).
 
     Args:
         s: (b, c, H, P, N) chunk states from zero.
@@ -58,14 +92,8 @@ def pass_states(
     Returns:
         (S_in (b, c, H, P, N) the state entering each chunk, final state (b, H, P, N)).
     """
-    b, c, H, P, N = s.shape
-    h0 = torch.zeros_like(s[:, :1]) if initial_state is None else initial_state.to(s.dtype)[:, None]
-    states = rearrange(torch.cat([h0, s], dim=1), "b k h p n -> b h k (p n)")  # (b, H, c+1, P*N)
-    log_decay = F.pad(rearrange(totals, "b c h -> b h c"), (1, 0))  # (b, H, c+1)
-    # M_kj = exp(T_j + ... + T_{k-1}) for j ≤ k: entry k collects every earlier chunk state.
-    out = torch.matmul(torch.exp(segsum_stable(log_decay)).to(states.dtype), states)  # (b, H, c+1, P*N)
-    out = rearrange(out, "b h k (p n) -> b k h p n", p=P)
-    return out[:, :c], out[:, c]
+    h0 = s.new_zeros(s.shape[0], *s.shape[2:]) if initial_state is None else initial_state.to(s.dtype)
+    return StatePassing.apply(s, torch.exp(totals).to(s.dtype), h0)
 
 
 def state_output(S_in: torch.Tensor, cs: torch.Tensor, C: torch.Tensor) -> torch.Tensor:
