@@ -111,14 +111,14 @@ def mixer_step(
     delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)
     xh = x.to(ct).view(b, h, p)
     decay = torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))  # exp(Δ A), (B, H)
+    xd = xh * delta[:, :, None]  # Δ x, (B, H, P)
     if torch.compiler.is_compiling():
-        y = _state_update_pointwise(ssm_state, decay, xh * delta[:, :, None], B.to(ct), C.to(ct), g)
+        y = _state_update_pointwise(ssm_state, decay, xd, B.to(ct), C.to(ct), g)
     else:
         ssm_state.mul_(decay[:, :, None, None])
         # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
         state = ssm_state.view(b * g, (h // g) * p, n)
-        xd = (xh * delta[:, :, None]).view(b * g, -1, 1)
-        state.baddbmm_(xd, B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
+        state.baddbmm_(xd.view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
         y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
     D = mixer.skip_weight().to(ct)  # (H,) or (H, P)
     y = torch.addcmul(y, xh, D[:, None] if D.dim() == 1 else D)
