@@ -47,6 +47,27 @@ def test_compiled_ssd_equals_the_float64_recurrence():
     torch.testing.assert_close(got.double(), ref, rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.slow  # inductor compiles C++
+def test_compiled_chunked_ssd_trains_like_eager():
+    """Under torch.compile the chunked form's ChunkScan runs eagerly (a graph break around it): outputs,
+    final state and every gradient equal the eager ones."""
+    from skeleton_mamba.ssd.chunked import ssd_chunked
+
+    torch._dynamo.reset()
+    inp = _ssd_inputs(L=40)  # 5 chunks of 8
+    results = []
+    for fn in (ssd_chunked, torch.compile(ssd_chunked)):
+        leaves = {k: v.clone().requires_grad_(True) for k, v in inp.items()}
+        y, final = fn(**leaves, chunk_size=8, return_final_state=True)
+        (y.square().sum() + final.sum()).backward()
+        results.append((y.detach(), final.detach(), {k: v.grad for k, v in leaves.items()}))
+    (y0, f0, g0), (y1, f1, g1) = results
+    torch.testing.assert_close(y1, y0, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(f1, f0, rtol=1e-5, atol=1e-5)
+    for k in inp:
+        torch.testing.assert_close(g1[k], g0[k], rtol=1e-4, atol=1e-4, msg=lambda m, k=k: f"grad {k}: {m}")
+
+
 @pytest.mark.slow  # compiling even a one-block EMM takes about a minute on 2 CPU cores
 def test_compiled_emm_denoiser_equals_eager():
     from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig

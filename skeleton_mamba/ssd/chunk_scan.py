@@ -1,0 +1,164 @@
+"""The chunked SSD's three steps as one function with a hand-written backward ([Mamba-2] SSD, chunked form).
+
+Per chunk k of length Q and head h of B/C group g: cs is the inclusive cumulative sum of a = Δ·A inside
+the chunk and T_k = cs_{Q-1} its total. As in :mod:`~skeleton_mamba.ssd.intra_chunk`, cs = hi + lo with
+hi its rounding to the compute dtype, r = exp(lo), c = exp(-lo), and Xd = c ⊙ Δ ⊙ X (Q×P). Then
+
+1. the chunk's state from zero:   s_k = Be Xd,   Be = (exp(T_k - hi) ⊙ B)ᵀ                      (N×P)
+2. the states entering chunks:    S_0 = h0,  S_{k+1} = exp(T_k) S_k + s_k  (a scan over the chunks)
+3. the outputs:                   Y' = W Xd + Ce S_k,   W = E ∘ C Bᵀ,  E_ij = exp(hi_i - hi_j) (i ≥ j),
+                                  Ce = exp(hi) ⊙ C,     Y = r ⊙ Y' + D ⊙ X
+
+which is Y_q = Σ_{j≤q} exp(cs_q - cs_j) (C_q·B_j) Δ_j X_j + exp(cs_q) C_q S_k + D X_q and
+s_k = Σ_j exp(T_k - cs_j) Δ_j X_j ⊗ B_j: the chunked form of ``mamba_ssm/modules/ssd_minimal.py``, with
+the float64 decays entering the compute dtype only through r and c. The states are kept as N×P (the
+transpose of the usual P×N), so steps 1 and 3 are batched products of the layouts their factors already
+have: no separate scaling passes for the states or their outputs, no layout copies, and the gradients of
+both steps flow into one dXd. Decay factors below the compute dtype's
+smallest normal number are set to zero (:func:`decay_factor`): they change no result at that size and
+subnormal operands make CPU arithmetic many times slower.
+
+Backward, with dY' = r ⊙ dY and G_k = dL/dS_k (the scan run backwards from G_c = dL/dS_final):
+
+    dS_in = Ceᵀ dY',   ds_k = G_{k+1} = dS_in[k+1] + exp(T_{k+1}) G_{k+2},   dh0 = G_0,
+    dXd = Wᵀ dY' + Beᵀ ds,   dW = (dY' Xdᵀ) ∘ E,   dCe = dY' S_kᵀ,   dBe = ds Xdᵀ,
+    dC = Σ_heads (dW B + exp(hi) ⊙ dCe),   dB = Σ_heads (dWᵀ C + (exp(T - hi) ⊙ dBe)ᵀ),
+    dX = c Δ ⊙ dXd + D ⊙ dY,   dΔ = c ⊙ Σ_p X ⊙ dXd,   dD = Σ X ⊙ dY,
+    dcs_q = Σ_p dY'_qp Y'_qp - Σ_p Xd_qp dXd_qp,   and on the last position also
+    dT_k = Σ G_{k+1} ⊙ S_{k+1}
+
+(every factor exp(±cs) is its own derivative, so the sums over Q×Q and N×P entries reduce to sums over P;
+dT_k collects both s_k's dependence on T_k and that of the decay exp(T_k) of step 2).
+
+Memory: the Q×Q and N×Q factors of all chunks are kept for the backward (with Q = P = N, about eight
+tensors the size of X); unlike the quadratic form's :func:`~skeleton_mamba.ssd.intra_chunk.intra_chunk`
+nothing is tiled, the sizes grow linearly with the length.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from skeleton_mamba.ssd.intra_chunk import split_cumsum
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask
+from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
+
+
+def _sum_over_group_heads(t: torch.Tensor, groups: int) -> torch.Tensor:
+    """(n, H, ...) -> (n, G, ...): the sum over the H // G heads of every B/C group."""
+    n, H = t.shape[:2]
+    if H == groups:
+        return t
+    return t.view(n, groups, H // groups, *t.shape[2:]).sum(2)
+
+
+class ChunkScan(torch.autograd.Function):
+    """See the module docstring. Layouts: x (n, Q, H, P) for n = b·c chunks (sequence-major), delta
+    (n, Q, H), cs (n, H, Q) (float64 or x's dtype), B, C (n, Q, G, N), D (H, P) or None, h0 (b, H, N, P)
+    -> y (n, Q, H, P), final state (b, H, N, P)."""
+
+    @staticmethod
+    def forward(ctx, x, delta, cs, B, C, D, h0):
+        n, Q, H, P = x.shape
+        G, N = B.shape[2], B.shape[3]
+        R, b = H // G, h0.shape[0]
+        c = n // b
+        hi, row, col = split_cumsum(cs, x.dtype)  # (n, H, Q)
+        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col  # Δ_j c_j
+        xd = torch.mul(x.transpose(1, 2), wcol[..., None], out=x.new_empty(n, H, Q, P))
+        total = cs[..., -1:]  # (n, H, 1) in cs's dtype
+        e = decay_factor(total - hi.to(cs.dtype), x.dtype)  # (n, H, Q)
+        Be = torch.mul(e.view(n, G, R, 1, Q), B.permute(0, 2, 3, 1)[:, :, None],
+                       out=x.new_empty(n, G, R, N, Q)).reshape(n, H, N, Q)
+        d = decay_factor(total.reshape(b, c, H), x.dtype)
+        S_in, final = scan_states(torch.matmul(Be, xd).view(b, c, H, N, P), d, h0)
+        E = decay_mask(hi, bias=causal_bias(Q, x.dtype, x.device))  # (n, H, Q, Q)
+        CB = torch.matmul(C.transpose(1, 2), B.permute(0, 2, 3, 1))  # (n, G, Q, Q), shared by R heads
+        W = torch.mul(E.view(n, G, R, Q, Q), CB[:, :, None]).view(n, H, Q, Q)
+        f = decay_factor(hi, x.dtype)
+        Ce = torch.mul(f.view(n, G, R, Q, 1), C.transpose(1, 2)[:, :, None]).view(n, H, Q, N)
+        y_in = torch.matmul(W, xd)  # (n, H, Q, P)
+        y_in.view(n * H, Q, P).baddbmm_(Ce.reshape(n * H, Q, N), S_in.reshape(n * H, N, P))
+        y = torch.empty_like(x)
+        if row is None:
+            y.copy_(y_in.transpose(1, 2))
+        else:
+            torch.mul(y_in.transpose(1, 2), row.transpose(1, 2)[..., None], out=y)
+        if D is not None:
+            y.addcmul_(x, D)
+        ctx.cs_dtype = cs.dtype
+        ctx.save_for_backward(x, delta, row, col, B, C, D, xd, y_in, E, W, Be, Ce, e, f, d, S_in, final)
+        return y, final
+
+    @staticmethod
+    def backward(ctx, dy, dfinal):
+        x, delta, row, col, B, C, D, xd, y_in, E, W, Be, Ce, e, f, d, S_in, final = ctx.saved_tensors
+        n, Q, H, P = x.shape
+        G, N = B.shape[2], B.shape[3]
+        b, c = d.shape[:2]
+        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col
+        dys = x.new_empty(n, H, Q, P)
+        if row is None:
+            dys.copy_(dy.transpose(1, 2))
+        else:
+            torch.mul(dy.transpose(1, 2), row[..., None], out=dys)
+        S_flat = S_in.reshape(n, H, N, P)
+        ds, dh0 = scan_states_backward(torch.matmul(Ce.transpose(-1, -2), dys).view(b, c, H, N, P), d, dfinal)
+        ds_flat = ds.reshape(n, H, N, P)
+        dxd = torch.matmul(W.transpose(-1, -2), dys)  # (n, H, Q, P)
+        dxd.view(n * H, Q, P).baddbmm_(Be.reshape(n * H, N, Q).transpose(-1, -2), ds.reshape(n * H, N, P))
+        # W, Ce and Be are not needed any more: their gradients take their storage.
+        dW = torch.matmul(dys, xd.transpose(-1, -2), out=W).mul_(E)
+        dCe = torch.matmul(dys, S_flat.transpose(-1, -2), out=Ce).mul_(f[..., None])
+        dBe = torch.matmul(ds_flat, xd.transpose(-1, -2), out=Be).mul_(e[:, :, None])
+        dCB, dCe, dBe = (_sum_over_group_heads(t, G) for t in (dW, dCe, dBe))
+        dC_t = torch.matmul(dCB, B.transpose(1, 2)).add_(dCe)  # (n, G, Q, N)
+        dB_t = torch.matmul(dCB.transpose(-1, -2), C.transpose(1, 2)).add_(dBe.transpose(-1, -2))
+        u = torch.linalg.vecdot(x.transpose(1, 2), dxd)  # (n, H, Q): Σ_p X dXd
+        ddelta = u if col is None else u * col
+        dcs = torch.einsum("nhqp,nhqp->nhq", dys, y_in).sub_(u * wcol)  # Σ_p dY' Y' - Σ_p Xd dXd
+        dT = x.new_empty(b, c, H)  # Σ G_{k+1} ⊙ S_{k+1}, S_c the final state
+        dT[:, : c - 1] = torch.linalg.vecdot(ds[:, : c - 1].flatten(3), S_in[:, 1:].flatten(3))
+        dT[:, c - 1] = torch.linalg.vecdot(ds[:, c - 1].flatten(2), final.flatten(2))
+        dcs[..., -1] += dT.view(n, H)
+        dx = torch.mul(dxd.transpose(1, 2), wcol.transpose(1, 2)[..., None], out=torch.empty_like(x))
+        if D is not None:
+            dx.addcmul_(dy, D)
+        dD = None
+        if D is not None and ctx.needs_input_grad[5]:
+            dD = torch.linalg.vecdot(dy.flatten(0, 1), x.flatten(0, 1), dim=0)
+        return (dx, ddelta.transpose(1, 2), dcs.to(ctx.cs_dtype), dB_t.transpose(1, 2), dC_t.transpose(1, 2),
+                dD, dh0)
+
+
+@torch.compiler.disable(reason="ChunkScan runs eagerly (its hand-written backward was faster than inductor)")
+def chunk_scan(
+    x: torch.Tensor,
+    delta: torch.Tensor,
+    cs: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    D: torch.Tensor | None,
+    h0: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """SSD outputs and final state of b sequences of c chunks each, in x's dtype.
+
+    Args:
+        x: (n, Q, H, P) inputs, n = b·c chunks, those of one sequence consecutive.
+        delta: (n, Q, H) step sizes Δ.
+        cs: (n, H, Q) inclusive cumulative sums of a = Δ·A inside each chunk, float64 (or x's dtype,
+            then the decays carry the rounding error of cs; see intra_chunk.py).
+        B, C: (n, Q, G, N); head h reads group h // (H // G).
+        D: (H, P) skip weights or ``None``.
+        h0: (b, H, N, P) the state entering each sequence (N×P, the transpose of ``ssd``'s states).
+
+    Returns:
+        y (n, Q, H, P), final state (b, H, N, P). Under ``torch.compile`` this runs eagerly (a graph
+        break): written out as differentiable operations for inductor to fuse, with the scan as an opaque
+        operator, the same computation ran slower (forward + backward at ``bench_ssd.py``'s T = 4800:
+        201 ms, against 188 ms with this function in the compiled graph).
+    """
+    dt = x.dtype
+    cs = cs.contiguous() if cs.dtype == torch.float64 else cs.to(dt).contiguous()
+    x, delta, B, C, D, h0 = (t if t is None else t.to(dt).contiguous() for t in (x, delta, B, C, D, h0))
+    return ChunkScan.apply(x, delta, cs, B, C, D, h0)
