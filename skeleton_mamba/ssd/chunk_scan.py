@@ -14,9 +14,9 @@ s_k = Σ_j exp(T_k - cs_j) Δ_j X_j ⊗ B_j: the chunked form of ``mamba_ssm/mod
 the float64 decays entering the compute dtype only through r and c. The states are kept as N×P (the
 transpose of the usual P×N), so steps 1 and 3 are batched products of the layouts their factors already
 have: no separate scaling passes for the states or their outputs, no layout copies, and the gradients of
-both steps flow into one dXd. Decay factors below the compute dtype's
-smallest normal number are set to zero (:func:`decay_factor`): they change no result at that size and
-subnormal operands make CPU arithmetic many times slower.
+both steps flow into one dXd. Decay factors below the compute dtype's smallest normal number (1.2e-38 in
+fp32) are set to zero (:func:`decay_factor`): the terms they scale lie far below the rounding of any output
+of ordinary size, and subnormal operands make CPU arithmetic many times slower.
 
 Backward, with dY' = r ⊙ dY and G_k = dL/dS_k (the scan run backwards from G_c = dL/dS_final):
 
