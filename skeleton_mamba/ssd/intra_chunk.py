@@ -174,7 +174,7 @@ def intra_chunk(
             the rounding error of cs, see the module docstring).
         B, C: (n, Q, G, N); head h reads group h // (H // G).
         D: (H, P) skip weights or ``None``.
-        y_off: (n, Q, H, P) extra term (the contribution of the entering state) or ``None``.
+        y_off: (n, Q, H, P) extra term (the contribution of the earlier blocks) or ``None``.
 
     Returns:
         y (n, Q, H, P) = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + y_off + D ⊙ x, all in x's dtype.
