@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import torch
 
-from skeleton_mamba.ssd.intra_chunk import split_cumsum
+from skeleton_mamba.ssd.intra_chunk import column_weights, compute_inputs, split_cumsum
 from skeleton_mamba.ssd.segsum import causal_bias, decay_mask
 from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
 
@@ -64,7 +64,7 @@ class ChunkScan(torch.autograd.Function):
         R, b = H // G, h0.shape[0]
         c = n // b
         hi, row, col = split_cumsum(cs, x.dtype)  # (n, H, Q)
-        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col  # Δ_j c_j
+        wcol = column_weights(delta, col)  # Δ_j c_j
         xd = torch.mul(x.transpose(1, 2), wcol[..., None], out=x.new_empty(n, H, Q, P))
         total = cs[..., -1:]  # (n, H, 1) in cs's dtype
         e = decay_factor(total - hi.to(cs.dtype), x.dtype)  # (n, H, Q)
@@ -96,7 +96,7 @@ class ChunkScan(torch.autograd.Function):
         n, Q, H, P = x.shape
         G, N = B.shape[2], B.shape[3]
         b, c = d.shape[:2]
-        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col
+        wcol = column_weights(delta, col)
         dys = x.new_empty(n, H, Q, P)
         if row is None:
             dys.copy_(dy.transpose(1, 2))
@@ -158,7 +158,5 @@ def chunk_scan(
         operator, the same computation ran slower (forward + backward at ``bench_ssd.py``'s T = 4800:
         201 ms, against 188 ms with this function in the compiled graph).
     """
-    dt = x.dtype
-    cs = cs.contiguous() if cs.dtype == torch.float64 else cs.to(dt).contiguous()
-    x, delta, B, C, D, h0 = (t if t is None else t.to(dt).contiguous() for t in (x, delta, B, C, D, h0))
+    cs, (x, delta, B, C, D, h0) = compute_inputs(x.dtype, cs, x, delta, B, C, D, h0)
     return ChunkScan.apply(x, delta, cs, B, C, D, h0)

@@ -67,7 +67,7 @@ def ssd_chunked(
         final = final.transpose(-1, -2)  # (b, H, P, N)
     else:
         y = intra_chunk(xc, delta, cs.transpose(1, 2), Bc, Cc, D2)
-    y = y.reshape(b, c * Q, H, P)[:, :L].to(x.dtype)  # a view, except in some compiled layouts
+    y = y.view(b, c * Q, H, P)[:, :L].to(x.dtype)
     if not return_final_state:
         return y
     return y, final

@@ -57,6 +57,19 @@ def split_cumsum(cs: torch.Tensor, dtype: torch.dtype) -> tuple[torch.Tensor, to
     return hi, lo.exp().to(dtype), lo.neg().exp().to(dtype)
 
 
+def column_weights(delta: torch.Tensor, col: torch.Tensor | None) -> torch.Tensor:
+    """Δ_j c_j, the column factor of Xd' = c ⊙ Δ ⊙ X: (n, H, Q) from delta (n, Q, H) and c (n, H, Q)."""
+    return delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col
+
+
+def compute_inputs(
+    dtype: torch.dtype, cs: torch.Tensor, *tensors: torch.Tensor | None
+) -> tuple[torch.Tensor, list[torch.Tensor | None]]:
+    """cs contiguous in float64 (kept) or else in ``dtype``, and the tensors contiguous in ``dtype``."""
+    cs = cs.contiguous() if cs.dtype == torch.float64 else cs.to(dtype).contiguous()
+    return cs, [t if t is None else t.to(dtype).contiguous() for t in tensors]
+
+
 def _weights(hi, B, C, bias, E, CB, W):
     """Fill the tile buffers: CB = C Bᵀ (s, G, Q, Q), E = exp(hi_i - hi_j) causal (s, H, Q, Q) and
     W = E ∘ CB (s, H, Q, Q); W may be E itself (then E is overwritten)."""
@@ -77,7 +90,7 @@ class IntraChunk(torch.autograd.Function):
         n, Q, H, P = x.shape
         G = B.shape[2]
         hi, row, col = split_cumsum(cs, x.dtype)  # (n, H, Q)
-        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col  # Δ_j c_j
+        wcol = column_weights(delta, col)  # Δ_j c_j
         xd, y = x.new_empty(n, H, Q, P), torch.empty_like(x)
         y_in = torch.empty_like(xd)
         tiles = _tiles(n, H * Q * Q)
@@ -109,7 +122,7 @@ class IntraChunk(torch.autograd.Function):
         n, Q, H, P = x.shape
         G = B.shape[2]
         R = H // G
-        wcol = delta.transpose(1, 2) if col is None else delta.transpose(1, 2) * col
+        wcol = column_weights(delta, col)
         dys, dxd = torch.empty_like(xd), torch.empty_like(xd)
         dx = torch.empty_like(x)
         ddelta, dcs = x.new_empty(n, H, Q), x.new_empty(n, H, Q)
@@ -179,7 +192,5 @@ def intra_chunk(
     Returns:
         y (n, Q, H, P) = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + y_off + D ⊙ x, all in x's dtype.
     """
-    dt = x.dtype
-    cs = cs.contiguous() if cs.dtype == torch.float64 else cs.to(dt).contiguous()
-    args = [t.to(dt).contiguous() if t is not None else None for t in (x, delta, B, C, D, y_off)]
-    return IntraChunk.apply(args[0], args[1], cs, *args[2:])
+    cs, (x, delta, B, C, D, y_off) = compute_inputs(x.dtype, cs, x, delta, B, C, D, y_off)
+    return IntraChunk.apply(x, delta, cs, B, C, D, y_off)

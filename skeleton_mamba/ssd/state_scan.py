@@ -58,5 +58,3 @@ def scan_states_backward(
     for k in range(c - 1, 0, -1):
         torch.addcmul(dS_in[:, k], ds[:, k], d[:, k, :, None, None], out=ds[:, k - 1])
     return ds, torch.addcmul(dS_in[:, 0], ds[:, 0], d[:, 0, :, None, None])
-
-
