@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 
-__all__ = ["backbone_config", "config_from", "plain_backbone_config", "with_flat_fields"]
+__all__ = ["backbone_config", "config_from", "plain_backbone_config"]
 
 
 def backbone_config(value: SkeletonMambaConfig | Mapping | None) -> SkeletonMambaConfig:
@@ -59,15 +59,3 @@ def config_from(cls: type, value: object | Mapping | None):
         for name, v in dict(value).items()
     }
     return cls(**fields)
-
-
-def with_flat_fields(config, flat: Mapping, renames: Mapping[str, str] | None = None):
-    """``config`` with fields replaced by flat keyword arguments (checkpoints saved before the config existed
-    hold its fields as flat hyperparameters; ``renames`` maps their old names to the fields')."""
-    renames = renames or {}
-    values = {renames.get(k, k): v for k, v in flat.items()}
-    unknown = sorted(set(values) - {f.name for f in dataclasses.fields(config)})
-    if unknown:
-        name = type(config).__name__
-        raise TypeError(f"unexpected keyword arguments {', '.join(unknown)}: not fields of {name}")
-    return dataclasses.replace(config, **values) if values else config

@@ -77,7 +77,7 @@ def test_sampling_options_check_override_and_describe():
     assert SamplingOptions.from_hparams(hparams) == SamplingOptions("ddim", 7, 1.0, 2.0)
 
 
-def test_cli_sampling_arguments_and_the_old_steps_ddpm():
+def test_cli_sampling_arguments():
     import argparse
 
     from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
@@ -88,9 +88,10 @@ def test_cli_sampling_arguments_and_the_old_steps_ddpm():
     assert options.override(**sampling_overrides(parser.parse_args([]))) == options
     args = parser.parse_args(["--sampler", "ddpm", "--eta", "0", "--guidance", "1.5"])
     assert options.override(**sampling_overrides(args)) == SamplingOptions("ddpm", 50, 0.0, 1.5)
-    with pytest.warns(FutureWarning, match="--sampler ddpm"):
-        old = sampling_overrides(parser.parse_args(["--steps", "ddpm"]))
-    assert options.override(**old) == SamplingOptions("ddpm", 50, 1.0, 2.0)
+    args = parser.parse_args(["--steps", "7"])  # a step count alone selects DDIM
+    assert options.override(**sampling_overrides(args)) == SamplingOptions("ddim", 7, 1.0, 2.0)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--steps", "ddpm"])
     with pytest.raises(SystemExit):
         parser.parse_args(["--steps", "0"])
 
@@ -279,78 +280,15 @@ def _save(module, hparams: dict, path) -> None:
     )
 
 
-@pytest.mark.parametrize(("old_steps", "sampler"), [(None, "ddpm"), (3, "ddim")])
-def test_old_text2motion_checkpoint_loads_and_samples_as_before(
-    old_steps, sampler, text2motion_module_class, tmp_path
-):
-    """A checkpoint written before ``sampler`` existed: ``num_steps``; ``sampling_steps`` None (DDPM) or a
-    number (DDIM with that many steps, whatever the new default sampler is)."""
-    from skeleton_mamba.tasks.checkpoints import load_module
-
-    torch.manual_seed(0)
-    new = text2motion_module_class(
-        backbone=TINY, diffusion_steps=10, sampler=sampler, sampling_steps=3
-    ).eval()
-    old_hparams = {k: v for k, v in new.hparams.items() if k not in ("diffusion_steps", "sampler", "eta")}
-    old_hparams.update(num_steps=10, sampling_steps=old_steps)
-    _save(new, old_hparams, tmp_path / "old.ckpt")
-    with pytest.warns(FutureWarning, match="num_steps is deprecated"):
-        loaded = load_module(text2motion_module_class, tmp_path / "old.ckpt").eval()
-    assert loaded.hparams.diffusion_steps == 10 and "num_steps" not in loaded.hparams
-    assert loaded.sampling.describe() == new.sampling.describe()  # DDPM: no step count
-    captions, lengths = ["a person walks"], [6]
-    expected = new.generate(captions, lengths, torch.Generator().manual_seed(1))[0]
-    torch.testing.assert_close(
-        loaded.generate(captions, lengths, torch.Generator().manual_seed(1))[0], expected
-    )
-
-
-def test_old_text2motion_checkpoint_through_ckpt_path(text2motion_module_class, tmp_path, monkeypatch):
-    """``sm test --ckpt_path OLD.ckpt``: LightningCLI parses the old hyper-parameters over the new recipe."""
-    from lightning.pytorch import LightningDataModule, LightningModule
-
-    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI
-
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
-    module = text2motion_module_class(backbone=TINY, diffusion_steps=1000)
-    old = {k: v for k, v in module.hparams.items() if k not in ("diffusion_steps", "sampler", "eta")}
-    old.update(
-        num_steps=1000,
-        sampling_steps=7,
-        _class_path="skeleton_mamba.tasks.text2motion.module.TextToMotionModule",
-        _instantiator="lightning.pytorch.cli.instantiate_module",
-    )
-    _save(module, old, tmp_path / "old.ckpt")
-    args = ["test", "--recipe", "humanml3d_demo.yaml", "--ckpt_path", str(tmp_path / "old.ckpt")]
-    args += ["--trainer.logger", "false", "--trainer.callbacks", "[]"]
-    args += ["--trainer.enable_progress_bar", "false"]
-    args += ["--trainer.limit_test_batches", "1", "--model.evaluation.repetitions", "0"]
-    args += ["--data.val_clips", "2"]
-    with pytest.warns(FutureWarning, match="num_steps is deprecated"):
-        cli = SkeletonMambaCLI(LightningModule, LightningDataModule, subclass_mode_model=True,
-                               subclass_mode_data=True, args=args)  # fmt: skip
-    assert cli.model.sampling == SamplingOptions("ddim", 7, 0.0, 2.5)
-    assert cli.model.hparams.diffusion_steps == 1000 and "num_steps" not in cli.model.hparams
-
-
-def test_old_text2motion_spellings_in_recipes(text2motion_module_class):
-    with pytest.warns(FutureWarning, match="sampler: ddpm"):
-        module = text2motion_module_class(
-            backbone=TINY, diffusion_steps=10, sampler="ddim", sampling_steps=None
-        )
-    assert module.sampling == SamplingOptions("ddpm", 50, 0.0, 2.5)
-    with pytest.warns(FutureWarning, match="eval_sampling_steps: -1"):
+def test_text2motion_sampling_arguments_are_checked(text2motion_module_class):
+    with pytest.raises(ValueError, match="sampling_steps must be an integer"):
+        text2motion_module_class(backbone=TINY, diffusion_steps=10, sampling_steps=None)
+    with pytest.raises(ValueError, match="sampling_steps must be >= 1"):
         text2motion_module_class(backbone=TINY, diffusion_steps=10, eval_sampling_steps=-1)
     with pytest.raises(ValueError, match="sampler"):
         text2motion_module_class(backbone=TINY, sampler="dpm")
     with pytest.raises(ValueError, match="sampler"):
         text2motion_module_class(backbone=TINY, eval_sampler="dpm")
-    from skeleton_mamba.tasks.text2motion.demo import TextToMotionDemo
-
-    with pytest.warns(FutureWarning, match="sampling_steps -1"):
-        demo = TextToMotionDemo(sampling_steps=-1)
-    assert demo.sampling_steps is None
 
 
 def test_old_egodance_checkpoint_without_eta_loads(tiny_egodance_module, tmp_path):

@@ -2,24 +2,17 @@
 
 ``--sampler ddim|ddpm``, ``--steps N`` (DDIM steps; alone it selects DDIM), ``--eta`` and ``--guidance``
 override the checkpoint's :class:`~.sampling.SamplingOptions` (:meth:`~.sampling.SamplingOptions.override`).
-``--steps ddpm`` is the deprecated spelling of ``--sampler ddpm``.
 """
 
 from __future__ import annotations
 
 import argparse
-import warnings
 
 from skeleton_mamba.tasks.diffusion.sampling import SAMPLERS
 
 __all__ = ["add_sampling_arguments", "sampling_overrides"]
 
-_DDPM_STEPS = "ddpm"
-
-
-def _steps(text: str) -> int | str:
-    if text == _DDPM_STEPS:
-        return text
+def _steps(text: str) -> int:
     try:
         steps = int(text)
     except ValueError:
@@ -43,8 +36,4 @@ def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
 
 def sampling_overrides(args: argparse.Namespace) -> dict:
     """The keyword arguments of :meth:`~.sampling.SamplingOptions.override` that ``args`` gives."""
-    sampler, steps = args.sampler, args.steps
-    if steps == _DDPM_STEPS:
-        warnings.warn("--steps ddpm is deprecated; use --sampler ddpm", FutureWarning, stacklevel=2)
-        sampler, steps = sampler or "ddpm", None
-    return dict(sampler=sampler, sampling_steps=steps, eta=args.eta, guidance_weight=args.guidance)
+    return dict(sampler=args.sampler, sampling_steps=args.steps, eta=args.eta, guidance_weight=args.guidance)

@@ -111,12 +111,6 @@ class MusicEncoder(nn.Module):
         self.feature_mean.copy_(mean)
         self.feature_std.copy_(std)
 
-    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
-        # checkpoints from before the standardisation: the identity statistics, i.e. the same outputs
-        state_dict.setdefault(prefix + "feature_mean", torch.zeros_like(self.feature_mean))
-        state_dict.setdefault(prefix + "feature_std", torch.ones_like(self.feature_std))
-        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
-
     def forward(self, music: torch.Tensor) -> torch.Tensor:
         h = self.proj((music - self.feature_mean.to(music.dtype)) / self.feature_std.to(music.dtype))
         pos = sinusoidal_embedding(torch.arange(music.shape[1], device=music.device), h.shape[-1])

@@ -126,13 +126,6 @@ class EMM(nn.Module):
         self.frame_condition = nn.Linear(context_dim, d) if c.frame_condition else None
         self.skip_x0 = SkipX0(diffusion_steps, channels=(NUM_JOINTS, NUM_CHANNELS))
 
-    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
-        # a checkpoint from before frame_condition: zero weights add nothing, i.e. the network it trained
-        if self.frame_condition is not None:
-            for name, p in self.frame_condition.named_parameters():
-                state_dict.setdefault(f"{prefix}frame_condition.{name}", torch.zeros_like(p))
-        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
-
     def set_data_statistics(self, motion: torch.Tensor, music: torch.Tensor | None = None) -> None:
         """Per-channel mean and standard deviation of training motion tokens (N, T, 24, 10) (the
         preconditioning) and of their music features (N, T, L) (the music encoder's standardisation)."""

@@ -26,7 +26,6 @@ provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on)
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 import torch
 from lightning.pytorch import LightningModule
@@ -36,7 +35,7 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchmetrics import MeanMetric
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config, with_flat_fields
+from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config
 from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
@@ -57,10 +56,6 @@ __all__ = ["EgoDanceModule", "HEAD_SOURCES"]
 
 HEAD_SOURCES = {"estimate": "estimated_head", "oracle": "oracle_head", "none": "unguided"}
 """Head-guidance sources and the name their test metrics are logged under (``test/<name>/...``)."""
-
-
-FLAT_NETWORK_RENAMES = {"encoder_dropout": "dropout"}
-"""Flat hyperparameters of checkpoints saved before :class:`~.model.EMMConfig`, renamed as its fields."""
 
 
 def _music_cache_dir(module: LightningModule) -> str | None:
@@ -102,8 +97,6 @@ class EgoDanceModule(BackboneModule):
         seed: seed of the evaluation noise.
         protocol: dance-evaluation protocol of the test loop: ``"edge"`` (default), ``"bailando"`` or
             ``"fact"`` (see the module docstring).
-        **flat_network: :class:`~.model.EMMConfig` fields given one by one, as checkpoints saved before
-            ``network`` existed hold them (``encoder_dropout`` is its ``dropout``); they override ``network``.
     """
 
     def __init__(
@@ -139,13 +132,9 @@ class EgoDanceModule(BackboneModule):
         test_oracle_head: bool = True,
         seed: int = 0,
         protocol: str = "edge",
-        **flat_network: Any,
     ) -> None:
         super().__init__()
         network = config_from(EMMConfig, network)
-        if flat_network:  # a checkpoint from before `network` existed also predates frame_condition
-            network = dataclasses.replace(network, frame_condition=False)
-        network = with_flat_fields(network, flat_network, FLAT_NETWORK_RENAMES)
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         if head_source not in HEAD_SOURCES:
@@ -158,7 +147,7 @@ class EgoDanceModule(BackboneModule):
             )
         SamplingOptions(sampler, sampling_steps, eta, guidance_weight)  # checks them
         estimator_config = config_from(HeadEstimatorConfig, head_estimator)
-        ignore = ("network", "head_estimator", *flat_network)
+        ignore = ("network", "head_estimator")
         config = self.save_backbone_hyperparameters(backbone, ignore=ignore)
         self.hparams["network"] = plain_backbone_config(network)
         self.hparams["head_estimator"] = plain_backbone_config(estimator_config)

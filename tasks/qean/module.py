@@ -23,7 +23,6 @@ mp4 with the music.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -31,7 +30,7 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config, with_flat_fields
+from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config
 from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
@@ -73,8 +72,6 @@ class QEANModule(BackboneModule):
         render: also render an mp4 at predict time.
         protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, [QEAN]'s), ``"bailando"``
             or ``"edge"`` (see :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`).
-        **flat_network: :class:`~.model.QEANConfig` fields given one by one, as checkpoints saved before
-            ``network`` existed hold them; they override ``network``.
     """
 
     def __init__(
@@ -89,13 +86,12 @@ class QEANModule(BackboneModule):
         output_dir: str = "qean_predictions",
         render: bool = True,
         protocol: str = "fact",
-        **flat_network: Any,
     ) -> None:
         super().__init__()
-        network = with_flat_fields(config_from(QEANConfig, network), flat_network)
+        network = config_from(QEANConfig, network)
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
-        ignore = ("network", *flat_network)
+        ignore = ("network",)
         backbone_cfg = self.save_backbone_hyperparameters(backbone, ignore=ignore, optional=True)
         self.hparams["network"] = plain_backbone_config(network)
         self.lr_milestones = [90_000, 150_000] if lr_milestones is None else list(lr_milestones)

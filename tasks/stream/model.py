@@ -135,14 +135,3 @@ class StreamDancer(nn.Module):
         :meth:`~skeleton_mamba.SkeletonMamba.compile_step`).
         """
         return (backbone_step or self.backbone.step)(self._inputs(prev, music), state)
-
-    @torch.inference_mode()
-    def rollout(self, music: torch.Tensor) -> torch.Tensor:
-        """Dance to a whole feature sequence (B, T, music_dim), frame by frame -> (B, T, 24, 12)."""
-        state = self.init_state(music.shape[0])
-        prev = music.new_zeros(music.shape[0], 24, POSE_CHANNELS)
-        poses = []
-        for t in range(music.shape[1]):
-            prev, state = self.step(prev, music[:, t], state)
-            poses.append(prev)
-        return torch.stack(poses, dim=1)

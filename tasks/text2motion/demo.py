@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import warnings
 from pathlib import Path
 
 import torch
@@ -44,8 +43,7 @@ class TextToMotionDemo(Callback):
         out_subdir: folder under the trainer's log dir (``runs/<name>/version_N``).
         render: ``"mp4"``, ``"gif"`` or ``None`` (no video).
         sampler: ``"ddim"`` or ``"ddpm"`` (``None``: the module's).
-        sampling_steps: DDIM steps (``None``: the module's; a number alone selects DDIM; -1 is the
-            deprecated spelling of ``None``).
+        sampling_steps: DDIM steps (``None``: the module's; a number alone selects DDIM).
         seed: noise seed.
         score_captions: held-out captions (of the data module's val split) to score (0: no scores).
         score_samples: motions generated per scored caption (at least 2).
@@ -63,9 +61,6 @@ class TextToMotionDemo(Callback):
         score_samples: int = 2,
         sampler: str | None = None,
     ) -> None:
-        if sampling_steps == -1:
-            warnings.warn("TextToMotionDemo: sampling_steps -1 is deprecated, use null", FutureWarning, 2)
-            sampling_steps = None
         self.prompts = list(prompts or ["a person waves both arms up and down."])
         self.frames = parse_length(length)
         if render not in (None, "mp4", "gif"):

@@ -26,7 +26,6 @@ command line.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -57,30 +56,6 @@ DEFAULT_SAMPLING_STEPS = 50  # DDIM steps when none is given
 STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
 
 
-def _legacy_sampling(
-    num_steps: int | None, diffusion_steps: int, sampler: str, sampling_steps: int | None
-) -> tuple[int, str, int]:
-    """``(diffusion_steps, sampler, sampling_steps)`` with the old spellings (``num_steps``;
-    ``sampling_steps`` ``None`` for DDPM, a number for DDIM) mapped, and a warning naming the new ones."""
-    if num_steps is not None:
-        warnings.warn(
-            "TextToMotionModule: num_steps is deprecated, use diffusion_steps (and sampler: ddim | ddpm with "
-            "sampling_steps for DDIM's steps); with num_steps, sampling_steps keeps its old meaning "
-            f"(sampling_steps={sampling_steps}: {'DDPM' if sampling_steps is None else 'DDIM'})",
-            FutureWarning,
-            stacklevel=3,
-        )
-        diffusion_steps, sampler = num_steps, "ddpm" if sampling_steps is None else "ddim"
-    elif sampling_steps is None:
-        warnings.warn(
-            "TextToMotionModule: sampling_steps: null for DDPM is deprecated, use sampler: ddpm",
-            FutureWarning,
-            stacklevel=3,
-        )
-        sampler = "ddpm"
-    return diffusion_steps, sampler, DEFAULT_SAMPLING_STEPS if sampling_steps is None else sampling_steps
-
-
 class TextToMotionModule(BackboneModule):
     """Skeleton Mamba text-to-motion diffusion.
 
@@ -93,7 +68,7 @@ class TextToMotionModule(BackboneModule):
         cond_drop_prob: probability of dropping the caption in training (0.1).
         guidance_weight: classifier-free guidance scale s at sampling (2.5).
         sampler: ``ddpm`` (all T steps, MDM) or ``ddim`` at sampling.
-        sampling_steps: DDIM steps (``None``: deprecated spelling of ``sampler: ddpm``).
+        sampling_steps: DDIM steps.
         eta: DDIM noise (0: deterministic).
         lr: AdamW learning rate (1e-4).
         weight_decay: AdamW weight decay (0).
@@ -101,10 +76,7 @@ class TextToMotionModule(BackboneModule):
             sizes, MDM's by default, ``repetitions: 0`` reports the test loss only; the evaluator's files).
         eval_sampler: the evaluation's sampler (``None``: the module's ``sampler``).
         eval_sampling_steps: the evaluation's DDIM steps (``None``: the module's; a number alone selects
-            DDIM; -1 is the deprecated spelling of ``None``).
-        num_steps: deprecated spelling of ``diffusion_steps``; with it, ``sampling_steps`` keeps its old
-            meaning (a number: DDIM with that many steps; ``None``: DDPM) whatever ``sampler`` says, so
-            checkpoints and recipes written before ``sampler`` existed sample as they did.
+            DDIM).
     """
 
     def __init__(
@@ -117,22 +89,15 @@ class TextToMotionModule(BackboneModule):
         cond_drop_prob: float = 0.1,
         guidance_weight: float = 2.5,
         sampler: str = "ddpm",
-        sampling_steps: int | None = DEFAULT_SAMPLING_STEPS,
+        sampling_steps: int = DEFAULT_SAMPLING_STEPS,
         eta: float = 0.0,
         lr: float = 1e-4,
         weight_decay: float = 0.0,
         evaluation: T2MEvalConfig | None = None,
         eval_sampler: str | None = None,
         eval_sampling_steps: int | None = None,
-        num_steps: int | None = None,
     ) -> None:
         super().__init__()
-        diffusion_steps, sampler, sampling_steps = _legacy_sampling(
-            num_steps, diffusion_steps, sampler, sampling_steps
-        )
-        if eval_sampling_steps == -1:
-            warnings.warn("eval_sampling_steps: -1 is deprecated, use null (the module's)", FutureWarning, 2)
-            eval_sampling_steps = None
         SamplingOptions(sampler, sampling_steps, eta, guidance_weight).override(
             eval_sampler, eval_sampling_steps
         )  # checks both

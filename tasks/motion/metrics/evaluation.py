@@ -67,13 +67,6 @@ class DanceEvaluation(nn.Module):
         self.counts[side] += len(clips)
         return clips
 
-    def add_real_features(self, kinetic: torch.Tensor, geometric: torch.Tensor) -> None:
-        """Add precomputed real-set features ``(N, 72)`` and ``(N, 32)`` (already sliced by the protocol)."""
-        for name, features in (("kinetic", kinetic), ("geometric", geometric)):
-            self.fid[name].update_features(features, real=True)
-            self.div[name].update_features(features, real=True)
-        self.counts["real"] += len(kinetic)
-
     def compute(self) -> dict[str, float]:
         """The metrics; FID and Div only when each set holds at least 2 clips (in this process)."""
         out: dict[str, float] = {}
