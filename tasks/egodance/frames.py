@@ -5,8 +5,8 @@ One function, used wherever frames change size (the data set, ``sm dance``, :cla
 
 - Bilinear, with antialiasing when shrinking (PyTorch's ``interpolate(antialias=True)``, the PIL-style
   triangle filter whose support grows with the scale factor). kornia's ``resize(antialias=True)`` blurs
-  with a Gaussian by grouped 1-D convolutions first, which oneDNN runs slowly on the CPU: 600 frames of
-  64 px to 32 px took 291 ms with kornia and 11.6 ms with PyTorch's filter (2-core Xeon, torch 2.13).
+  with a Gaussian by grouped 1-D convolutions first, which oneDNN runs an order of magnitude slower on the
+  CPU.
 - The result is in the standard, contiguous (N, 3, H, W) layout. Decoded video permuted from (H, W, 3)
   is channels-last in memory, and on torch 2.13's CPU build oneDNN's convolution backward on such input
   corrupted the heap ("double free or corruption" while training the vision encoder).

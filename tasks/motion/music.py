@@ -24,8 +24,8 @@ onto half or double the tempo) is a separate, labelled value, :attr:`MusicAnalys
 68 BPM track has tempo 68 and dance-range tempo 136. Audio with fewer than two beats has no tempo, and
 :attr:`MusicAnalysis.tempo_note` says why (silent, too short, no steady beat).
 
-pyproject.toml requires ``librosa>=0.10.2``, the first version whose features and beats match the later ones
-(the comparison is in ``benchmarks/README.md``); the cache key holds the version.
+pyproject.toml requires ``librosa>=0.10.2``, the first version whose features and beats match the later ones;
+the cache key holds the version.
 
 Features are cached on disk (:mod:`~skeleton_mamba.tasks.motion.cache`) keyed by the audio file's content
 and every setting; tempo and beats are re-derived from the cached beat column, so hits and misses agree.

@@ -147,7 +147,7 @@ def facing_angle(joints: torch.Tensor, smooth_sigma: float = 20.0) -> torch.Tens
     ``l_hip, r_hip, sdr_r, sdr_l``, so its across vector is ``(p1 - p2) + (p17 - p16)`` (left-minus-right
     hips plus right-minus-left shoulders); ``forward = Y x across``, smoothed over time by a Gaussian
     (sigma 20 frames, ``mode='nearest'``, ``smooth_forward=True``). The real sample's root rotation
-    velocities match this definition (tests/test_humanml3d.py), not the anatomical one.
+    velocities match this definition, not the anatomical one.
 
     Args:
         joints: (T, 22, 3) y-up positions.

@@ -2,7 +2,7 @@
 
 Embree is called directly (``EmbreeScene.run(..., output=1)``), which returns, per ray, the triangle,
 the ray parameter and the barycentric coordinates of the first hit in one pass, faster than trimesh's
-embree-backed queries (``benchmarks/README.md``, EgoAIST++ builder).
+embree-backed queries.
 The directions are NOT normalised: the ray parameter ``t`` of a hit is in units of the direction, so
 camera rays with unit z give the z-depth directly, and a segment ``a -> b`` cast as ``(a, b - a)`` is
 crossed when ``t <= 1``.

@@ -8,7 +8,7 @@ One ray per pixel centre (:func:`~camera.pixel_rays`); the first triangle hit gi
   ``ambient + (1 - ambient) * |n . v|`` (n the triangle normal, v the unit ray direction), the background
   colour where nothing is hit.
 
-Speed (the issue's goal: 20 frames/s at 224 x 224 on 2 cores): a :class:`Renderer` is built once per
+Speed: a :class:`Renderer` is built once per
 scene and camera intrinsics and reused for every frame. It keeps the camera-frame ray directions (unit z,
 so the hit parameter IS the z-depth) and their norms, and one float32 row per triangle (unit normal, the
 colour of corner a and the colour differences b - a, c - a, in 0-255 units). A frame is then one rotation
