@@ -9,11 +9,12 @@
   ``MonoLoader``; here librosa decodes and resamples, so a beat can move by a frame where they differ.
 - :func:`edge_slice_features`: [EDGE]'s per-slice 35-d features (EDGE data/slice.py ``slice_audio``, test.py,
   data/audio_extraction/baseline_features.py ``extract``): the track at its own sample rate is cut into 5 s
-  slices every 2.5 s (``while start <= len - window``), each slice written as a 16-bit wav and read back at
-  15,360 Hz, its features computed **on the slice alone** (so the beat tracker restarts in every slice) and
-  cut to 150 rows. ``start_bpm``: EDGE's ``_get_tempo`` reads the 5th ``_`` field of the slice name
-  (``<stem>_slice<i>``), so an AIST++ sequence name gives its music id's tempo, and anything else (e.g.
-  ``mBR0.wav``) falls back to ``librosa`` tempo of the slice loaded at 22,050 Hz, unfolded.
+  slices every 2.5 s (:func:`edge_slice_starts`: ``while start <= len - window``), each slice written as a
+  16-bit wav and read back at 15,360 Hz, its features computed **on the slice alone** (so the beat tracker
+  restarts in every slice) and cut to 150 rows. ``start_bpm``: EDGE's ``_get_tempo`` reads the 5th ``_``
+  field of the slice name (``<stem>_slice<i>``), so an AIST++ sequence name gives its music id's tempo, and
+  anything else (e.g. ``mBR0.wav``) falls back to ``librosa`` tempo of the slice loaded at 22,050 Hz,
+  unfolded.
 
 Results are cached like the 35-d features (:mod:`.cache`), keyed by file content and settings.
 """
@@ -42,6 +43,7 @@ __all__ = [
     "bailando_beats",
     "edge_slice_beats",
     "edge_slice_features",
+    "edge_slice_starts",
     "edge_start_bpm",
     "fact_beats",
 ]
@@ -81,6 +83,21 @@ def bailando_beats(
         onehot[beats] = 1.0
         cache.store(key, onehot)
     return np.flatnonzero(onehot)
+
+
+def edge_slice_starts(length: int, rate: float) -> range:
+    """[EDGE]'s slice starts (EDGE data/slice.py ``slice_audio`` / ``slice_motion``) in a ``length``-long
+    signal at ``rate`` samples (or frames) per second: window ``int(5 * rate)``, stride ``int(2.5 * rate)``,
+    starts ``0, stride, ...`` kept while ``start <= length - window``.
+
+    ``slice_audio`` applies it at the file's sample rate, ``slice_motion`` at 60 fps (and stops at the audio
+    slice count), so motion and music of the same duration give the same count, and slice ``i`` of both
+    starts ``2.5 i`` seconds in (exactly, where ``2.5 * rate`` is an integer).
+    """
+    window, stride = int(EDGE_SLICE_SECONDS * rate), int(EDGE_STRIDE_SECONDS * rate)
+    if window < 1 or stride < 1:
+        raise ValueError(f"EDGE slicing needs a rate of at least 0.4 per second, got {rate}")
+    return range(0, int(length) - window + 1, stride)
 
 
 def edge_start_bpm(slice_name: str) -> float | None:
@@ -131,9 +148,9 @@ def edge_slice_features(
     audio = audio[int(start_s * native_sr) :]
     if duration_s is not None:
         audio = audio[: int(duration_s * native_sr)]
-    window, stride = int(EDGE_SLICE_SECONDS * native_sr), int(EDGE_STRIDE_SECONDS * native_sr)
+    window = int(EDGE_SLICE_SECONDS * native_sr)
     slices = []
-    for i, start in enumerate(range(0, len(audio) - window + 1, stride)):
+    for i, start in enumerate(edge_slice_starts(len(audio), native_sr)):
         piece = audio[start : start + window]
         y = _wav16_roundtrip(piece, native_sr, EDGE_FPS * HOP_LENGTH)
         bpm = edge_start_bpm(f"{path.stem}_slice{i}")

@@ -167,10 +167,15 @@ class BailandoProtocol(DanceProtocol):
 class EDGEProtocol(DanceProtocol):
     """[EDGE] 5 s clips: EDGE data/slice.py, test.py, data/audio_extraction/baseline_features.py, eval_pfc.py.
 
-    Motion at 30 fps is cut into 150-frame clips every 75 frames (5 s every 2.5 s, EDGE's test slicing);
-    clip ``i`` is paired with audio slice ``i``, whose 35-d features are computed on the slice alone
-    (:func:`.protocol_music.edge_slice_features`). Per clip: FID / Div features, PFC (eval_pfc.py, y-up here)
-    and BeatAlign in Bailando's form against the slice's beats. EDGE ships no FID, Div or BeatAlign code
+    Motion is cut into 150-frame clips at 30 fps every 75 frames (5 s every 2.5 s, EDGE's test slicing).
+    Which clips exist is EDGE's ``slice_motion`` rule at the motion's own rate
+    (:func:`.protocol_music.edge_slice_starts`: at 60 fps, starts ``150 i`` with ``150 i + 300 <= T``),
+    not the rule on the 30 fps sequence, which has ``ceil(T / 2)`` frames and one clip more for ``T = 300 +
+    150 k - 1``; EDGE then takes every second frame of each 300-frame slice, as the 60 -> 30 fps
+    resampling does. Clip ``i`` is paired with audio slice ``i`` (as many pairs as the shorter has), whose
+    35-d features are computed on the slice alone (:func:`.protocol_music.edge_slice_features`). Per clip:
+    FID / Div features, PFC (eval_pfc.py, y-up here) and BeatAlign in Bailando's form against the slice's
+    beats. EDGE ships no FID, Div or BeatAlign code
     (Stanford-TML/EDGE#27, #46): BeatAlign here is Bailando's form (as LODGE and [EgoMusic]'s MM term use)
     with its 60 fps constants kept in seconds (sigma 1.5 frames, smoothing 2.5 frames at 30 fps), our choice.
     """
@@ -187,8 +192,23 @@ class EDGEProtocol(DanceProtocol):
 
         return edge_slice_beats(edge_slice_features(path, start_s, duration_s, cache_dir))
 
-    def clips(self, joints, beats, generated):
-        starts = range(0, len(joints) - self.clip_frames + 1, self.stride_frames)
+    def score(self, joints, fps, beats=None, generated=True):
+        """Clips of one ``(T, 24, 3)`` y-up sequence at ``fps``: as many as EDGE slices at that rate."""
+        from skeleton_mamba.tasks.motion.protocol_music import edge_slice_starts
+
+        (seq,) = as_sequences([joints], min_frames=3, joints=24)
+        count = len(edge_slice_starts(len(seq), fps))
+        if count == 0:
+            raise ValueError(
+                f"EDGE protocol: {len(seq)} frames at {fps:g} fps, a clip needs 150 frames at 30 fps (5 s)"
+            )
+        if abs(fps - self.fps) > 1e-9:
+            seq = resample_linear(seq, fps, self.fps)
+        return self.clips(seq, beats, generated, max_clips=count)
+
+    def clips(self, joints, beats, generated, max_clips=None):
+        """The clips of 30 fps ``joints``, at most ``max_clips`` (EDGE's count at the source rate)."""
+        starts = range(0, len(joints) - self.clip_frames + 1, self.stride_frames)[:max_clips]
         if not starts:
             raise ValueError(f"EDGE protocol: {len(joints)} frames at 30 fps, a clip needs 150")
         if beats is not None:
