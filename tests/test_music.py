@@ -179,7 +179,7 @@ def test_analyze_music_cli_json_and_out(tmp_path, capsys):
     assert rc == 0
     report = json.loads(capsys.readouterr().out)
     keys = {"file", "duration_s", "tempo_bpm", "dance_tempo_bpm", "dance_bpm_range", "beats_s", "fps"}
-    assert set(report) == keys | {"feature_shape"}
+    assert set(report) == keys | {"feature_shape", "audio_stack"}
     assert report["fps"] == 30 and report["duration_s"] == pytest.approx(8.0)
     assert report["tempo_bpm"] == pytest.approx(120.0, rel=0.03)
     feats = np.load(out)

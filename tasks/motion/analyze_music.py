@@ -11,6 +11,9 @@ Examples::
     sm analyze-music song.opus                    # tempo and beat times at 60 fps
     sm analyze-music song.wav --fps 30 --out f.npy  # EDGE's 30 fps features saved as (T, 35) .npy
     sm analyze-music song.mp3 --json              # one JSON object on stdout
+
+The JSON object records the audio stack (``audio_stack``: librosa, numpy, soundfile versions and the
+resampler, :func:`.music.audio_stack`): beat frames differ between librosa versions.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE
+from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack
 
 __all__ = ["main"]
 
@@ -110,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         if analysis.tempo_note:
             report["tempo_note"] = analysis.tempo_note
+        report["audio_stack"] = audio_stack()
         print(json.dumps(report))
     else:
         low, high = DANCE_BPM_RANGE

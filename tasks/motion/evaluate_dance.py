@@ -85,7 +85,8 @@ def evaluate_folders(
     """Score every motion of ``generated`` against the reference set ``real`` under ``protocol``.
 
     Returns:
-        The :meth:`.metrics.evaluation.DanceEvaluation.compute` dict plus ``protocol`` and file counts.
+        The :meth:`.metrics.evaluation.DanceEvaluation.compute` dict plus ``protocol``, file counts and
+        ``audio_stack`` (:func:`.music.audio_stack`: the versions that decide the music beats).
     """
     from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 
@@ -112,7 +113,9 @@ def evaluate_folders(
             f"{generated} / {real}: FID and Div need at least 2 clips in each set, got "
             f"{values['generated_clips']} generated and {values['real_clips']} real"
         )
-    return {"protocol": protocol, **counts, **values}
+    from skeleton_mamba.tasks.motion.music import audio_stack
+
+    return {"protocol": protocol, **counts, **values, "audio_stack": audio_stack()}
 
 
 def format_table(result: dict) -> str:

@@ -27,6 +27,9 @@ onto half or double the tempo) is a separate, labelled value, :attr:`MusicAnalys
 pyproject.toml requires ``librosa>=0.10.2``, the first version whose features and beats match the later ones;
 the cache key holds the version.
 
+Beat frames move with the audio stack (librosa version, its default resampler): :func:`audio_stack` records
+it for every result that holds beats.
+
 Features are cached on disk (:mod:`~skeleton_mamba.tasks.motion.cache`) keyed by the audio file's content
 and every setting; tempo and beats are re-derived from the cached beat column, so hits and misses agree.
 """
@@ -57,6 +60,7 @@ __all__ = [
     "ONSET_PEAK",
     "MusicAnalysis",
     "aist_start_bpm",
+    "audio_stack",
     "compute_music_features",
     "extract_music_features",
     "fold_tempo",
@@ -115,6 +119,41 @@ def tempo_from_beats(beat_frames: np.ndarray, fps: float) -> float:
         return 0.0
     slope = np.polyfit(np.arange(beats.size, dtype=np.float64), beats / fps, 1)[0]
     return float(60.0 / slope)
+
+
+_RESAMPLER_PACKAGES = {"soxr": "soxr", "kaiser": "resampy", "fft": "scipy", "scipy": "scipy",
+                       "polyphase": "scipy", "linear": "samplerate", "zero": "samplerate",
+                       "sinc": "samplerate"}  # fmt: skip
+
+
+def audio_stack() -> dict[str, str]:
+    """The installed audio stack that decides decoded samples, features and beats, for result records.
+
+    Keys: ``librosa``, ``numpy``, ``soundfile``, ``libsndfile`` (versions), ``resampler`` (librosa's
+    ``res_type``: :func:`load_audio` and EDGE's slice round trip pass none, so it is the version's default,
+    ``soxr_hq`` from librosa 0.10 on, ``kaiser_best`` (resampy) before) and ``resampler_package`` (the
+    package behind it, ``"name version"``).
+    """
+    import inspect
+    from importlib import metadata
+
+    import librosa
+    import soundfile
+
+    res_type = str(inspect.signature(librosa.resample).parameters["res_type"].default)
+    package = _RESAMPLER_PACKAGES.get(res_type.split("_")[0], "unknown")
+    try:
+        package_version = metadata.version(package)
+    except metadata.PackageNotFoundError:
+        package_version = "not installed"
+    return {
+        "librosa": librosa.__version__,
+        "numpy": np.__version__,
+        "soundfile": soundfile.__version__,
+        "libsndfile": str(soundfile.__libsndfile_version__),
+        "resampler": res_type,
+        "resampler_package": f"{package} {package_version}",
+    }
 
 
 def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
