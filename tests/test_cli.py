@@ -87,6 +87,10 @@ def test_sm_recipes_lists_each_recipe_with_its_first_comment_line(capsys):
     for name, description in listed.items():
         first = (RECIPES_DIR / name).read_text().splitlines()[0]
         assert first.startswith("# ") and description == first[2:].strip()
+        # a whole statement, not the first line of a sentence cut mid-way
+        assert description.count("(") == description.count(")"), f"{name}: unclosed '(' in {description!r}"
+        last_word = description.rstrip(".").split()[-1].lower()
+        assert not description.endswith((",", ";", ":")) and last_word not in {"the", "a", "and", "of", "for"}, name
 
 
 # --- parsing: names, paths, merge order, links ----------------------------------------------------
