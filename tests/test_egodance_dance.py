@@ -86,6 +86,24 @@ def test_sm_dance_writes_npz_bvh_and_mp4_with_music(inputs, capsys):
     assert "dance.mp4" in capsys.readouterr().out
 
 
+def test_sm_dance_says_when_the_video_is_shorter_than_the_music(inputs, capsys):
+    import imageio.v3 as iio
+
+    from skeleton_mamba.tasks.egodance.dance_cli import main
+    from skeleton_mamba.tasks.motion.motion_file import load_motion
+
+    tmp, ckpt, wav = inputs  # a 12 s track
+    short = (np.random.default_rng(1).random((150, 32, 32, 3)) * 255).astype(np.uint8)
+    iio.imwrite(tmp / "short.mp4", short, fps=30)  # 5 s
+    args = ["--ckpt", str(ckpt), "--music", str(wav), "--video", str(tmp / "short.mp4")]
+    args += ["--out", str(tmp / "short.npz"), "--steps", "2", "--no-render", "--head", "none"]
+    assert main(args) == 0
+    assert load_motion(tmp / "short.npz").poses.shape[0] == 150
+    err = capsys.readouterr().err
+    assert "warning: the video has 150 frames (5.0 s at 30 fps), the music 361 (12.0 s)" in err
+    assert "the dance covers the first 5.0 s" in err
+
+
 def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch):
     from skeleton_mamba.tasks.motion.motion_file import load_motion
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -140,6 +141,14 @@ def _conditions(
             raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
         rgb = torch.from_numpy(_read_video(Path(args.video))).permute(0, 3, 1, 2)
         n = min(len(rgb), len(music))
+        if abs(len(rgb) - len(music)) > 1:  # one frame of rounding between the two lengths is no news
+            video_s, music_s = len(rgb) / fps, len(music) / fps
+            print(
+                f"sm dance: warning: the video has {len(rgb)} frames ({video_s:.1f} s at {fps:g} fps), the "
+                f"music {len(music)} ({music_s:.1f} s); the dance covers the first {n / fps:.1f} s, where "
+                "both are (pass a video as long as the music for the whole track)",
+                file=sys.stderr,
+            )
         music = music[:n]
         frames = resize_frames(rgb[:n].float() / 255.0, size)
     return music, frames, None
