@@ -15,6 +15,7 @@ import sys
 import librosa
 import numpy as np
 import pytest
+import soundfile as sf
 import torch
 
 from skeleton_mamba.tasks.motion.motion_file import load_motion
@@ -177,6 +178,34 @@ def test_sm_stream_explains_missing_inputs(checkpoint, tmp_path, capsys):
     assert "none.wav: music file not found" in capsys.readouterr().err
     assert main(["--ckpt", str(checkpoint), "--out", str(tmp_path)]) == 2
     assert "--music" in capsys.readouterr().err
+
+
+def test_sm_stream_checks_checkpoints_like_every_command(tmp_path, capsys, tiny_egodance_module):
+    """URLs, text files and checkpoints of another task: one line each, exit 2, nothing written."""
+    import lightning
+
+    from skeleton_mamba.tasks.stream.cli import main
+
+    out = tmp_path / "out"
+    wav = tmp_path / "song.wav"
+    sf.write(wav, np.zeros(22050, dtype=np.float32), 22050)
+    base = ["--music", str(wav), "--out", str(out)]
+    assert main(["--ckpt", "https://example.org/last.ckpt", *base]) == 2
+    assert "remote checkpoints are refused" in capsys.readouterr().err
+    text = tmp_path / "notes.ckpt"
+    text.write_text("not a checkpoint")
+    assert main(["--ckpt", str(text), *base]) == 2
+    assert "notes.ckpt: not a plain-data checkpoint, refused" in capsys.readouterr().err
+    module = tiny_egodance_module()
+    hparams = {**module.hparams, "_class_path": "skeleton_mamba.tasks.egodance.module.EgoDanceModule"}
+    ego = tmp_path / "emm.ckpt"
+    state = {"state_dict": module.state_dict(), "hyper_parameters": hparams}
+    torch.save({**state, "pytorch-lightning_version": lightning.__version__}, ego)
+    assert main(["--ckpt", str(ego), *base]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "holds a skeleton_mamba.tasks.egodance.module.EgoDanceModule, not a StreamDanceModule" in err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_training_features_are_what_the_live_stream_computes(tmp_path):

@@ -92,9 +92,10 @@ def realtime_hint(latency: dict[str, float], compiled: bool, fps: int) -> str | 
 
 
 def _load_dancer(ckpt: str):
+    from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.stream.module import StreamDanceModule
 
-    return StreamDanceModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).model.eval()
+    return load_module(StreamDanceModule, ckpt).model.eval()
 
 
 def stream_dance(args: argparse.Namespace) -> int:
@@ -187,9 +188,16 @@ def stream_dance(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from skeleton_mamba.tasks.checkpoints import check_checkpoint_path
+
     args = build_parser().parse_args(argv)
-    if not Path(args.ckpt).is_file():
+    try:
+        check_checkpoint_path(args.ckpt)  # a URL is refused, a missing file named, before any work
+    except FileNotFoundError:
         print(f"sm stream: checkpoint {args.ckpt} not found", file=sys.stderr)
+        return 2
+    except (OSError, ValueError) as err:
+        print(f"sm stream: checkpoint {args.ckpt}: {err}", file=sys.stderr)
         return 2
     if args.threads:
         import torch

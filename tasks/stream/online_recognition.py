@@ -104,6 +104,7 @@ def _plot(prob: np.ndarray, names: list[str], path: Path) -> None:
 
 def stream_recognition(args: argparse.Namespace) -> int:
     """``sm stream --task recognition`` (see the module docstring)."""
+    from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
     from skeleton_mamba.tasks.stream.cli import announce_compile, report_compile
 
@@ -112,7 +113,7 @@ def stream_recognition(args: argparse.Namespace) -> int:
         return 2
     path = Path(args.skeleton)
     keypoints = _load_keypoints(path)
-    module = ActionRecognitionModule.load_from_checkpoint(args.ckpt, map_location="cpu", weights_only=True)
+    module = load_module(ActionRecognitionModule, args.ckpt)
     model = module.model
     m, t, j, c = keypoints.shape
     expected = (model.backbone.skeleton.num_joints, model.backbone.config.in_channels)
