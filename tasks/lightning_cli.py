@@ -23,17 +23,17 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import inspect
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import lightning.pytorch as pl
 from lightning.pytorch import LightningDataModule, LightningModule
-from lightning.pytorch.cli import LightningArgumentParser, LightningCLI, _InstantiatorFn
+from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCLI
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.checkpoints import load_checkpoint
+from skeleton_mamba.tasks.lightning_compat import install_accepted_links
 from skeleton_mamba.tasks.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
 from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty, resume_in_run_folder
@@ -81,26 +81,6 @@ def import_task_modules() -> list[str]:
     return imported
 
 
-class _AcceptedLinksInstantiator(_InstantiatorFn):
-    """Lightning's model instantiator, recording only the linked values the model accepts.
-
-    Lightning stores every applied data-to-model link in the checkpoint's hyper-parameters and parses them
-    back on ``--ckpt_path``; a link the model has no argument for (``batch_size`` on a module without one)
-    would then break ``sm test/predict --ckpt_path``. Lightning has no public hook for this, so the class
-    builds on its private ``_InstantiatorFn`` and ``_add_instantiators``: pyproject bounds lightning below 2.7
-    and ``tests/test_qean_sm.py`` (``sm predict --ckpt_path`` of a module without ``batch_size``) guards it.
-    """
-
-    def __call__(self, class_type, *args, applied_instantiation_links: dict, **kwargs):
-        accepted = inspect.signature(class_type).parameters
-        links = {
-            key: value
-            for key, value in applied_instantiation_links.items()
-            if not key.startswith("model.init_args.") or key.split(".")[2] in accepted
-        }
-        return super().__call__(class_type, *args, applied_instantiation_links=links, **kwargs)
-
-
 class SkeletonMambaCLI(LightningCLI):
     """LightningCLI with ``--recipe`` and the data-to-model links of :data:`DATA_TO_MODEL_LINKS`."""
 
@@ -124,15 +104,41 @@ class SkeletonMambaCLI(LightningCLI):
         for source, target in DATA_TO_MODEL_LINKS:
             parser.link_arguments(f"data.{source}", f"model.init_args.{target}", apply_on="instantiate")
 
-    def _add_instantiators(self) -> None:
-        """Lightning's instantiators, with the model's filtered by :class:`_AcceptedLinksInstantiator`."""
-        super()._add_instantiators()
-        self.parser.add_instantiator(
-            _AcceptedLinksInstantiator(cli=self, key="model"),
-            self.model_class or LightningModule,
-            subclasses=self.subclass_mode_model,
-            prepend=True,
-        )
+    def parse_arguments(self, parser: LightningArgumentParser, args: ArgsType) -> None:
+        """Parse, then check ``--ckpt_path`` before Lightning reads it (:mod:`.checkpoints`).
+
+        ``last`` becomes the last checkpoint of the latest run of this recipe; the file must be local and
+        load with ``weights_only=True``, and the class paths in its hyper-parameters must be the project's,
+        all before Lightning parses them (which imports the classes they name). ``sm fit`` resumes in the
+        checkpoint's own run folder (:func:`~skeleton_mamba.tasks.run_folders.resume_in_run_folder`). The
+        trainer method's ``weights_only`` is set to True, so that Lightning's own load of the checkpoint is
+        restricted too.
+        """
+        super().parse_arguments(parser, args)
+        subcommand = self.config.get("subcommand")
+        config = self.config.get(subcommand) if subcommand else None
+        if config is None:
+            return
+        if "weights_only" in config:  # the Trainer method's argument (Lightning >= 2.6)
+            config.weights_only = True
+        ckpt_path = config.get("ckpt_path")
+        if ckpt_path is not None:
+            if str(ckpt_path) == "last":
+                ckpt_path = str(find_last_checkpoint(config.trainer))
+                config.ckpt_path = ckpt_path
+            load_checkpoint(ckpt_path)
+            if subcommand == "fit":
+                resume_in_run_folder(config.trainer, Path(ckpt_path))
+
+    def before_instantiate_classes(self) -> None:
+        """Lightning's model instantiator, given only the linked values the model accepts.
+
+        Lightning stores every applied data-to-model link in the checkpoint's hyper-parameters and parses
+        them back on ``--ckpt_path``; a link the model has no argument for (``batch_size`` on a module
+        without one) would then break ``sm test|predict --ckpt_path``
+        (:mod:`skeleton_mamba.tasks.lightning_compat`).
+        """
+        install_accepted_links(self)
 
     def instantiate_trainer(self, **kwargs) -> pl.Trainer:
         """The trainer, with every logger's version fixed before any of them creates its folder.
@@ -143,7 +149,7 @@ class SkeletonMambaCLI(LightningCLI):
         recorded so that a run stopping before it wrote anything leaves none behind. The progress bar shows
         the epoch total (:mod:`skeleton_mamba.tasks.progress_bar`) unless the recipe configures its own.
         """
-        config = {**self._get(self.config_init, "trainer", default={}), **kwargs}
+        config = {**_subcommand_config(self.config_init, self.subcommand).get("trainer", {}), **kwargs}
         kwargs["callbacks"] = with_default_progress_bar(
             config.get("callbacks"), config.get("enable_progress_bar")
         )
@@ -159,32 +165,10 @@ class SkeletonMambaCLI(LightningCLI):
             ]
         return trainer
 
-    def _parse_ckpt_path(self) -> None:
-        """Check ``--ckpt_path`` before Lightning reads it (:mod:`skeleton_mamba.tasks.checkpoints`).
 
-        ``last`` becomes the last checkpoint of the latest run of this recipe; the file must be local and
-        load with ``weights_only=True``, and the class paths in its hyper-parameters must be the project's,
-        all before Lightning parses them (which imports the classes they name). ``sm fit`` resumes in the
-        checkpoint's own run folder (:func:`~skeleton_mamba.tasks.run_folders.resume_in_run_folder`).
-        """
-        subcommand = self.config.get("subcommand")
-        config = self.config.get(subcommand) if subcommand else None
-        ckpt_path = config.get("ckpt_path") if config is not None else None
-        if ckpt_path is not None:
-            if str(ckpt_path) == "last":
-                ckpt_path = str(find_last_checkpoint(config.trainer))
-                config.ckpt_path = ckpt_path
-            load_checkpoint(ckpt_path)
-            if subcommand == "fit":
-                resume_in_run_folder(config.trainer, Path(ckpt_path))
-        super()._parse_ckpt_path()
-
-    def _prepare_subcommand_kwargs(self, subcommand: str) -> dict:
-        """The trainer method's arguments, with Lightning's own checkpoint load forced to ``weights_only``."""
-        kwargs = super()._prepare_subcommand_kwargs(subcommand)
-        if "weights_only" in inspect.signature(getattr(self.trainer, subcommand)).parameters:
-            kwargs["weights_only"] = True
-        return kwargs
+def _subcommand_config(config, subcommand: str | None):
+    """The part of a parsed (or instantiated) config for ``subcommand``; all of it without one."""
+    return config.get(str(subcommand), config) if subcommand is not None else config
 
 
 def run(argv: Sequence[str] | None = None) -> int:

@@ -263,3 +263,27 @@ def test_overlay_of_a_local_recipe_by_relative_path_and_base_errors(tmp_path, ca
             sm_main(["fit", "--recipe", str(tmp_path / name), "--print_config"])
         err = capsys.readouterr().err
         assert message in err and name in err
+
+
+def test_the_trainer_method_gets_weights_only_true(tmp_path, monkeypatch):
+    """Lightning's own load of ``--ckpt_path`` is restricted to weights (``weights_only=True``)."""
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+
+    received: dict = {}
+
+    class RecordingCLI(SkeletonMambaCLI):
+        def before_fit(self) -> None:  # LightningCLI's hook: the trainer method is looked up after it
+            self.trainer.fit = lambda **kwargs: received.update(kwargs)
+
+    import_task_modules()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["sm"])  # the arguments are passed as args=
+    args = ["fit", "--recipe", "recognition_synthetic.yaml", "--trainer.logger", "false"]
+    RecordingCLI(
+        LightningModule, LightningDataModule, subclass_mode_model=True, subclass_mode_data=True, args=args,
+        save_config_callback=None,
+    )  # fmt: skip
+    assert received["weights_only"] is True and received["ckpt_path"] is None
+    assert isinstance(received["model"], LightningModule)

@@ -1,0 +1,80 @@
+"""The project's only use of Lightning internals, for one thing Lightning has no public hook for.
+
+LightningCLI writes every applied data-to-model link (``parser.link_arguments(..., apply_on="instantiate")``)
+into the model's hyper-parameters, which the checkpoint stores and ``--ckpt_path`` parses back. jsonargparse
+reports a link as applied even when the chosen model class has no such argument (it skips setting the value,
+but lists it), so a ``batch_size`` link to a module without ``batch_size`` lands in the checkpoint and breaks
+``sm test|predict --ckpt_path``; a nested target (``network.seed_frames``) on a module without ``network``
+fails already at instantiation. LightningCLI builds those hyper-parameters in its private ``_InstantiatorFn``
+and offers no hook to filter the links it receives, so :class:`AcceptedLinksInstantiator` subclasses it.
+Everything else the project needs from LightningCLI goes through its documented hooks
+(:mod:`skeleton_mamba.tasks.lightning_cli`).
+
+:data:`CHECKED_LIGHTNING` names the releases this was read against; importing this module on a Lightning
+without ``_InstantiatorFn`` raises an :class:`ImportError` saying so, rather than running without the filter.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import lightning.pytorch as pl
+from lightning.pytorch import LightningModule
+from lightning.pytorch.cli import LightningCLI
+
+__all__ = ["CHECKED_LIGHTNING", "PRIVATE_NAMES", "AcceptedLinksInstantiator", "install_accepted_links"]
+
+CHECKED_LIGHTNING = ("2.5.2", "2.6.6")
+"""The first and last lightning releases whose ``_InstantiatorFn`` was read for this module (the same
+constructor ``(cli, key)`` and call ``(class_type, *args, applied_instantiation_links, **kwargs)`` throughout,
+and unchanged on Lightning's main branch of July 2026)."""
+
+PRIVATE_NAMES = ("lightning.pytorch.cli._InstantiatorFn",)
+"""The private names used here."""
+
+try:
+    # Missing public API: a LightningCLI hook that sees the applied instantiation links before Lightning's
+    # model instantiator stores them as hyper-parameters (it hands them to ``save_hyperparameters`` through a
+    # private context variable that only ``_InstantiatorFn`` sets).
+    from lightning.pytorch.cli import _InstantiatorFn
+except ImportError as err:  # pragma: no cover - only on a Lightning that removed it
+    raise ImportError(
+        f"lightning {pl.__version__} has no lightning.pytorch.cli._InstantiatorFn, which "
+        f"skeleton_mamba.tasks.lightning_compat subclasses (checked with lightning {CHECKED_LIGHTNING[0]} to "
+        f"{CHECKED_LIGHTNING[1]}): install lightning<={CHECKED_LIGHTNING[1]} or port the adapter"
+    ) from err
+
+
+class AcceptedLinksInstantiator(_InstantiatorFn):
+    """Lightning's model instantiator, given only the linked values the model class accepts.
+
+    A link ``model.init_args.<name>[.<field>]`` is kept when the class's ``__init__`` has ``<name>``; links
+    to other components (``data.*``) pass unchanged.
+    """
+
+    def __call__(self, class_type, *args, applied_instantiation_links: dict, **kwargs):
+        accepted = inspect.signature(class_type).parameters
+        prefix = f"{self.key}.init_args."
+        links = {
+            key: value
+            for key, value in applied_instantiation_links.items()
+            if not key.startswith(prefix) or key[len(prefix) :].split(".")[0] in accepted
+        }
+        return super().__call__(class_type, *args, applied_instantiation_links=links, **kwargs)
+
+
+def install_accepted_links(cli: LightningCLI) -> None:
+    """Put :class:`AcceptedLinksInstantiator` in front of Lightning's model instantiator.
+
+    Call from ``before_instantiate_classes``, which LightningCLI runs after registering its own
+    instantiators; the key ``(model class, subclass mode)`` is Lightning's, so this one replaces it.
+    ``ArgumentParser.add_instantiator`` is jsonargparse's (deprecated since 4.49 in favour of an
+    ``instantiators`` argument to ``instantiate``, which LightningCLI does not expose: its
+    ``instantiate_classes`` calls the parser itself); Lightning registers its own the same way.
+    """
+    cli.parser.add_instantiator(
+        AcceptedLinksInstantiator(cli=cli, key="model"),
+        cli.model_class or LightningModule,
+        subclasses=cli.subclass_mode_model,
+        prepend=True,
+    )

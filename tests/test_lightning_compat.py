@@ -1,0 +1,167 @@
+"""The Lightning internals the project still relies on, all in ``tasks/lightning_compat.py``.
+
+Checked against lightning 2.5.2 to 2.6.6 (``CHECKED_LIGHTNING``). These tests fail with a message naming the
+private name and that range when a Lightning release removes or changes what the adapter builds on, or when
+LightningCLI stops calling the public hook the adapter is installed from in the order it needs. Also here:
+:func:`~skeleton_mamba.tasks.base_module.attached_trainer`, the public replacement of ``module._trainer``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import sys
+
+import lightning.pytorch as pl
+import pytest
+import torch
+from lightning.pytorch import LightningDataModule, LightningModule
+from lightning.pytorch.cli import LightningCLI
+
+from skeleton_mamba.tasks import lightning_compat
+from skeleton_mamba.tasks.base_module import attached_trainer
+from skeleton_mamba.tasks.lightning_compat import CHECKED_LIGHTNING, PRIVATE_NAMES, install_accepted_links
+
+CHECKED = (
+    f"lightning {pl.__version__} installed; tasks/lightning_compat.py was checked against lightning "
+    f"{CHECKED_LIGHTNING[0]} to {CHECKED_LIGHTNING[1]}"
+)
+
+
+def test_the_private_names_the_adapter_uses_are_there():
+    import importlib
+
+    for name in PRIVATE_NAMES:
+        module_name, attr = name.rsplit(".", 1)
+        assert hasattr(importlib.import_module(module_name), attr), f"{name} is gone ({CHECKED})"
+    from lightning.pytorch.cli import _InstantiatorFn
+
+    init = list(inspect.signature(_InstantiatorFn.__init__).parameters)
+    assert init == ["self", "cli", "key"], (
+        f"_InstantiatorFn(cli, key) became _InstantiatorFn{init} ({CHECKED})"
+    )
+    call = inspect.signature(_InstantiatorFn.__call__).parameters
+    link_param = call.get("applied_instantiation_links")
+    assert link_param is not None and link_param.kind is inspect.Parameter.KEYWORD_ONLY, (
+        f"_InstantiatorFn.__call__ no longer takes applied_instantiation_links= ({CHECKED})"
+    )
+    assert issubclass(lightning_compat.AcceptedLinksInstantiator, _InstantiatorFn)
+    assert hasattr(pl.cli.LightningArgumentParser, "add_instantiator"), (
+        f"jsonargparse removed ArgumentParser.add_instantiator ({CHECKED})"
+    )
+
+
+# --- the behaviour the adapter exists for ---------------------------------------------------------
+
+
+class Data(LightningDataModule):
+    """A data module whose ``batch_size`` and ``seed_frames`` are linked to the model."""
+
+    def __init__(self, batch_size: int = 6, seed_frames: int = 12) -> None:
+        super().__init__()
+        self.batch_size, self.seed_frames = batch_size, seed_frames
+
+
+class WithoutLinkedArguments(LightningModule):
+    """A model with neither ``batch_size`` nor ``network`` (the links' targets)."""
+
+    def __init__(self, lr: float = 0.1) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.layer = torch.nn.Linear(1, 1)
+
+
+class WithLinkedArguments(LightningModule):
+    """A model taking ``batch_size`` and a ``network`` dict with ``seed_frames``."""
+
+    def __init__(self, batch_size: int = 1, network: dict | None = None, lr: float = 0.1) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.layer = torch.nn.Linear(1, 1)
+
+
+class LinkingCLI(LightningCLI):
+    """Two instantiation links, as ``sm`` links data-module values to the model."""
+
+    filter_links = True
+    nested = True
+
+    def add_arguments_to_parser(self, parser) -> None:
+        parser.link_arguments("data.batch_size", "model.init_args.batch_size", apply_on="instantiate")
+        if self.nested:
+            parser.link_arguments(
+                "data.seed_frames", "model.init_args.network.seed_frames", apply_on="instantiate"
+            )
+
+    def before_instantiate_classes(self) -> None:
+        if self.filter_links:
+            install_accepted_links(self)
+
+
+def build(model: type, cli_class: type = LinkingCLI, model_args: tuple[str, ...] = ()) -> LightningModule:
+    args = [f"--model={__name__}.{model.__name__}", *model_args, f"--data={__name__}.Data"]
+    args += ["--trainer.logger=false", "--trainer.enable_checkpointing=false"]
+    cli = cli_class(
+        LightningModule,
+        LightningDataModule,
+        subclass_mode_model=True,
+        subclass_mode_data=True,
+        run=False,
+        args=args,
+    )
+    return cli.model
+
+
+@pytest.fixture(autouse=True)
+def _cli_argv(monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["sm"])  # the arguments are passed as args=
+
+
+def test_plain_lightning_stores_links_the_model_has_no_argument_for():
+    """Why the adapter exists: without it the checkpoint's hyper-parameters name an argument the model
+    lacks. When this fails, Lightning stopped doing so and ``AcceptedLinksInstantiator`` may go."""
+
+    class PlainCLI(LinkingCLI):
+        filter_links = False
+        nested = False
+
+    class PlainNestedCLI(PlainCLI):
+        nested = True
+
+    hparams = build(WithoutLinkedArguments, PlainCLI).hparams
+    assert hparams.get("batch_size") == 6, f"Lightning no longer stores unaccepted links ({CHECKED})"
+    with pytest.raises(ValueError, match="network.seed_frames"):  # a nested link fails at instantiation
+        build(WithoutLinkedArguments, PlainNestedCLI)
+
+
+def test_the_filter_drops_the_links_the_model_lacks_and_keeps_the_others():
+    without = build(WithoutLinkedArguments).hparams
+    assert "batch_size" not in without and "network" not in without, (
+        f"the accepted-links instantiator did not take effect: LightningCLI may now register its own after "
+        f"before_instantiate_classes ({CHECKED})"
+    )
+    assert without["lr"] == 0.1
+    model = build(WithLinkedArguments, model_args=("--model.init_args.network={}",))
+    assert model.hparams["batch_size"] == 6 and model.hparams["network"] == {"seed_frames": 12}
+
+
+# --- attached_trainer: LightningModule's trainer, or None -----------------------------------------
+
+
+def test_attached_trainer_is_the_trainer_or_none():
+    module = WithoutLinkedArguments()
+    with pytest.raises(RuntimeError, match="not attached"):  # what attached_trainer turns into None
+        _ = module.trainer
+    assert attached_trainer(module) is None
+    trainer = pl.Trainer(accelerator="cpu", logger=False, enable_checkpointing=False)
+    module.trainer = trainer
+    assert attached_trainer(module) is trainer
+    module.trainer = None
+    assert attached_trainer(module) is None
+
+
+def test_attached_trainer_is_none_under_fabric():
+    from lightning.fabric import Fabric
+
+    module = WithoutLinkedArguments()
+    module.fabric = Fabric(accelerator="cpu", devices=1)
+    assert attached_trainer(module) is None  # module.trainer is Lightning's Fabric stand-in here
