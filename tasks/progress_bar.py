@@ -17,7 +17,6 @@ from datetime import timedelta
 import lightning.pytorch as pl
 from lightning.pytorch.callbacks import Callback, ProgressBar, RichProgressBar, TQDMProgressBar
 from lightning.pytorch.callbacks.timer import Timer
-from lightning.pytorch.utilities.imports import _RICH_AVAILABLE
 
 __all__ = [
     "EpochTotalRichProgressBar",
@@ -62,11 +61,32 @@ def train_description(trainer: pl.Trainer, epoch: int) -> str:
 
 
 class EpochTotalRichProgressBar(RichProgressBar):
-    """Lightning's rich progress bar with :func:`train_description`."""
+    """Lightning's rich progress bar with :func:`train_description`.
 
-    def _get_train_description(self, current_epoch: int) -> str:
-        text = train_description(self.trainer, current_epoch)
-        return f"{text:{len(self.validation_description)}}"  # as Lightning pads it (no flicker)
+    The training task's description is replaced once Lightning has created or reset it (at every epoch
+    start, and at the first batch when training resumes mid-epoch), through the bar's public ``progress``
+    (a rich ``Progress``) and ``train_progress_bar_id``.
+    """
+
+    def on_train_epoch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        super().on_train_epoch_start(trainer, pl_module)
+        self._describe_train_task(trainer)
+
+    def on_train_batch_end(self, trainer: pl.Trainer, pl_module: pl.LightningModule, *args, **kwargs) -> None:
+        created = self.train_progress_bar_id is None  # Lightning adds the task here after a mid-epoch resume
+        super().on_train_batch_end(trainer, pl_module, *args, **kwargs)
+        if created:
+            self._describe_train_task(trainer)
+
+    def _describe_train_task(self, trainer: pl.Trainer) -> None:
+        if self.is_disabled or self.progress is None or self.train_progress_bar_id is None:
+            return
+        text = train_description(trainer, trainer.current_epoch)
+        text = f"{text:{len(self.validation_description)}}"  # padded as Lightning pads it (no flicker)
+        if self.theme.description:  # styled as Lightning styles the descriptions of the tasks it adds
+            text = f"[{self.theme.description}]{text}"
+        self.progress.update(self.train_progress_bar_id, description=text)
+        self.refresh()
 
 
 class EpochTotalTQDMProgressBar(TQDMProgressBar):
@@ -79,7 +99,10 @@ class EpochTotalTQDMProgressBar(TQDMProgressBar):
 
 def default_progress_bar() -> ProgressBar:
     """The bar Lightning would pick (rich when installed, else tqdm), with epoch totals."""
-    return EpochTotalRichProgressBar() if _RICH_AVAILABLE else EpochTotalTQDMProgressBar()
+    try:
+        return EpochTotalRichProgressBar()
+    except ModuleNotFoundError:  # RichProgressBar's own check: rich missing or too old
+        return EpochTotalTQDMProgressBar()
 
 
 def with_default_progress_bar(

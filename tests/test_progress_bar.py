@@ -117,3 +117,33 @@ def test_sm_installs_the_bar_unless_the_recipe_has_one_or_turns_it_off(tmp_path,
     )
     kept = cli_trainer([*recipe, "--config", str(own)]).progress_bar_callback
     assert type(kept) is TQDMProgressBar and kept.refresh_rate == 7
+
+
+class RecreatedTask(Callback):
+    """Drops the rich bar's training task after the first batch, as a mid-epoch resume starts without one;
+    records the description of the task Lightning then creates at the batch's end."""
+
+    def __init__(self) -> None:
+        self.shown: list[str] = []
+
+    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:
+        bar = trainer.progress_bar_callback
+        if batch_idx == 1 and trainer.current_epoch == 0:
+            bar.train_progress_bar_id = None
+        if batch_idx == 2 and trainer.current_epoch == 0:
+            self.shown.append(bar.progress.tasks[bar.train_progress_bar_id].description.strip())
+
+
+def test_the_rich_bar_keeps_its_theme_and_describes_a_task_created_mid_epoch():
+    pytest.importorskip("rich")
+    from lightning.pytorch.callbacks.progress.rich_progress import RichProgressBarTheme
+
+    _, shown = fit(EpochTotalRichProgressBar(theme=RichProgressBarTheme(description="green")), max_steps=5)
+    assert shown == ["[green]Epoch 0/1", "[green]Epoch 1/1"]  # markup as Lightning's tasks get it
+    recreated = RecreatedTask()
+    trainer = pl.Trainer(
+        accelerator="cpu", callbacks=[EpochTotalRichProgressBar(), recreated], logger=False,
+        enable_checkpointing=False, enable_model_summary=False, max_steps=4,
+    )  # fmt: skip
+    trainer.fit(TinyRegression())
+    assert recreated.shown == ["Epoch 0/1"]
