@@ -478,3 +478,23 @@ def test_scene_folder_pattern_picks_replica_meshes(tmp_path):
     assert get_scene(keys[1], "y").name == "room_0"
     with pytest.raises(FileNotFoundError, match=r"\*/nothing.glb"):
         scene_keys(BuildConfig(out="o", scenes=str(tmp_path), scene_pattern="*/nothing.glb"))
+
+
+def test_stopping_the_pool_ends_its_workers_without_running_the_queued_windows():
+    """``_stop_pool`` (Ctrl-C or a failed window) terminates the running workers and cancels the queue."""
+    import multiprocessing
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    from skeleton_mamba.tasks.egodance.builder import build
+
+    others = set(multiprocessing.active_children())
+    pool = ProcessPoolExecutor(max_workers=2, mp_context=build._pool_context(), initializer=build._init_worker)
+    futures = [pool.submit(time.sleep, 60) for _ in range(6)]  # 2 running, 1 in the call queue, 3 waiting
+    workers = [p for p in multiprocessing.active_children() if p not in others]
+    assert len(workers) == 2 and all(p.is_alive() for p in workers)
+    start = time.monotonic()
+    build._stop_pool(pool, others)
+    assert time.monotonic() - start < 30  # not the 2 x 60 s of sleeping windows
+    assert not any(p.is_alive() for p in workers)
+    assert futures[-1].cancelled()

@@ -275,13 +275,18 @@ def _init_worker() -> None:
     torch.set_num_threads(1)
 
 
-def _stop_pool(pool: ProcessPoolExecutor) -> None:
-    """Cancel the queued windows and end the workers now (a window in progress leaves only a temp folder)."""
-    processes = list((pool._processes or {}).values())  # the executor has no public handle on them
+def _stop_pool(pool: ProcessPoolExecutor, others: set[multiprocessing.process.BaseProcess]) -> None:
+    """Cancel the queued windows and end the workers now (a window in progress leaves only a temp folder).
+
+    The executor has no public handle on its workers (until Python 3.14's ``terminate_workers``): they are
+    this process's children that ``multiprocessing.active_children()`` lists now and did not list when the
+    pool was made (``others``).
+    """
+    workers = [process for process in multiprocessing.active_children() if process not in others]
     pool.shutdown(wait=False, cancel_futures=True)
-    for process in processes:
+    for process in workers:
         process.terminate()
-    for process in processes:
+    for process in workers:
         process.join(timeout=5)
 
 
@@ -454,6 +459,7 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
             record(build_window(task, cfg))
             bar.update()
     else:
+        others = set(multiprocessing.active_children())
         pool = ProcessPoolExecutor(
             max_workers=min(cfg.workers, len(todo)), mp_context=_pool_context(), initializer=_init_worker
         )
@@ -463,7 +469,7 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
                 record(future.result())
                 bar.update()
         except BaseException:
-            _stop_pool(pool)  # Ctrl-C or a failed window: do not wait for the queued windows
+            _stop_pool(pool, others)  # Ctrl-C or a failed window: do not wait for the queued windows
             raise
         pool.shutdown()
     bar.close()
