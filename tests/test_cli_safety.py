@@ -136,10 +136,19 @@ def test_class_path_check_admits_the_project_and_recipe_libraries():
 
 
 @pytest.mark.parametrize("url", ["http://127.0.0.1:9/x.ckpt", "https://example.org/x.ckpt", "s3://b/x.ckpt"])
-def test_remote_checkpoints_are_refused_without_a_connection(url, capsys):
-    assert sm_main(["test", "--recipe", SYNTHETIC, "--ckpt_path", url]) == 2
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["test", "--recipe", SYNTHETIC, "--ckpt_path", "{url}"],
+        ["generate", "--text", "a person walks", "--checkpoint", "{url}", "--out", "{tmp}/out"],
+        ["stream", "--ckpt", "{url}", "--music", "x.wav", "--out", "{tmp}/out"],
+    ],
+)
+def test_remote_checkpoints_are_refused_without_a_connection(url, command, tmp_path, capsys):
+    assert sm_main([a.format(url=url, tmp=tmp_path) for a in command]) == 2
     err = capsys.readouterr().err
-    assert f"{url}: remote checkpoints are refused" in err and "Traceback" not in err
+    assert f"{url}: remote checkpoints are refused" in err and "Traceback" not in err  # the URL as given
+    assert not (tmp_path / "out").exists()
 
 
 def test_missing_and_directory_checkpoints_are_one_line_errors(tmp_path, capsys):

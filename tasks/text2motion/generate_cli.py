@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.checkpoints import check_checkpoint_path, load_module
 from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.atomic import atomic_open
@@ -106,16 +107,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
         frames = parse_length(args.length)
-        checkpoint = Path(args.checkpoint)
-        if not checkpoint.is_file():
-            raise FileNotFoundError(f"{checkpoint}: no such checkpoint")
+        checkpoint = check_checkpoint_path(args.checkpoint)  # the text as given: a URL is refused as one
+    except FileNotFoundError:
+        print(f"sm generate: error: {args.checkpoint}: no such checkpoint", file=sys.stderr)
+        return 2
     except (OSError, ValueError) as e:
         print(f"sm generate: error: {one_line_message(e)}", file=sys.stderr)
         return 2
-    from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 
-    module = load_module(TextToMotionModule, checkpoint).eval()  # checked (tasks/checkpoints.py)
+    module = load_module(TextToMotionModule, checkpoint).eval()
     captions = [c for c in args.text for _ in range(args.num)]
     features, _ = module.generate(
         captions,
