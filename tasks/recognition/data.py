@@ -4,7 +4,8 @@ One pickle (``sm prepare ntu60|ntu120|kinetics`` writes it; PYSKL's ``ntu60_3dan
 holds every sample and the named splits; the data module picks ``train_split`` / ``val_split`` /
 ``test_split`` and runs :class:`.transforms.SkeletonPipeline` per sample:
 
-- training: 1 random clip of ``clip_len`` frames, optional rotation / scaling;
+- training: 1 random clip of ``clip_len`` frames, optional PYSKL ``RandomScale`` / ``RandomRot`` (by
+  default on the whole sequence before sampling, as PYSKL's configs order them);
 - validation: ``num_clips_val`` deterministic clips; test: ``num_clips_test`` (PYSKL: 10, seed 255).
 
 A batch is ``(keypoint (B, N, M, T, V, C) float32, label (B,) int64)`` with N clips and M bodies.
@@ -66,8 +67,11 @@ class RecognitionDataModule(SplitDataModule):
         num_clips_val: clips per validation sample.
         num_clips_test: clips per test sample; their softmax scores are averaged (PYSKL: 10).
         num_person: bodies per sample (zero-padded).
-        max_angle: training rotation range in radians (0: off, as PYSKL's NTU configs).
-        scale_range: training per-axis scale range (0: off).
+        max_angle: training ``RandomRot`` range in radians (0: off, as PYSKL's ST-GCN++ configs; its
+            strong-augmentation configs use 0.3).
+        scale_range: training ``RandomScale`` per-axis range (0: off; strong augmentation: 0.1).
+        augment_before_sampling: scale / rotate the whole sequence, then sample frames (PYSKL's order);
+            False samples first (see :class:`.transforms.SkeletonPipeline`).
         batch_size: per-device batch size.
         num_workers: DataLoader worker processes.
         prepare_command: how to build ``ann_file`` (shown when it is missing).
@@ -87,6 +91,7 @@ class RecognitionDataModule(SplitDataModule):
         num_person: int = 2,
         max_angle: float = 0.0,
         scale_range: float = 0.0,
+        augment_before_sampling: bool = True,
         batch_size: int = 128,
         num_workers: int = 4,
         prepare_command: str | None = None,
@@ -103,6 +108,7 @@ class RecognitionDataModule(SplitDataModule):
         self.num_person = num_person
         self.max_angle = max_angle
         self.scale_range = scale_range
+        self.augment_before_sampling = augment_before_sampling
         self.prepare_command = prepare_command
         self._data: dict | None = None
         self.check_data()
@@ -146,7 +152,13 @@ class RecognitionDataModule(SplitDataModule):
         """The sample pipeline of ``fit`` (training), ``validate`` or ``test``/``predict``."""
         if stage == "fit":
             return SkeletonPipeline(
-                self.clip_len, 1, False, self.num_person, self.max_angle, self.scale_range
+                self.clip_len,
+                1,
+                False,
+                self.num_person,
+                self.max_angle,
+                self.scale_range,
+                augment_before_sampling=self.augment_before_sampling,
             )
         num_clips = self.num_clips["validate" if stage == "validate" else "test"]
         return SkeletonPipeline(self.clip_len, num_clips, True, self.num_person)

@@ -14,8 +14,12 @@ whose ST-GCN++ / CTR-GCN configs report NTU numbers with 10-clip testing::
 - :func:`pre_normalize_2d` = ``PreNormalize2D``: x, y scaled to [-1, 1] by the image size.
 - :func:`uniform_sample_indices` = ``UniformSampleFrames``: ``clip_len`` segments, one random frame each;
   test mode reseeds a ``RandomState(255)`` for every call, so indices match PYSKL's exactly.
-- :func:`random_rotate_scale`: PYSKL ``RandomScale`` then ``RandomRot``, draw for draw (angle signs, the 2-D
-  range); PYSKL's NTU configs do not use them, so the pipeline's defaults switch them off.
+- :func:`random_scale` = ``RandomScale`` and :func:`random_rot` = ``RandomRot``, draw for draw (angle signs,
+  the 2-D range); :func:`random_rotate_scale` composes the two and draws only for the transforms switched on.
+  PYSKL's ST-GCN++ configs use neither (the pipeline's defaults switch them off); its strong-augmentation
+  configs (``configs/strong_aug/*/j.py``: ``RandomScale(scale=0.1)``, ``RandomRot()``) and DG-STGCN configs
+  (``RandomRot``) put them after ``PreNormalize3D`` and *before* ``UniformSample``, which is the pipeline's
+  default order (``augment_before_sampling``).
 """
 
 from __future__ import annotations
@@ -30,7 +34,9 @@ __all__ = [
     "keep_bodies",
     "pre_normalize_2d",
     "pre_normalize_3d",
+    "random_rot",
     "random_rotate_scale",
+    "random_scale",
     "uniform_sample_indices",
 ]
 
@@ -195,27 +201,42 @@ def uniform_sample_indices(
     return np.mod(np.concatenate(clips), total_frames).astype(np.int64)
 
 
-def random_rotate_scale(
-    keypoint: np.ndarray,
-    rng: np.random.Generator | np.random.RandomState,
-    max_angle: float | None = 0.3,
-    scale_range: float = 0.0,
+def random_scale(
+    keypoint: np.ndarray, rng: np.random.Generator | np.random.RandomState, scale: float
 ) -> np.ndarray:
-    """Per-axis scaling then a rotation, draw for draw as [PYSKL] ``RandomScale`` + ``RandomRot``.
+    """[PYSKL] ``RandomScale(scale)``: every coordinate axis scaled by its own ``1 + U(-1, 1) * scale``.
 
-    PYSKL pyskl/datasets/pipelines/pose_related.py: the scale draws ``uniform(-1, 1, size=C)``; the
-    rotation draws nothing when every joint is (close to) zero, else for C = 3 ``theta = uniform(-max_angle,
-    max_angle, size=3)`` and ``R = Rz Ry Rx`` with PYSKL's matrices, which turn by ``-theta`` about each axis
-    (``Rotation.from_euler("xyz", -theta)``), and for C = 2 ``theta = uniform(-max_angle)``, i.e. uniform
-    on ``[-max_angle, 1)`` rad (numpy's default upper bound 1.0; PYSKL's 2-D range, kept for parity), and
-    ``R = [[cos, -sin], [sin, cos]]``. With ``np.random.RandomState(seed)`` as ``rng`` the result equals
-    PYSKL's after ``np.random.seed(seed)``.
+    Draws ``uniform(-1, 1, size=C)`` on every call, also for ``scale = 0`` (as PYSKL, whose transform draws
+    whenever it is in the pipeline); the factors do not depend on the joints.
+
+    Args:
+        keypoint: (M, T, V, C) joints.
+        rng: the random generator (a ``RandomState`` seeded like PYSKL's global ``np.random``: its draws).
+        scale: the range; each axis is scaled by a factor in [1 - scale, 1 + scale].
+
+    Returns:
+        (M, T, V, C) float32; zero joints stay zero.
+    """
+    keypoint = np.asarray(keypoint, dtype=np.float32)
+    factors = 1.0 + rng.uniform(-1.0, 1.0, size=keypoint.shape[-1]) * scale
+    return (keypoint * factors).astype(np.float32)
+
+
+def random_rot(
+    keypoint: np.ndarray, rng: np.random.Generator | np.random.RandomState, theta: float = 0.3
+) -> np.ndarray:
+    """[PYSKL] ``RandomRot(theta)``: one random rotation of the whole sample.
+
+    PYSKL pyskl/datasets/pipelines/pose_related.py: nothing is drawn when every joint is (close to) zero;
+    else for C = 3 three angles ``t = uniform(-theta, theta, size=3)`` and ``R = Rz Ry Rx`` with PYSKL's
+    matrices, which turn by ``-t`` about each axis (``Rotation.from_euler("xyz", -t)``); for C = 2 one angle
+    ``t = uniform(-theta)``, i.e. uniform on ``[-theta, 1)`` rad (numpy's default upper bound 1.0; PYSKL's
+    2-D range, kept for parity), and ``R = [[cos t, -sin t], [sin t, cos t]]``. Every joint becomes ``R x``.
 
     Args:
         keypoint: (M, T, V, C) joints, C = 3 (or 2 for image-plane skeletons).
         rng: the random generator.
-        max_angle: PYSKL's ``theta`` (radians); ``None``: no ``RandomRot`` (and no draw for it).
-        scale_range: each coordinate axis is scaled by 1 + U(-1, 1) * scale_range (0 disables).
+        theta: the angle range in radians.
 
     Returns:
         (M, T, V, C) float32; all-zero (absent) joints stay zero.
@@ -223,34 +244,77 @@ def random_rotate_scale(
     keypoint = np.asarray(keypoint, dtype=np.float32)
     c = keypoint.shape[-1]
     if c not in (2, 3):
-        raise ValueError(f"random_rotate_scale expects C = 2 or 3 coordinates, got shape {keypoint.shape}")
-    keypoint = keypoint * (1.0 + rng.uniform(-1.0, 1.0, size=c) * scale_range)
-    if max_angle is None or np.all(np.isclose(keypoint, 0)):
-        return keypoint.astype(np.float32)
+        raise ValueError(f"random_rot expects C = 2 or 3 coordinates, got shape {keypoint.shape}")
+    if np.all(np.isclose(keypoint, 0)):
+        return keypoint.copy()
     if c == 3:
-        matrix = Rotation.from_euler("xyz", -rng.uniform(-max_angle, max_angle, size=3)).as_matrix()
+        matrix = Rotation.from_euler("xyz", -rng.uniform(-theta, theta, size=3)).as_matrix()
     else:
-        theta = rng.uniform(-max_angle)
-        matrix = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        t = rng.uniform(-theta)
+        matrix = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
     return (keypoint @ matrix.T).astype(np.float32)
+
+
+def random_rotate_scale(
+    keypoint: np.ndarray,
+    rng: np.random.Generator | np.random.RandomState,
+    max_angle: float | None = 0.3,
+    scale_range: float | None = None,
+) -> np.ndarray:
+    """[PYSKL] ``RandomScale(scale_range)`` then ``RandomRot(max_angle)``, each only when switched on.
+
+    A transform that is off (``None`` or 0) is left out of the pipeline and draws nothing, so with
+    ``np.random.RandomState(seed)`` as ``rng`` the result equals PYSKL's after ``np.random.seed(seed)`` for
+    the pipeline holding just the transforms that are on: scale only, rotation only, both, or neither.
+    (PYSKL's ``RandomScale(0.0)`` / ``RandomRot(0)`` in a pipeline would still draw: call
+    :func:`random_scale` / :func:`random_rot` for those.)
+
+    Args:
+        keypoint: (M, T, V, C) joints, C = 3 (or 2 for image-plane skeletons).
+        rng: the random generator.
+        max_angle: ``RandomRot``'s ``theta`` (radians); ``None`` or 0: no rotation.
+        scale_range: ``RandomScale``'s ``scale``; ``None`` or 0: no scaling.
+
+    Returns:
+        (M, T, V, C) float32; all-zero (absent) joints stay zero.
+    """
+    keypoint = np.asarray(keypoint, dtype=np.float32)
+    if keypoint.shape[-1] not in (2, 3):
+        raise ValueError(f"random_rotate_scale expects C = 2 or 3 coordinates, got shape {keypoint.shape}")
+    if scale_range:
+        keypoint = random_scale(keypoint, rng, scale_range)
+    if max_angle:
+        keypoint = random_rot(keypoint, rng, max_angle)
+    return keypoint
 
 
 class SkeletonPipeline:
     """One annotation -> (num_clips, M, clip_len, V, C) float32 network input (PYSKL GCN pipeline).
 
-    3D (C = 3, x y z): ``pre_normalize_3d`` -> sampling -> [train: ``random_rotate_scale``] -> bodies.
+    3D (C = 3, x y z): ``pre_normalize_3d`` -> [train: ``random_rotate_scale``] -> sampling -> bodies.
     2D (``keypoint_score`` present): ``pre_normalize_2d`` with the annotation's ``img_shape`` -> score
-    appended as a third channel (x, y, score) as PYSKL ``GenSkeFeat`` does -> sampling -> bodies.
+    appended as a third channel (x, y, score) as PYSKL ``GenSkeFeat`` does -> [train: ``random_rotate_scale``
+    of x, y: PYSKL's transforms on (M, T, V, 2) keypoints, C = 2] -> sampling -> bodies. (PYSKL's own
+    ``PreNormalize2D`` merges the score into a third channel, so a PYSKL 2-D config with ``RandomRot``, of
+    which it ships none, would turn (x, y, score) as if 3-D.)
+
+    The order is PYSKL's: its configs that augment (``configs/strong_aug/*/j.py``, ``configs/dgstgcn/*/j.py``)
+    run ``RandomScale`` / ``RandomRot`` on the whole normalised sequence before ``UniformSample``, so the
+    draws come scale, rotation, then sampling, and with ``np.random.RandomState(seed)`` as ``rng`` the output
+    equals PYSKL's after ``np.random.seed(seed)``. ``augment_before_sampling=False`` samples first and
+    augments the sampled clips (the order of the 2s-AGCN / CTR-GCN feeders: sampling draws first).
 
     Args:
         clip_len: frames per clip (PYSKL GCN configs: 100).
         num_clips: clips per sample (PYSKL: 1 for training / validation, 10 for testing).
         test_mode: deterministic sampling (seeded as PYSKL) and no augmentation.
         num_person: bodies in the output (zero-padded).
-        max_angle: training rotation range in radians (0 = off, PYSKL NTU default; CTR-GCN uses 0.3).
-        scale_range: training per-axis scale range (0 = off).
+        max_angle: training ``RandomRot`` angle range in radians (0 = no ``RandomRot``, nothing drawn: PYSKL's
+            ST-GCN++ configs; strong_aug: 0.3).
+        scale_range: training ``RandomScale`` range (0 = no ``RandomScale``, nothing drawn; strong_aug: 0.1).
         img_shape: (height, width) for 2D data without ``img_shape`` in the annotation.
         seed: the test-mode sampling seed.
+        augment_before_sampling: augment the whole sequence, then sample (PYSKL); False: sample, then augment.
     """
 
     def __init__(
@@ -263,6 +327,7 @@ class SkeletonPipeline:
         scale_range: float = 0.0,
         img_shape: tuple[float, float] = (1080, 1920),
         seed: int = 255,
+        augment_before_sampling: bool = True,
     ) -> None:
         self.clip_len = clip_len
         self.num_clips = num_clips
@@ -272,8 +337,17 @@ class SkeletonPipeline:
         self.scale_range = scale_range
         self.img_shape = img_shape
         self.seed = seed
+        self.augment_before_sampling = augment_before_sampling
 
-    def __call__(self, annotation: Mapping, rng: np.random.Generator | None = None) -> np.ndarray:
+    def _augment(
+        self, keypoint: np.ndarray, xyz: int, rng: np.random.Generator | np.random.RandomState
+    ) -> None:
+        """In place: ``random_rotate_scale`` of the first ``xyz`` channels of (M, T, V, C) ``keypoint``."""
+        keypoint[..., :xyz] = random_rotate_scale(keypoint[..., :xyz], rng, self.max_angle, self.scale_range)
+
+    def __call__(
+        self, annotation: Mapping, rng: np.random.Generator | np.random.RandomState | None = None
+    ) -> np.ndarray:
         """Apply the pipeline to one annotation dict (``keypoint`` and optionally ``keypoint_score``).
 
         Args:
@@ -290,17 +364,20 @@ class SkeletonPipeline:
             xy = pre_normalize_2d(keypoint, annotation["keypoint_score"], img_shape)
             score = np.asarray(annotation["keypoint_score"], np.float32)
             keypoint = np.concatenate([xy, score[..., None]], -1)
+            xyz = 2
         else:
             keypoint = pre_normalize_3d(keypoint)
+            xyz = 3
         m, t, v, c = keypoint.shape
         if t == 0:
             raise ValueError(f"{annotation.get('frame_dir', '<sample>')}: no frame with a body to sample")
+        augment = not self.test_mode and bool(self.max_angle or self.scale_range)
+        if augment and self.augment_before_sampling:
+            self._augment(keypoint, xyz, rng)
         inds = uniform_sample_indices(t, self.clip_len, self.num_clips, self.test_mode, rng, self.seed)
         clips = keypoint[:, inds]  # (M, num_clips * clip_len, V, C)
-        if not self.test_mode and (self.max_angle or self.scale_range):
-            xyz = 2 if "keypoint_score" in annotation else c
-            angle = self.max_angle or None  # 0 = off (PYSKL's 2-D RandomRot(0) would still turn by U[0, 1))
-            clips[..., :xyz] = random_rotate_scale(clips[..., :xyz], rng, angle, self.scale_range)
+        if augment and not self.augment_before_sampling:
+            self._augment(clips, xyz, rng)
         clips = keep_bodies(clips, self.num_person)
         clips = clips.reshape(self.num_person, self.num_clips, self.clip_len, v, c).transpose(1, 0, 2, 3, 4)
         return np.ascontiguousarray(clips, dtype=np.float32)
