@@ -9,12 +9,27 @@ from __future__ import annotations
 
 import inspect
 
+import lightning.pytorch as pl
 from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
 
-__all__ = ["BackboneModule"]
+__all__ = ["BackboneModule", "attached_trainer"]
+
+
+def attached_trainer(module: LightningModule) -> pl.Trainer | None:
+    """The Trainer ``module`` runs in, or None outside one (built alone, or run by Fabric).
+
+    LightningModule has no public "is attached" check: its ``trainer`` property raises a RuntimeError when
+    no Trainer is attached, and under Fabric returns a stand-in that forwards to the Fabric object.
+    """
+    if module.fabric is not None:
+        return None
+    try:
+        return module.trainer
+    except RuntimeError:
+        return None
 
 
 class BackboneModule(LightningModule):

@@ -36,7 +36,7 @@ from torchmetrics import MeanMetric
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config
-from skeleton_mamba.tasks.base_module import BackboneModule
+from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
 from skeleton_mamba.tasks.egodance.head_estimator import (
@@ -60,7 +60,7 @@ HEAD_SOURCES = {"estimate": "estimated_head", "oracle": "oracle_head", "none": "
 
 def _music_cache_dir(module: LightningModule) -> str | None:
     """The data module's ``music_cache_dir`` when the module runs in a Trainer with one, else ``None``."""
-    datamodule = getattr(module._trainer, "datamodule", None) if module._trainer is not None else None
+    datamodule = getattr(attached_trainer(module), "datamodule", None)
     return getattr(datamodule, "hparams", {}).get("music_cache_dir")
 
 
@@ -185,7 +185,7 @@ class EgoDanceModule(BackboneModule):
     def setup(self, stage: str) -> None:
         """Fit: the denoiser's preconditioning statistics from the training windows' motion, and the music
         encoder's from their music."""
-        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        datamodule = getattr(attached_trainer(self), "datamodule", None)
         train = (getattr(datamodule, "datasets", None) or {}).get("train")
         if stage == "fit" and train is not None and len(train) > 0:
             motion = torch.stack([item["motion"] for item in train.items])

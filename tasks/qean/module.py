@@ -31,7 +31,7 @@ from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config
-from skeleton_mamba.tasks.base_module import BackboneModule
+from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
@@ -107,7 +107,7 @@ class QEANModule(BackboneModule):
         return self.model(motion, music)
 
     def setup(self, stage: str) -> None:
-        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        datamodule = getattr(attached_trainer(self), "datamodule", None)
         hparams = getattr(datamodule, "hparams", {})
         lengths = ("seed_frames", "music_frames", "predict_frames")
         ours = {key: getattr(self.model.config, key) for key in lengths}
@@ -187,7 +187,7 @@ class QEANModule(BackboneModule):
     def results_table(self, values: dict[str, float]) -> str:
         """Our test figures beside [QEAN] Table 1, headed by the protocol run and its comparability."""
         sequences, frames = self._generated_count, self.hparams.generate_frames
-        synthetic = bool(getattr(getattr(self._trainer, "datamodule", None), "synthetic", False))
+        synthetic = bool(getattr(getattr(attached_trainer(self), "datamodule", None), "synthetic", False))
         reasons = ["synthetic data in the AIST++ layout, not AIST++"] if synthetic else []
         protocol = self.hparams.get("protocol", "fact")
         if protocol != "fact":

@@ -32,7 +32,7 @@ from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.base_module import BackboneModule
+from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.early import (
     FRACTIONS,
@@ -172,8 +172,9 @@ class ActionRecognitionModule(BackboneModule):
 
     def effective_lr(self) -> float:
         """``lr * global_batch / base_batch_size`` (see the module docstring)."""
-        world = self.trainer.world_size if self._trainer is not None else 1
-        accumulate = self.trainer.accumulate_grad_batches if self._trainer is not None else 1
+        trainer = attached_trainer(self)
+        world = trainer.world_size if trainer is not None else 1
+        accumulate = trainer.accumulate_grad_batches if trainer is not None else 1
         global_batch = self.hparams.batch_size * world * accumulate
         return self.hparams.lr * global_batch / self.hparams.base_batch_size
 
