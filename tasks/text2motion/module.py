@@ -33,7 +33,7 @@ import torch
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.backbone_config import config_from
-from skeleton_mamba.tasks.base_module import BackboneModule
+from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
 from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions, sample
 from skeleton_mamba.tasks.text2motion.evaluation import T2MEvalConfig, T2MEvaluation
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
@@ -54,6 +54,15 @@ __all__ = ["TextToMotionModule"]
 
 DEFAULT_SAMPLING_STEPS = 50  # DDIM steps when none is given
 STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
+
+
+class _Unregistered:
+    """Holds a module as a plain attribute of another: ``nn.Module`` registers only attributes that are
+    modules, parameters or buffers, so the held one stays out of the owner's ``state_dict``,
+    ``parameters()``, ``to()`` and ``train()``."""
+
+    def __init__(self, module: torch.nn.Module) -> None:
+        self.module = module
 
 
 class TextToMotionModule(BackboneModule):
@@ -112,7 +121,7 @@ class TextToMotionModule(BackboneModule):
         # the new spellings (LightningCLI saves the arguments as given, old spellings included)
         self.hparams.update(diffusion_steps=diffusion_steps, sampler=sampler, sampling_steps=sampling_steps)
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
-        self.__dict__["text_encoder"] = TextEncoder(text_encoder_path, max_tokens=max_tokens)
+        self._text_encoder = _Unregistered(TextEncoder(text_encoder_path, max_tokens=max_tokens))
         self.denoiser = TextToMotionDenoiser(
             config, self.text_encoder.dim, time_channels, diffusion_steps=diffusion_steps
         )
@@ -121,7 +130,7 @@ class TextToMotionModule(BackboneModule):
         self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
 
     def setup(self, stage: str) -> None:
-        datamodule = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        datamodule = getattr(attached_trainer(self), "datamodule", None)
         if stage == "fit" and datamodule is not None and hasattr(datamodule, "statistics"):
             mean, std = datamodule.statistics()
             self.feature_mean.copy_(mean)
@@ -131,6 +140,11 @@ class TextToMotionModule(BackboneModule):
                 frames = np.concatenate([clip.features for clip in train.clips])[:STATISTICS_FRAMES]
                 features = torch.from_numpy(frames.astype(np.float32))
                 self.denoiser.set_data_statistics((features - mean.float()) / std.float())
+
+    @property
+    def text_encoder(self) -> TextEncoder:
+        """The frozen text encoder, kept outside the module's state (see the module docstring)."""
+        return self._text_encoder.module
 
     def encode_text(self, captions: list[str]) -> TextCondition:
         """Frozen text encoding on the module's device: tokens (B, S, D) and mask (B, S)."""
