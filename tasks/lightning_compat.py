@@ -10,8 +10,9 @@ and offers no hook to filter the links it receives, so :class:`AcceptedLinksInst
 Everything else the project needs from LightningCLI goes through its documented hooks
 (:mod:`skeleton_mamba.tasks.lightning_cli`).
 
-:data:`CHECKED_LIGHTNING` names the releases this was read against; importing this module on a Lightning
-without ``_InstantiatorFn`` raises an :class:`ImportError` saying so, rather than running without the filter.
+:data:`CHECKED_LIGHTNING` names the releases this was read against; importing this module on a Lightning whose
+``_InstantiatorFn`` is gone or has another signature (:func:`private_api_problems`) raises an
+:class:`ImportError` saying so, rather than running without the filter.
 """
 
 from __future__ import annotations
@@ -22,7 +23,13 @@ import lightning.pytorch as pl
 from lightning.pytorch import LightningModule
 from lightning.pytorch.cli import LightningCLI
 
-__all__ = ["CHECKED_LIGHTNING", "PRIVATE_NAMES", "AcceptedLinksInstantiator", "install_accepted_links"]
+__all__ = [
+    "CHECKED_LIGHTNING",
+    "PRIVATE_NAMES",
+    "AcceptedLinksInstantiator",
+    "install_accepted_links",
+    "private_api_problems",
+]
 
 CHECKED_LIGHTNING = ("2.5.2", "2.6.6")
 """The first and last lightning releases whose ``_InstantiatorFn`` was read for this module (the same
@@ -32,17 +39,37 @@ and unchanged on Lightning's main branch of July 2026)."""
 PRIVATE_NAMES = ("lightning.pytorch.cli._InstantiatorFn",)
 """The private names used here."""
 
+
+def _unsupported(reason: str) -> ImportError:
+    return ImportError(
+        f"lightning {pl.__version__}: {reason}; skeleton_mamba.tasks.lightning_compat builds on it "
+        f"(checked with lightning {CHECKED_LIGHTNING[0]} to {CHECKED_LIGHTNING[1]}): install "
+        f"lightning<={CHECKED_LIGHTNING[1]} or port the adapter"
+    )
+
+
 try:
     # Missing public API: a LightningCLI hook that sees the applied instantiation links before Lightning's
     # model instantiator stores them as hyper-parameters (it hands them to ``save_hyperparameters`` through a
     # private context variable that only ``_InstantiatorFn`` sets).
     from lightning.pytorch.cli import _InstantiatorFn
 except ImportError as err:  # pragma: no cover - only on a Lightning that removed it
-    raise ImportError(
-        f"lightning {pl.__version__} has no lightning.pytorch.cli._InstantiatorFn, which "
-        f"skeleton_mamba.tasks.lightning_compat subclasses (checked with lightning {CHECKED_LIGHTNING[0]} to "
-        f"{CHECKED_LIGHTNING[1]}): install lightning<={CHECKED_LIGHTNING[1]} or port the adapter"
-    ) from err
+    raise _unsupported("lightning.pytorch.cli._InstantiatorFn is gone") from err
+
+
+def private_api_problems() -> list[str]:
+    """How the installed Lightning's ``_InstantiatorFn`` differs from the one read (empty: as read)."""
+    problems = []
+    if list(inspect.signature(_InstantiatorFn.__init__).parameters) != ["self", "cli", "key"]:
+        problems.append("_InstantiatorFn(cli, key) changed its constructor")
+    link_param = inspect.signature(_InstantiatorFn.__call__).parameters.get("applied_instantiation_links")
+    if link_param is None or link_param.kind is not inspect.Parameter.KEYWORD_ONLY:
+        problems.append("_InstantiatorFn.__call__ no longer takes applied_instantiation_links=")
+    return problems
+
+
+if private_api_problems():  # pragma: no cover - only on a Lightning that changed it
+    raise _unsupported("; ".join(private_api_problems()))
 
 
 class AcceptedLinksInstantiator(_InstantiatorFn):
