@@ -1,8 +1,9 @@
 """The chunked SSD's three steps as one function with a hand-written backward ([Mamba-2] SSD, chunked form).
 
-Per chunk k of length Q and head h of B/C group g: cs is the inclusive cumulative sum of a = Δ·A inside
-the chunk and T_k = cs_{Q-1} its total. As in :mod:`~skeleton_mamba.ssd.intra_chunk`, cs = hi + lo with
-hi its rounding to the compute dtype, r = exp(lo), c = exp(-lo), and Xd = c ⊙ Δ ⊙ X (Q×P). Then
+Per chunk k of length Q and head h of B/C group g: cs is the inclusive cumulative sum (float64) of the log
+decays a = Δ·A inside the chunk and T_k = cs_{Q-1} its total. As in :mod:`~skeleton_mamba.ssd.intra_chunk`,
+cs = hi + lo with hi its rounding to the compute dtype, r = exp(lo), c = exp(-lo), and Xd = c ⊙ Δ ⊙ X
+(Q×P). Then
 
 1. the chunk's state from zero:   s_k = Be Xd,   Be = (exp(T_k - hi) ⊙ B)ᵀ                      (N×P)
 2. the states entering chunks:    S_0 = h0,  S_{k+1} = exp(T_k) S_k + s_k  (a scan over the chunks)
@@ -24,11 +25,19 @@ Backward, with dY' = r ⊙ dY and G_k = dL/dS_k (the scan run backwards from G_c
     dXd = Wᵀ dY' + Beᵀ ds,   dW = (dY' Xdᵀ) ∘ E,   dCe = dY' S_kᵀ,   dBe = ds Xdᵀ,
     dC = Σ_heads (dW B + exp(hi) ⊙ dCe),   dB = Σ_heads (dWᵀ C + (exp(T - hi) ⊙ dBe)ᵀ),
     dX = c Δ ⊙ dXd + D ⊙ dY,   dΔ = c ⊙ Σ_p X ⊙ dXd,   dD = Σ X ⊙ dY,
-    dcs_q = Σ_p dY'_qp Y'_qp - Σ_p Xd_qp dXd_qp,   and on the last position also
-    dT_k = Σ G_{k+1} ⊙ S_{k+1}
 
-(every factor exp(±cs) is its own derivative, so the sums over Q×Q and N×P entries reduce to sums over P;
-dT_k collects both s_k's dependence on T_k and that of the decay exp(T_k) of step 2).
+and the gradient of the log decays, one sum per way a_m enters (m a position of chunk k):
+
+    da_m = Σ_{i ≥ m > j} M_ij      W_ij holds a_{j+1..i};  M = dW' ∘ CB, dW' per head (decay_mask_backward)
+         + Σ_{i ≥ m} q_i           Ce_i holds cs_i = a_{0..i};  q_i = exp(hi_i) Σ_n C_in dCe_in
+         + Σ_{j < m} g_j           Be_j holds T - cs_j = a_{j+1..Q-1};  g_j = e_j Σ_n B_jn dBe_nj
+         + d_k Σ G_{k+1} ⊙ S_k     the chunk's decay exp(T_k) of step 2 holds every a_m
+
+(e_j = exp(T - hi_j); every factor exp(±cs) is its own derivative). Each term is summed over exactly
+the entries that hold a_m. Written as per-position gradients of cs followed by a cumulative sum, the row
+and column sums of M and the Be term of the last position would cancel to within their rounding, which
+under fast decay is far larger than the gradient (the fp32 gradients of A and dt would be 10² to 10³
+times less accurate than the recurrence's).
 
 Memory: the Q×Q and N×Q factors of all chunks are kept for the backward (with Q = P = N, about eight
 tensors the size of X); unlike the quadratic form's :func:`~skeleton_mamba.ssd.intra_chunk.intra_chunk`
@@ -40,7 +49,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.intra_chunk import column_weights, compute_inputs, split_cumsum
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
 from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
 
 
@@ -54,15 +63,16 @@ def _sum_over_group_heads(t: torch.Tensor, groups: int) -> torch.Tensor:
 
 class ChunkScan(torch.autograd.Function):
     """See the module docstring. Layouts: x (n, Q, H, P) for n = b·c chunks (sequence-major), delta
-    (n, Q, H), cs (n, H, Q) (float64 or x's dtype), B, C (n, Q, G, N), D (H, P) or None, h0 (b, H, N, P)
+    (n, Q, H), a (n, H, Q) (float64 or x's dtype), B, C (n, Q, G, N), D (H, P) or None, h0 (b, H, N, P)
     -> y (n, Q, H, P), final state (b, H, N, P)."""
 
     @staticmethod
-    def forward(ctx, x, delta, cs, B, C, D, h0):
+    def forward(ctx, x, delta, a, B, C, D, h0):
         n, Q, H, P = x.shape
         G, N = B.shape[2], B.shape[3]
         R, b = H // G, h0.shape[0]
         c = n // b
+        cs = a.cumsum(-1)
         hi, row, col = split_cumsum(cs, x.dtype)  # (n, H, Q)
         wcol = column_weights(delta, col)  # Δ_j c_j
         xd = torch.mul(x.transpose(1, 2), wcol[..., None], out=x.new_empty(n, H, Q, P))
@@ -86,15 +96,16 @@ class ChunkScan(torch.autograd.Function):
             torch.mul(y_in.transpose(1, 2), row.transpose(1, 2)[..., None], out=y)
         if D is not None:
             y.addcmul_(x, D)
-        ctx.cs_dtype = cs.dtype
-        ctx.save_for_backward(x, delta, row, col, B, C, D, xd, y_in, E, W, Be, Ce, e, f, d, S_in, final)
+        ctx.a_dtype = a.dtype
+        ctx.save_for_backward(x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in)
         return y, final
 
     @staticmethod
     def backward(ctx, dy, dfinal):
-        x, delta, row, col, B, C, D, xd, y_in, E, W, Be, Ce, e, f, d, S_in, final = ctx.saved_tensors
+        x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in = ctx.saved_tensors
         n, Q, H, P = x.shape
         G, N = B.shape[2], B.shape[3]
+        R = H // G
         b, c = d.shape[:2]
         wcol = column_weights(delta, col)
         dys = x.new_empty(n, H, Q, P)
@@ -111,31 +122,37 @@ class ChunkScan(torch.autograd.Function):
         dW = torch.matmul(dys, xd.transpose(-1, -2), out=W).mul_(E)
         dCe = torch.matmul(dys, S_flat.transpose(-1, -2), out=Ce).mul_(f[..., None])
         dBe = torch.matmul(ds_flat, xd.transpose(-1, -2), out=Be).mul_(e[:, :, None])
+        da = None
+        if ctx.needs_input_grad[2]:  # the terms of da (module docstring) that need dCe, dBe per head
+            Cg = C.transpose(1, 2)[:, :, None]  # (n, G, 1, Q, N)
+            Bg = B.permute(0, 2, 3, 1)[:, :, None]  # (n, G, 1, N, Q)
+            q = torch.linalg.vecdot(dCe.view(n, G, R, Q, N), Cg).view(n, H, Q)
+            g = torch.linalg.vecdot(dBe.view(n, G, R, N, Q), Bg, dim=-2).view(n, H, Q)
+            da = q.flip(-1).cumsum(-1).flip(-1)  # Σ_{i ≥ m} q_i
+            da[..., 1:] += g[..., :-1].cumsum(-1)  # Σ_{j < m} g_j
+            da += (d * torch.linalg.vecdot(ds.flatten(3), S_in.flatten(3))).view(n, H, 1)
         dCB, dCe, dBe = (_sum_over_group_heads(t, G) for t in (dW, dCe, dBe))
         dC_t = torch.matmul(dCB, B.transpose(1, 2)).add_(dCe)  # (n, G, Q, N)
         dB_t = torch.matmul(dCB.transpose(-1, -2), C.transpose(1, 2)).add_(dBe.transpose(-1, -2))
+        if da is not None:  # dCB is used: dW becomes M = W ∘ ∂L/∂W = dW ∘ CB in place
+            da += decay_mask_backward(dW.view(n, G, R, Q, Q).mul_(CB[:, :, None]).view(n, H, Q, Q))
+            da = da.to(ctx.a_dtype)
         u = torch.linalg.vecdot(x.transpose(1, 2), dxd)  # (n, H, Q): Σ_p X dXd
         ddelta = u if col is None else u * col
-        dcs = torch.einsum("nhqp,nhqp->nhq", dys, y_in).sub_(u * wcol)  # Σ_p dY' Y' - Σ_p Xd dXd
-        dT = x.new_empty(b, c, H)  # Σ G_{k+1} ⊙ S_{k+1}, S_c the final state
-        dT[:, : c - 1] = torch.linalg.vecdot(ds[:, : c - 1].flatten(3), S_in[:, 1:].flatten(3))
-        dT[:, c - 1] = torch.linalg.vecdot(ds[:, c - 1].flatten(2), final.flatten(2))
-        dcs[..., -1] += dT.view(n, H)
         dx = torch.mul(dxd.transpose(1, 2), wcol.transpose(1, 2)[..., None], out=torch.empty_like(x))
         if D is not None:
             dx.addcmul_(dy, D)
         dD = None
         if D is not None and ctx.needs_input_grad[5]:
             dD = torch.linalg.vecdot(dy.flatten(0, 1), x.flatten(0, 1), dim=0)
-        return (dx, ddelta.transpose(1, 2), dcs.to(ctx.cs_dtype), dB_t.transpose(1, 2), dC_t.transpose(1, 2),
-                dD, dh0)
+        return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2), dD, dh0)
 
 
 @torch.compiler.disable(reason="ChunkScan runs eagerly (its hand-written backward was faster than inductor)")
 def chunk_scan(
     x: torch.Tensor,
     delta: torch.Tensor,
-    cs: torch.Tensor,
+    a: torch.Tensor,
     B: torch.Tensor,
     C: torch.Tensor,
     D: torch.Tensor | None,
@@ -146,8 +163,8 @@ def chunk_scan(
     Args:
         x: (n, Q, H, P) inputs, n = b·c chunks, those of one sequence consecutive.
         delta: (n, Q, H) step sizes Δ.
-        cs: (n, H, Q) inclusive cumulative sums of a = Δ·A inside each chunk, float64 (or x's dtype,
-            then the decays carry the rounding error of cs; see intra_chunk.py).
+        a: (n, H, Q) log decays a = Δ·A, float64 (or x's dtype, then the decays carry the rounding
+            error of their cumulative sums; see intra_chunk.py).
         B, C: (n, Q, G, N); head h reads group h // (H // G).
         D: (H, P) skip weights or ``None``.
         h0: (b, H, N, P) the state entering each sequence (N×P, the transpose of ``ssd``'s states).
@@ -158,5 +175,5 @@ def chunk_scan(
         operator, the same computation ran slower (forward + backward at ``bench_ssd.py``'s T = 4800:
         201 ms, against 188 ms with this function in the compiled graph).
     """
-    cs, (x, delta, B, C, D, h0) = compute_inputs(x.dtype, cs, x, delta, B, C, D, h0)
-    return ChunkScan.apply(x, delta, cs, B, C, D, h0)
+    a, (x, delta, B, C, D, h0) = compute_inputs(x.dtype, a, x, delta, B, C, D, h0)
+    return ChunkScan.apply(x, delta, a, B, C, D, h0)

@@ -57,16 +57,16 @@ def ssd_chunked(
     n = b * c
     xc, delta = xc.reshape(n, Q, H, P), delta.reshape(n, Q, H)
     Bc, Cc = Bc.reshape(n, Q, G, N), Cc.reshape(n, Q, G, N)
-    # The log decays are summed in float64 whatever the compute dtype: an fp32 cumsum over a chunk
+    # The log decays enter in float64 whatever the compute dtype: an fp32 cumsum over a chunk
     # (|cs| in the hundreds) puts errors of ~1e-5 on exp(cs_i - cs_j); see intra_chunk.py.
-    cs = (delta.to(torch.float64) * A.to(torch.float64)).cumsum(dim=1)  # (n, Q, H) float64
+    a = (delta.to(torch.float64) * A.to(torch.float64)).transpose(1, 2)  # (n, H, Q) float64
     D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
     if c > 1 or initial_state is not None or return_final_state:
         h0 = x.new_zeros(b, H, N, P, dtype=ct) if initial_state is None else initial_state.transpose(-1, -2)
-        y, final = chunk_scan(xc, delta, cs.transpose(1, 2), Bc, Cc, D2, h0)
+        y, final = chunk_scan(xc, delta, a, Bc, Cc, D2, h0)
         final = final.transpose(-1, -2)  # (b, H, P, N)
     else:
-        y = intra_chunk(xc, delta, cs.transpose(1, 2), Bc, Cc, D2)
+        y = intra_chunk(xc, delta, a, Bc, Cc, D2)
     y = y.view(b, c * Q, H, P)[:, :L].to(x.dtype)
     if not return_final_state:
         return y

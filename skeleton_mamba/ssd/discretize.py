@@ -75,7 +75,11 @@ def discretize_dt(
     """
     delta = dt.to(dtype)
     if dt_bias is not None:
-        delta = delta + dt_bias.to(dtype)
+        # dt + dt_bias is added in float64 and rounded once, the value of the fp32 sum, so that the
+        # gradient of dt_bias, a sum over every batch entry and position, is accumulated in float64:
+        # inductor's fp32 reduction of it (torch.compile) was off by 5x the fp32 recurrence's error.
+        wide = torch.float64
+        delta = (dt.to(wide) + dt_bias.to(wide)).to(dtype)
     if dt_softplus:
         delta = F.softplus(delta)
     lo, hi = dt_limit

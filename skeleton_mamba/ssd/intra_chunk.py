@@ -4,12 +4,13 @@ For each chunk (step 1, diagonal blocks, of ``mamba_ssm/modules/ssd_minimal.py``
 
     Y = (Lmask ∘ C Bᵀ)(Δ ⊙ X) + Y_off + D ⊙ X,      Lmask_ij = exp(cs_i - cs_j) for i ≥ j, else 0,
 
-with cs the inclusive cumulative sum of a = Δ·A inside the chunk and Y_off an optional term added
-by the caller (the inter-chunk contribution). C·Bᵀ is formed once per group and shared by its heads.
+with cs the inclusive cumulative sum (in float64) of the log decays a = Δ·A inside the chunk and Y_off
+an optional term added by the caller (the inter-chunk contribution). C·Bᵀ is formed once per group and
+shared by its heads.
 
-Accuracy: ``cs`` arrives in float64. Rounding it to fp32 would put an error of u·|cs_i| (u = 2^-24)
-on every mask entry of row i — 1.5e-5 relative at |cs| = 250, more than the rest of the fp32
-computation together. So cs = hi + lo with hi = fp32(cs), and
+Accuracy: ``a`` arrives in float64, and so does its cumulative sum cs. Rounding cs to fp32 would put
+an error of u·|cs_i| (u = 2^-24) on every mask entry of row i — 1.5e-5 relative at |cs| = 250, more
+than the rest of the fp32 computation together. So cs = hi + lo with hi = fp32(cs), and
 exp(cs_i - cs_j) = exp(hi_i - hi_j) · r_i · c_j with r = exp(lo), c = exp(-lo) (|lo| ≤ u|cs|/2):
 the Q×Q mask is formed in fp32 from hi only (an fp32 difference is correctly rounded), c is folded
 into the column weights Xd' = c ⊙ Δ ⊙ X and r into the rows of the output, both O(Q·P) work.
@@ -18,22 +19,28 @@ Backward, with W' = exp(hi_i - hi_j)·CB_ij (causal), Xd' = c ⊙ Δ ⊙ X, Y' =
 dY' = r ⊙ dY (so that W = diag(r) W' diag(c) never has to be formed):
     dXd' = W'ᵀ dY',  dCB = Σ_{heads of g} (dY' Xd'ᵀ) ∘ exp(hi_i - hi_j) (causal),
     dC = dCB B,  dB = dCBᵀ C,  u_j = Σ_p X_jp dXd'_jp,  dΔ = c ⊙ u,  dX = c ⊙ Δ ⊙ dXd' + D ⊙ dY,
-    d cs_i = Σ_j dW_ij W_ij - Σ_k dW_ki W_ki = Σ_p dY'_ip Y'_ip - Σ_p Xd'_ip dXd'_ip
-             (∂W_ij/∂cs_i = W_ij, ∂W_ij/∂cs_j = -W_ij; the sums over Q×Q reduce to sums over P),
+    da_k = Σ_{i ≥ k > j} M_ij,  M = W ∘ ∂L/∂W = dW' ∘ CB  (dW' = (dY' Xd'ᵀ) ∘ exp(hi_i - hi_j) per head;
+             W_ij holds a_{j+1} + ... + a_i, see :func:`~skeleton_mamba.ssd.segsum.decay_mask_backward`),
     dD = Σ X ⊙ dY,  dY_off = dY.
+
+The gradient of a is summed over the Q×Q entries whose segment holds a_k, never as the difference of the
+row and column sums of M (Σ_p dY' Y' - Σ_p Xd' dXd' per position, then a cumulative sum): that difference
+keeps the rounding of the diagonal terms, which under fast decay (|Δ·A| ≈ 2 per step) is far larger than
+the gradient itself: the fp32 gradients of A and dt would be 10² to 10⁴ times less accurate than the
+recurrence's.
 
 Speed on CPU: the Q×Q tensors (the mask, C Bᵀ and W) are formed for at most ``TILE_ELEMENTS``
 entries at a time. When all chunks fit in one tile (every benchmark size) the mask and W are kept
 for the backward; larger inputs run tile by tile with reused buffers and the backward recomputes
 them, so memory stays bounded. Tiles are deliberately large: every operation is a thread fork/join,
-so many cache-sized tiles cost more in synchronisation than they save (``benchmarks/README.md``, SSD scan).
+so many cache-sized tiles cost more in synchronisation than they save.
 """
 
 from __future__ import annotations
 
 import torch
 
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
 
 # Most Q×Q entries (chunks · heads · Q²) per tile: 64 MB per buffer in fp32.
 TILE_ELEMENTS = 1 << 24
@@ -63,11 +70,12 @@ def column_weights(delta: torch.Tensor, col: torch.Tensor | None) -> torch.Tenso
 
 
 def compute_inputs(
-    dtype: torch.dtype, cs: torch.Tensor, *tensors: torch.Tensor | None
+    dtype: torch.dtype, a: torch.Tensor, *tensors: torch.Tensor | None
 ) -> tuple[torch.Tensor, list[torch.Tensor | None]]:
-    """cs contiguous in float64 (kept) or else in ``dtype``, and the tensors contiguous in ``dtype``."""
-    cs = cs.contiguous() if cs.dtype == torch.float64 else cs.to(dtype).contiguous()
-    return cs, [t if t is None else t.to(dtype).contiguous() for t in tensors]
+    """The log decays a contiguous in float64 (kept) or else in ``dtype``; the tensors contiguous in
+    ``dtype``."""
+    a = a.contiguous() if a.dtype == torch.float64 else a.to(dtype).contiguous()
+    return a, [t if t is None else t.to(dtype).contiguous() for t in tensors]
 
 
 def _weights(hi, B, C, bias, E, CB, W):
@@ -82,14 +90,14 @@ def _weights(hi, B, C, bias, E, CB, W):
 
 
 class IntraChunk(torch.autograd.Function):
-    """See the module docstring. Layouts: x (n, Q, H, P), delta (n, Q, H), cs (n, H, Q) (float64 or x's
+    """See the module docstring. Layouts: x (n, Q, H, P), delta (n, Q, H), a (n, H, Q) (float64 or x's
     dtype), B, C (n, Q, G, N), D (H, P) or None, y_off (n, Q, H, P) or None -> y (n, Q, H, P)."""
 
     @staticmethod
-    def forward(ctx, x, delta, cs, B, C, D, y_off):
+    def forward(ctx, x, delta, a, B, C, D, y_off):
         n, Q, H, P = x.shape
         G = B.shape[2]
-        hi, row, col = split_cumsum(cs, x.dtype)  # (n, H, Q)
+        hi, row, col = split_cumsum(a.cumsum(-1), x.dtype)  # (n, H, Q)
         wcol = column_weights(delta, col)  # Δ_j c_j
         xd, y = x.new_empty(n, H, Q, P), torch.empty_like(x)
         y_in = torch.empty_like(xd)
@@ -112,20 +120,20 @@ class IntraChunk(torch.autograd.Function):
                 y[t].add_(y_off[t])
             if D is not None:
                 y[t].addcmul_(x[t], D)
-        ctx.cs_dtype = cs.dtype
-        ctx.save_for_backward(x, delta, hi, row, col, B, C, D, xd, y_in, *((E, Wbuf) if keep else ()))
+        ctx.a_dtype = a.dtype
+        ctx.save_for_backward(x, delta, hi, row, col, B, C, D, xd, *((E, Wbuf, CB) if keep else ()))
         return y
 
     @staticmethod
     def backward(ctx, dy):
-        x, delta, hi, row, col, B, C, D, xd, y_in, *kept = ctx.saved_tensors
+        x, delta, hi, row, col, B, C, D, xd, *kept = ctx.saved_tensors
         n, Q, H, P = x.shape
         G = B.shape[2]
         R = H // G
         wcol = column_weights(delta, col)
         dys, dxd = torch.empty_like(xd), torch.empty_like(xd)
         dx = torch.empty_like(x)
-        ddelta, dcs = x.new_empty(n, H, Q), x.new_empty(n, H, Q)
+        ddelta, da = x.new_empty(n, H, Q), x.new_empty(n, H, Q)
         dB_t = B.new_empty(n, G, Q, B.shape[3])
         dC_t = torch.empty_like(dB_t)
         want_dD = D is not None and ctx.needs_input_grad[5]
@@ -133,7 +141,7 @@ class IntraChunk(torch.autograd.Function):
         tiles = _tiles(n, H * Q * Q)
         m = tiles[0][1]
         if kept:
-            E, W = kept
+            E, W, CB = kept
         else:
             E, W, CB = x.new_empty(m, H, Q, Q), x.new_empty(m, H, Q, Q), x.new_empty(m, G, Q, Q)
         bias = causal_bias(Q, x.dtype, x.device)
@@ -151,27 +159,30 @@ class IntraChunk(torch.autograd.Function):
             dCB = dW.view(s, G, R, Q, Q).sum(2) if R > 1 else dW
             torch.matmul(dCB, B[t].transpose(1, 2), out=dC_t[t])
             torch.matmul(dCB.transpose(-1, -2), C[t].transpose(1, 2), out=dB_t[t])
+            # dCB is used: dW becomes M = W ∘ ∂L/∂W = dW ∘ CB in place
+            if ctx.needs_input_grad[2]:
+                M = dW.view(s, G, R, Q, Q).mul_(CB[:s, :, None]).view(s, H, Q, Q)
+                da[t] = decay_mask_backward(M)
             u = torch.linalg.vecdot(x[t].transpose(1, 2), dxd[t])  # (s, H, Q): Σ_p X dXd'
             if col is None:
                 ddelta[t].copy_(u)
             else:
                 torch.mul(u, col[t], out=ddelta[t])
-            # Σ_p Xd' dXd' = Δ c Σ_p X dXd' = wcol·u
-            torch.sub(torch.linalg.vecdot(dys[t], y_in[t]), u.mul_(wcol[t]), out=dcs[t])
             torch.mul(dxd[t].transpose(1, 2), wcol[t].transpose(1, 2)[..., None], out=dx[t])
             if D is not None:
                 dx[t].addcmul_(dy[t], D)
             if want_dD:
                 dD += torch.linalg.vecdot(dy[t].flatten(0, 1), x[t].flatten(0, 1), dim=0)
         dy_off = dy if ctx.needs_input_grad[6] else None
-        return (dx, ddelta.transpose(1, 2), dcs.to(ctx.cs_dtype), dB_t.transpose(1, 2), dC_t.transpose(1, 2),
+        da = da.to(ctx.a_dtype) if ctx.needs_input_grad[2] else None
+        return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2),
                 dD, dy_off)
 
 
 def intra_chunk(
     x: torch.Tensor,
     delta: torch.Tensor,
-    cs: torch.Tensor,
+    a: torch.Tensor,
     B: torch.Tensor,
     C: torch.Tensor,
     D: torch.Tensor | None = None,
@@ -182,9 +193,8 @@ def intra_chunk(
     Args:
         x: (n, Q, H, P) inputs of n chunks of length Q.
         delta: (n, Q, H) step sizes Δ.
-        cs: (n, H, Q) inclusive cumulative sums of a = Δ·A (only differences inside a chunk are used,
-            so any offset per chunk is allowed), in float64 (or in x's dtype, then the mask carries
-            the rounding error of cs, see the module docstring).
+        a: (n, H, Q) log decays a = Δ·A, in float64 (or in x's dtype, then the mask carries the
+            rounding error of their cumulative sum, see the module docstring).
         B, C: (n, Q, G, N); head h reads group h // (H // G).
         D: (H, P) skip weights or ``None``.
         y_off: (n, Q, H, P) extra term (the contribution of the earlier blocks) or ``None``.
@@ -192,5 +202,5 @@ def intra_chunk(
     Returns:
         y (n, Q, H, P) = (Lmask ∘ C Bᵀ)(Δ ⊙ x) + y_off + D ⊙ x, all in x's dtype.
     """
-    cs, (x, delta, B, C, D, y_off) = compute_inputs(x.dtype, cs, x, delta, B, C, D, y_off)
-    return IntraChunk.apply(x, delta, cs, B, C, D, y_off)
+    a, (x, delta, B, C, D, y_off) = compute_inputs(x.dtype, a, x, delta, B, C, D, y_off)
+    return IntraChunk.apply(x, delta, a, B, C, D, y_off)

@@ -97,11 +97,13 @@ def ssd_quadratic(
     K = max(1, -(-L // block_size))
     q = max(1, -(-L // K))
     xc, delta, Bc, Cc = padded_inputs(x, dt, B, C, dt_bias, dt_softplus, dt_limit, K * q)
-    # float64 cumulative log decays (see intra_chunk.py for why fp32 is not enough)
-    cs = (delta.to(torch.float64) * A.to(torch.float64)).cumsum(dim=1)  # (b, K·q, H)
-    y_off = below_diagonal(xc * delta[..., None], cs, Bc, Cc, q).view(b * K, q, H, P) if K > 1 else None
+    # float64 log decays and their cumulative sums (see intra_chunk.py for why fp32 is not enough)
+    a = delta.to(torch.float64) * A.to(torch.float64)  # (b, K·q, H)
+    y_off = None
+    if K > 1:
+        y_off = below_diagonal(xc * delta[..., None], a.cumsum(dim=1), Bc, Cc, q).view(b * K, q, H, P)
     D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
     n = b * K
-    y = intra_chunk(xc.reshape(n, q, H, P), delta.reshape(n, q, H), cs.view(n, q, H).transpose(1, 2),
+    y = intra_chunk(xc.reshape(n, q, H, P), delta.reshape(n, q, H), a.view(n, q, H).transpose(1, 2),
                     Bc.reshape(n, q, G, N), Cc.reshape(n, q, G, N), D2, y_off).view(b, K * q, H, P)
     return y[:, :L].to(x.dtype)

@@ -1,7 +1,8 @@
 """Segment sums and the causal decay mask exp(segsum) of one chunk (``mamba_ssm/modules/ssd_minimal.py``).
 
 segsum(a)_ij = Σ_{k=j+1}^{i} a_k for i ≥ j and -inf for i < j, so that
-Lmask = exp(segsum(a)) is the 1-semiseparable causal decay matrix.
+Lmask = exp(segsum(a)) is the 1-semiseparable causal decay matrix, and the gradient of the log decays
+a through it (:func:`decay_mask_backward`).
 """
 
 from __future__ import annotations
@@ -56,3 +57,23 @@ def decay_mask(
     T = cs.shape[-1]
     bias = causal_bias(T, cs.dtype, cs.device) if bias is None else bias
     return torch.sub(cs[..., :, None], cs[..., None, :], out=out).add_(bias).exp_()
+
+
+def decay_mask_backward(M: torch.Tensor) -> torch.Tensor:
+    """The gradient of the log decays a through a decay mask, from M = Lmask ∘ ∂L/∂Lmask.
+
+    Lmask_ij = exp(a_{j+1} + ... + a_i) for i ≥ j, so ∂L/∂a_k = Σ_{i ≥ k > j} M_ij: the entries whose
+    segment contains k. They are summed as such (a cumulative sum along each row, then a column sum
+    strictly below the diagonal), not as Σ_{i≥k} (row sum_i - column sum_i) of M, the form autograd
+    through a cumulative sum of a would give: row and column sums both hold the diagonal M_ii, which
+    cancels exactly but leaves its rounding, u·|M_ii| per position. Under fast decay the true gradient
+    is orders of magnitude below the diagonal, and that rounding was all that reached A and dt.
+
+    Args:
+        M: (..., Q, Q), zero above the diagonal; overwritten (used as scratch).
+
+    Returns:
+        (..., Q) ∂L/∂a (zero at k = 0: a_0 enters no segment of its own chunk).
+    """
+    s = M.cumsum_(-1).tril_(-1).sum(-2)  # s_k = Σ_{i>k} Σ_{j≤k} M_ij = ∂L/∂a_{k+1}
+    return torch.cat([torch.zeros_like(s[..., :1]), s[..., :-1]], dim=-1)
