@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 import torch
 from lightning.pytorch import Trainer
+from lightning.pytorch.loggers import Logger
 from torch.utils.data import DataLoader
 
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.music import audio_stack
 
 
 def test_data_module_explains_what_is_missing(tmp_path):
@@ -121,6 +123,20 @@ def test_test_loop_under_the_edge_protocol(tmp_path, tiny_egodance_module, song)
         assert np.isfinite(results[f"test/{source}/FID_k"]) and np.isfinite(results[f"test/{source}/Div_g"])
 
 
+class _HyperparameterRecorder(Logger):
+    name, version = "recorder", 0
+
+    def __init__(self):
+        super().__init__()
+        self.logged = []
+
+    def log_metrics(self, metrics, step=None):
+        pass
+
+    def log_hyperparams(self, params, *args, **kwargs):
+        self.logged.append(params)
+
+
 def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song, capsys):
     torch.manual_seed(0)
     module = tiny_egodance_module(sampling_steps=3, ema_every=1, protocol="bailando")  # 16-frame windows
@@ -137,7 +153,9 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song, 
     before = [p.detach().clone() for p in module.ema.module.parameters()]
     trainer.fit(module, loader, loader)
     assert any(not torch.equal(a, b) for a, b in zip(before, module.ema.module.parameters(), strict=True))
+    trainer.loggers = [recorder := _HyperparameterRecorder()]
     results = trainer.test(module, loader, verbose=False)[0]
+    assert {"audio_stack": audio_stack()} in recorder.logged  # the versions that decide the beats
     # (PFC belongs to the edge protocol: tested above)
     names = ("mpjpe_mm", "root_error_mm", "head_error_mm", "beat_align", "mmv", "mm", "mv", "FID_k")
     for source in ("estimated_head", "oracle_head"):  # the default (estimate) and the oracle comparison

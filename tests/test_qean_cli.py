@@ -125,6 +125,10 @@ def test_results_table_says_whether_it_is_the_paper_protocol():
     module._generated_count, module._reference_count = 40, 1363
     table = module.results_table(values)
     assert "paper protocol" in table and "NOT COMPARABLE" not in table
+    import librosa
+    import numpy
+
+    assert f"audio stack: librosa {librosa.__version__}, numpy {numpy.__version__}, soundfile " in table
     assert "FID_k           1.000         30.1          -" in table
     assert "BeatAlign       0.250        0.239      0.292" in table
     module._generated_count = 20

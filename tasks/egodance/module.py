@@ -51,6 +51,7 @@ from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
+from skeleton_mamba.tasks.motion.music import record_audio_stack
 
 __all__ = ["EgoDanceModule", "HEAD_SOURCES"]
 
@@ -331,6 +332,9 @@ class EgoDanceModule(BackboneModule):
         if self.hparams.test_oracle_head and "oracle" not in sources and batch.get("head") is not None:
             sources.append("oracle")
         return sources
+
+    def on_test_start(self) -> None:
+        record_audio_stack(self.loggers)  # hyperparameter audio_stack: the versions that decide the beats
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
         true = motion_joints(batch["motion"])

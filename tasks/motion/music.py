@@ -65,6 +65,7 @@ __all__ = [
     "extract_music_features",
     "fold_tempo",
     "load_audio",
+    "record_audio_stack",
     "tempo_from_beats",
 ]
 
@@ -154,6 +155,16 @@ def audio_stack() -> dict[str, str]:
         "resampler": res_type,
         "resampler_package": f"{package} {package_version}",
     }
+
+
+def record_audio_stack(loggers) -> str:
+    """Log :func:`audio_stack` as the hyperparameter ``audio_stack`` of every logger (a Lightning module's
+    ``loggers``); returns it as one line, ``"librosa 0.11.0, numpy 2.4.6, ..."``, for a printed table."""
+    stack = audio_stack()
+    for logger in loggers:
+        logger.log_hyperparams({"audio_stack": stack})
+    libs = ", ".join(f"{name} {stack[name]}" for name in ("librosa", "numpy", "soundfile", "libsndfile"))
+    return f"{libs}, resampler {stack['resampler']} ({stack['resampler_package']})"
 
 
 def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
