@@ -36,6 +36,7 @@ __all__ = [
     "TRUSTED_CLASS_PREFIXES",
     "check_checkpoint_path",
     "check_class_paths",
+    "check_finite_state",
     "load_checkpoint",
     "load_module",
     "load_module_and_checkpoint",
@@ -167,4 +168,16 @@ def load_module_and_checkpoint(
         module = cls.load_from_checkpoint(io.BytesIO(data), map_location=map_location, weights_only=True)  # type: ignore[attr-defined]
     except (KeyError, TypeError, RuntimeError) as err:
         raise CheckpointError(f"{p}: does not fit {cls.__name__} ({type(err).__name__}: {err})") from err
+    check_finite_state(module, str(p))
     return module, checkpoint
+
+
+def check_finite_state(module: torch.nn.Module, source: str) -> None:
+    """Raise :class:`CheckpointError` naming the first parameter or buffer of ``module`` holding NaN or Inf
+    (such a model only produces non-finite output, which no command writes)."""
+    for name, tensor in (*module.named_parameters(), *module.named_buffers()):
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            bad = int((~torch.isfinite(tensor)).sum())
+            raise CheckpointError(
+                f"{source}: weights are not finite ({name}: {bad} of {tensor.numel()} values NaN or Inf)"
+            )

