@@ -29,11 +29,11 @@ Backward, with dY' = r ⊙ dY and G_k = dL/dS_k (the scan run backwards from G_c
 and the gradient of the log decays, one sum per way a_m enters (m a position of chunk k):
 
     da_m = Σ_{i ≥ m > j} M_ij      W_ij holds a_{j+1..i};  M = dW' ∘ CB, dW' per head (decay_mask_backward)
-         + Σ_{i ≥ m} q_i           Ce_i holds cs_i = a_{0..i};  q_i = exp(hi_i) Σ_n C_in dCe_in
-         + Σ_{j < m} g_j           Be_j holds T - cs_j = a_{j+1..Q-1};  g_j = e_j Σ_n B_jn dBe_nj
+         + Σ_{i ≥ m} q_i           Ce_i holds cs_i = a_{0..i};  q = Σ_p dY' ⊙ (Ce S_k)
+         + Σ_{j < m} g_j           Be_j holds T - cs_j = a_{j+1..Q-1};  g = Σ_p Xd ⊙ (Beᵀ ds_k)
          + d_k Σ G_{k+1} ⊙ S_k     the chunk's decay exp(T_k) of step 2 holds every a_m
 
-(e_j = exp(T - hi_j); every factor exp(±cs) is its own derivative). Each term is summed over exactly
+(every factor exp(±cs) is its own derivative). Each term is summed over exactly
 the entries that hold a_m. Written as per-position gradients of cs followed by a cumulative sum, the row
 and column sums of M and the Be term of the last position would cancel to within their rounding, which
 under fast decay is far larger than the gradient (the fp32 gradients of A and dt would be 10² to 10³
@@ -87,8 +87,9 @@ class ChunkScan(torch.autograd.Function):
         W = torch.mul(E.view(n, G, R, Q, Q), CB[:, :, None]).view(n, H, Q, Q)
         f = decay_factor(hi, x.dtype)
         Ce = torch.mul(f.view(n, G, R, Q, 1), C.transpose(1, 2)[:, :, None]).view(n, H, Q, N)
-        y_in = torch.matmul(W, xd)  # (n, H, Q, P)
-        y_in.view(n * H, Q, P).baddbmm_(Ce.reshape(n * H, Q, N), S_in.reshape(n * H, N, P))
+        y_state = torch.matmul(Ce, S_in.view(n, H, N, P))  # (n, H, Q, P), kept for the gradient of a
+        y_in = torch.baddbmm(y_state.view(n * H, Q, P), W.view(n * H, Q, Q), xd.view(n * H, Q, P))
+        y_in = y_in.view(n, H, Q, P)
         y = torch.empty_like(x)
         if row is None:
             y.copy_(y_in.transpose(1, 2))
@@ -97,12 +98,12 @@ class ChunkScan(torch.autograd.Function):
         if D is not None:
             y.addcmul_(x, D)
         ctx.a_dtype = a.dtype
-        ctx.save_for_backward(x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in)
+        ctx.save_for_backward(x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in, y_state)
         return y, final
 
     @staticmethod
     def backward(ctx, dy, dfinal):
-        x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in = ctx.saved_tensors
+        x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in, y_state = ctx.saved_tensors
         n, Q, H, P = x.shape
         G, N = B.shape[2], B.shape[3]
         R = H // G
@@ -116,18 +117,17 @@ class ChunkScan(torch.autograd.Function):
         S_flat = S_in.reshape(n, H, N, P)
         ds, dh0 = scan_states_backward(torch.matmul(Ce.transpose(-1, -2), dys).view(b, c, H, N, P), d, dfinal)
         ds_flat = ds.reshape(n, H, N, P)
-        dxd = torch.matmul(W.transpose(-1, -2), dys)  # (n, H, Q, P)
-        dxd.view(n * H, Q, P).baddbmm_(Be.reshape(n * H, N, Q).transpose(-1, -2), ds.reshape(n * H, N, P))
+        bds = torch.matmul(Be.transpose(-1, -2), ds_flat)  # (n, H, Q, P): Beᵀ ds
+        Wt = W.view(n * H, Q, Q).transpose(-1, -2)
+        dxd = torch.baddbmm(bds.view(n * H, Q, P), Wt, dys.view(n * H, Q, P)).view(n, H, Q, P)
         # W, Ce and Be are not needed any more: their gradients take their storage.
         dW = torch.matmul(dys, xd.transpose(-1, -2), out=W).mul_(E)
         dCe = torch.matmul(dys, S_flat.transpose(-1, -2), out=Ce).mul_(f[..., None])
         dBe = torch.matmul(ds_flat, xd.transpose(-1, -2), out=Be).mul_(e[:, :, None])
         da = None
-        if ctx.needs_input_grad[2]:  # the terms of da (module docstring) that need dCe, dBe per head
-            Cg = C.transpose(1, 2)[:, :, None]  # (n, G, 1, Q, N)
-            Bg = B.permute(0, 2, 3, 1)[:, :, None]  # (n, G, 1, N, Q)
-            q = torch.linalg.vecdot(dCe.view(n, G, R, Q, N), Cg).view(n, H, Q)
-            g = torch.linalg.vecdot(dBe.view(n, G, R, N, Q), Bg, dim=-2).view(n, H, Q)
+        if ctx.needs_input_grad[2]:  # the state terms of da (module docstring)
+            q = torch.linalg.vecdot(dys, y_state)  # Σ_n C dCe = Σ_p dY' ⊙ (Ce S), (n, H, Q)
+            g = torch.linalg.vecdot(xd, bds)  # Σ_n B dBe = Σ_p Xd ⊙ (Beᵀ ds)
             da = q.flip(-1).cumsum(-1).flip(-1)  # Σ_{i ≥ m} q_i
             da[..., 1:] += g[..., :-1].cumsum(-1)  # Σ_{j < m} g_j
             da += (d * torch.linalg.vecdot(ds.flatten(3), S_in.flatten(3))).view(n, H, 1)
