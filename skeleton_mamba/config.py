@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
+
 
 @dataclass
 class MixerConfig:
@@ -36,7 +38,7 @@ class MixerConfig:
     D_has_hdim: bool = False
     rmsnorm: bool = True
     norm_before_gate: bool = False
-    dt_limit: tuple[float, float] = (0.0, float("inf"))
+    dt_limit: tuple[float, float] = NO_DT_LIMIT
     bias: bool = False
     conv_bias: bool = True
     use_kernel: bool = True  # use mamba-ssm's Triton kernel on CUDA when installed

@@ -71,12 +71,10 @@ def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
     b, L, _ = zxbcdt.shape
     H, P, G, N = mixer.nheads, mixer.headdim, mixer.ngroups, mixer.d_state
     R = H // G
-    z0, x0, z, xbc, dt = torch.split(
-        zxbcdt, [mixer.d_mlp, mixer.d_mlp, mixer.d_ssm, mixer.d_ssm + 2 * G * N, H], dim=-1
-    )
+    z0, x0, z, xbc, dt = mixer.split(zxbcdt)
     ct = compute_dtype(xbc)
     xbc = F.silu(causal_conv_taps(xbc, mixer.conv1d.weight[:, 0], mixer.conv1d.bias)).to(ct)
-    x, B, C = torch.split(xbc, [mixer.d_ssm, G * N, G * N], dim=-1)
+    x, B, C = mixer.split_xbc(xbc)
     x = x.view(b, L, H, P)
     delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)  # (b, L, H)
     # float64 cumulative log decays, per head: cs (b, H, L); mask (b, H, L, L), causal.
@@ -92,12 +90,8 @@ def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
     cb = torch.matmul(C.view(b, L, G, N).transpose(1, 2), B.view(b, L, G, N).permute(0, 2, 3, 1))
     weight = mask.view(b, G, R, L, L).mul_(cb[:, :, None]).view(b, H, L, L)
     y = torch.matmul(weight, (x * delta[..., None]).transpose(1, 2)).transpose(1, 2)  # (b, L, H, P)
-    D = mixer.skip_weight().to(ct)
-    y = torch.addcmul(y, x, D[:, None] if D.dim() == 1 else D)
-    y = mixer.gate(y.reshape(b, L, mixer.d_ssm).to(zxbcdt.dtype), z)
-    if mixer.d_mlp:
-        y = torch.cat([F.silu(z0) * x0, y], dim=-1)
-    return y
+    y = mixer.skip(y, x)
+    return mixer.output(y.reshape(b, L, mixer.d_ssm).to(zxbcdt.dtype), z, z0, x0)
 
 
 class FrameOps:

@@ -6,6 +6,15 @@ in_proj -> (z0, x0, z, x, B, C, dt) -> causal depthwise conv over (x, B, C) + Si
 ``norm.weight``, ``out_proj``), the options of :class:`~skeleton_mamba.config.MixerConfig` and the
 initialisation of ``A_log``, ``dt_bias`` and ``D`` follow ``mamba_ssm/modules/mamba2.py`` so weights move
 between the two.
+
+The mixer owns its math in every form: :meth:`Mamba2Mixer.forward` / :meth:`~Mamba2Mixer.mix` for a
+sequence, :meth:`~Mamba2Mixer.step` for one token with the states of
+:meth:`~Mamba2Mixer.allocate_inference_cache` (as ``mamba_ssm.Mamba2``), and the pieces every form shares
+(:meth:`~Mamba2Mixer.split`, :meth:`~Mamba2Mixer.split_xbc`, :meth:`~Mamba2Mixer.skip`,
+:meth:`~Mamba2Mixer.output`), which the frame path (:func:`skeleton_mamba.frame_ops.short_mix`) uses too.
+The one-token recurrence ([Mamba-2] SSD):
+
+    h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t
 """
 
 from __future__ import annotations
@@ -21,6 +30,7 @@ from skeleton_mamba.causal_conv import causal_depthwise_conv
 from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.norm import RMSNormGated, upcast
 from skeleton_mamba.ssd import ssd
+from skeleton_mamba.ssd.discretize import apply_skip, compute_dtype, discretize_dt
 
 
 class Mamba2Mixer(nn.Module):
@@ -90,6 +100,30 @@ class Mamba2Mixer(nn.Module):
             return self.norm(y, z)
         return y * F.silu(z)
 
+    def split(self, zxbcdt: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """``in_proj``'s output (..., F) -> z0, x0 (..., d_mlp), z (..., d_ssm), xBC (..., conv_dim),
+        dt (..., H), in ``mamba_ssm.Mamba2``'s order."""
+        gn = self.ngroups * self.d_state
+        sizes = [self.d_mlp, self.d_mlp, self.d_ssm, self.d_ssm + 2 * gn, self.nheads]
+        return torch.split(zxbcdt, sizes, dim=-1)
+
+    def split_xbc(self, xbc: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The convolved xBC (..., conv_dim) -> x (..., d_ssm), B and C (..., ngroups·d_state)."""
+        gn = self.ngroups * self.d_state
+        return torch.split(xbc, [self.d_ssm, gn, gn], dim=-1)
+
+    def skip(self, y: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """y + D ⊙ x for y, x (..., H, P), in y's dtype (the sequence form's SSD adds it itself)."""
+        return apply_skip(y, x, self.skip_weight())
+
+    def output(self, y: torch.Tensor, z: torch.Tensor, z0: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
+        """The SSM output y (..., d_ssm) gated by z, after the gated-MLP channels silu(z0)·x0 when
+        d_ssm < d_inner: (..., d_inner), the input of ``out_proj``."""
+        y = self.gate(y, z)
+        if self.d_mlp:
+            y = torch.cat([F.silu(z0) * x0, y], dim=-1)
+        return y
+
     def mix(self, zxbcdt: torch.Tensor) -> torch.Tensor:
         """The mixer between its two projections: ``in_proj(u)`` (B, L, F) -> gated y (B, L, d_inner).
 
@@ -97,12 +131,8 @@ class Mamba2Mixer(nn.Module):
         Scan reads each group token in n orders) project the distinct tokens once, gather, and average
         outputs before ``out_proj``, which is linear.
         """
-        gn = self.ngroups * self.d_state
-        z0, x0, z, xbc, dt = torch.split(
-            zxbcdt, [self.d_mlp, self.d_mlp, self.d_ssm, self.d_ssm + 2 * gn, self.nheads], dim=-1
-        )
-        xbc = F.silu(self.causal_conv(xbc))
-        x, b, c = torch.split(xbc, [self.d_ssm, gn, gn], dim=-1)
+        z0, x0, z, xbc, dt = self.split(zxbcdt)
+        x, b, c = self.split_xbc(F.silu(self.causal_conv(xbc)))
         y = ssd(
             rearrange(x, "b l (h p) -> b l h p", p=self.headdim),
             dt,
@@ -116,14 +146,80 @@ class Mamba2Mixer(nn.Module):
             chunk_size=self.chunk_size,
             impl="auto" if self.config.use_kernel else "torch",  # "torch": never the mamba-ssm kernel
         )
-        y = self.gate(rearrange(y, "b l h p -> b l (h p)"), z)
-        if self.d_mlp:
-            y = torch.cat([F.silu(z0) * x0, y], dim=-1)
-        return y
+        return self.output(rearrange(y, "b l h p -> b l (h p)"), z, z0, x0)
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:
         """u (B, L, d_model) -> (B, L, d_model)."""
         return self.out_proj(self.mix(self.in_proj(u)))
+
+    def allocate_inference_cache(
+        self, batch_size: int, max_seqlen: int | None = None, dtype: torch.dtype | None = None,
+        device: torch.device | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Zero states for :meth:`step`, as ``mamba_ssm.Mamba2.allocate_inference_cache``.
+
+        Returns:
+            conv_state (batch, conv_dim, d_conv) in ``dtype`` (default: the weights'), the last inputs of
+            the convolution; ssm_state (batch, nheads, headdim, d_state) in the SSD's compute dtype (fp32,
+            fp64 for fp64). ``max_seqlen`` is accepted for mamba_ssm's signature; the size is fixed.
+        """
+        weight = self.conv1d.weight
+        dtype = dtype or weight.dtype
+        device = device or weight.device
+        conv = torch.zeros(batch_size, weight.shape[0], weight.shape[-1], dtype=dtype, device=device)
+        ssm_dtype = compute_dtype(torch.empty(0, dtype=dtype))
+        ssm = torch.zeros(batch_size, self.nheads, self.headdim, self.d_state, dtype=ssm_dtype, device=device)
+        return conv, ssm
+
+    def step(self, u: torch.Tensor, conv_state: torch.Tensor, ssm_state: torch.Tensor) -> torch.Tensor:
+        """One token: u (B, d_model) -> (B, d_model); both states updated in place.
+
+        Equal to the last output of ``forward(cat(previous tokens, u))``, as ``mamba_ssm.Mamba2.step``
+        (which takes (B, 1, d_model) and also returns the states), with ``dt_limit`` applied as in the
+        sequence form (mamba_ssm's own step skips it).
+        """
+        b = u.shape[0]
+        h, p, n, g = self.nheads, self.headdim, self.d_state, self.ngroups
+        z0, x0, z, xbc, dt = self.split(self.in_proj(u))
+        # Causal depthwise convolution over the last d_conv inputs (shift the window left, append).
+        window = torch.cat([conv_state[..., 1:], xbc[..., None]], dim=-1)
+        conv_state.copy_(window)
+        xbc = (window * self.conv1d.weight[:, 0]).sum(-1)  # (B, conv_dim)
+        if self.conv1d.bias is not None:
+            xbc = xbc + self.conv1d.bias
+        x, B, C = self.split_xbc(F.silu(xbc))
+        ct = ssm_state.dtype
+        delta = discretize_dt(dt, self.dt_bias, True, self.dt_limit, ct)  # (B, H)
+        xh = x.to(ct).view(b, h, p)
+        decay = torch.exp(delta * -torch.exp(self.A_log.to(ct)))  # exp(Δ A), (B, H)
+        xd = xh * delta[:, :, None]  # Δ x, (B, H, P)
+        if torch.compiler.is_compiling():
+            y = _state_update_pointwise(ssm_state, decay, xd, B.to(ct), C.to(ct), g)
+        else:
+            ssm_state.mul_(decay[:, :, None, None])
+            # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
+            state = ssm_state.view(b * g, (h // g) * p, n)
+            state.baddbmm_(xd.view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
+            y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
+        y = self.skip(y, xh)
+        return self.out_proj(self.output(y.to(u.dtype).view(b, self.d_ssm), z, z0, x0))
+
+
+def _state_update_pointwise(
+    ssm_state: torch.Tensor, decay: torch.Tensor, xd: torch.Tensor, B: torch.Tensor, C: torch.Tensor, g: int
+) -> torch.Tensor:
+    """h <- exp(Δ A) h + (Δ x) ⊗ B in place, and y = h C, as element-wise work and a reduction.
+
+    The form of :meth:`Mamba2Mixer.step` in compiled code (:class:`~skeleton_mamba.compiling.CompiledStep`):
+    inductor computes the new state directly into ``ssm_state``'s storage (no matrix product whose result
+    is copied back). ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G*N) -> y (B, H, P).
+    """
+    b, h, p, n = ssm_state.shape
+    r = h // g
+    new = (ssm_state * decay[:, :, None, None]).view(b, g, r, p, n)
+    new = new + xd.view(b, g, r, p, 1) * B.view(b, g, 1, 1, n)
+    ssm_state.copy_(new.view(b, h, p, n))
+    return (new * C.view(b, g, 1, 1, n)).sum(-1).view(b, h, p)
 
 
 def _check_options(cfg: MixerConfig, d_inner: int, d_ssm: int) -> tuple[float, float]:

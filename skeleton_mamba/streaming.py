@@ -15,9 +15,10 @@ over frames. Within a block, only the Temporal Scan mixes time; everything else 
   features instead (as ``tasks/stream``'s dance model does).
 
 The Temporal Scan's forward mixer carries, per block and per joint sequence, the two states of
-``mamba_ssm.Mamba2.step`` (layout of ``Mamba2.allocate_inference_cache``): the last ``d_conv``
-inputs of its depthwise convolution, ``conv (B*J, conv_dim, d_conv)``, and the SSD state
-``ssm (B*J, nheads, headdim, d_state)``, updated in place:
+:meth:`Mamba2Mixer.step <skeleton_mamba.mixer.Mamba2Mixer.step>` (from its ``allocate_inference_cache``,
+the layout of ``mamba_ssm.Mamba2``'s): the last ``d_conv`` inputs of its depthwise convolution,
+``conv (B*J, conv_dim, d_conv)``, and the SSD state ``ssm (B*J, nheads, headdim, d_state)``, updated
+in place:
 
     h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t     ([Mamba-2] SSD recurrence)
 
@@ -31,11 +32,8 @@ import ctypes.util
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
 
 from skeleton_mamba.frame_ops import FrameOps
-from skeleton_mamba.mixer import Mamba2Mixer
-from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
 
 
 @dataclass
@@ -67,91 +65,13 @@ class StreamState:
         self.frames = 0
 
 
-def allocate_mixer_state(
-    mixer: Mamba2Mixer, batch: int, dtype: torch.dtype | None = None, device: torch.device | None = None
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Zero ``(conv (batch, conv_dim, d_conv), ssm (batch, nheads, headdim, d_state))`` for ``mixer``.
-
-    ``dtype`` defaults to the mixer's weights; the SSD state is kept in the SSD's compute dtype.
-    """
-    weight = mixer.conv1d.weight
-    dtype = dtype or weight.dtype
-    device = device or weight.device
-    conv_dim, d_conv = weight.shape[0], weight.shape[-1]
-    conv = torch.zeros(batch, conv_dim, d_conv, dtype=dtype, device=device)
-    ssm_dtype = compute_dtype(torch.empty(0, dtype=dtype))
-    ssm = torch.zeros(batch, mixer.nheads, mixer.headdim, mixer.d_state, dtype=ssm_dtype, device=device)
-    return conv, ssm
-
-
-def mixer_step(
-    mixer: Mamba2Mixer, u: torch.Tensor, conv_state: torch.Tensor, ssm_state: torch.Tensor
-) -> torch.Tensor:
-    """One token through ``mixer``: u (B, d_model) -> (B, d_model); both states updated in place.
-
-    Equal to the last output of ``mixer(cat(previous tokens, u))`` (as ``mamba_ssm.Mamba2.step``).
-    """
-    b = u.shape[0]
-    h, p, n, g = mixer.nheads, mixer.headdim, mixer.d_state, mixer.ngroups
-    zxbcdt = mixer.in_proj(u)
-    z0, x0, z, xbc, dt = torch.split(
-        zxbcdt, [mixer.d_mlp, mixer.d_mlp, mixer.d_ssm, mixer.d_ssm + 2 * g * n, h], dim=-1
-    )
-
-    # Causal depthwise convolution over the last d_conv inputs (shift the window left, append).
-    window = torch.cat([conv_state[..., 1:], xbc[..., None]], dim=-1)
-    conv_state.copy_(window)
-    xbc = (window * mixer.conv1d.weight[:, 0]).sum(-1)  # (B, conv_dim)
-    if mixer.conv1d.bias is not None:
-        xbc = xbc + mixer.conv1d.bias
-    x, B, C = torch.split(F.silu(xbc), [mixer.d_ssm, g * n, g * n], dim=-1)
-
-    ct = ssm_state.dtype
-    # Δ as the sequence forward (with dt_limit; mamba_ssm's own step skips the limit), (B, H)
-    delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)
-    xh = x.to(ct).view(b, h, p)
-    decay = torch.exp(delta * -torch.exp(mixer.A_log.to(ct)))  # exp(Δ A), (B, H)
-    xd = xh * delta[:, :, None]  # Δ x, (B, H, P)
-    if torch.compiler.is_compiling():
-        y = _state_update_pointwise(ssm_state, decay, xd, B.to(ct), C.to(ct), g)
-    else:
-        ssm_state.mul_(decay[:, :, None, None])
-        # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
-        state = ssm_state.view(b * g, (h // g) * p, n)
-        state.baddbmm_(xd.view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
-        y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
-    D = mixer.skip_weight().to(ct)  # (H,) or (H, P)
-    y = torch.addcmul(y, xh, D[:, None] if D.dim() == 1 else D)
-    y = mixer.gate(y.to(u.dtype).view(b, mixer.d_ssm), z)
-    if mixer.d_mlp:
-        y = torch.cat([F.silu(z0) * x0, y], dim=-1)
-    return mixer.out_proj(y)
-
-
-def _state_update_pointwise(
-    ssm_state: torch.Tensor, decay: torch.Tensor, xd: torch.Tensor, B: torch.Tensor, C: torch.Tensor, g: int
-) -> torch.Tensor:
-    """h <- exp(Δ A) h + (Δ x) ⊗ B in place, and y = h C, as element-wise work and a reduction.
-
-    The form for compiled code (:class:`~skeleton_mamba.compiling.CompiledStep`): inductor computes the
-    new state directly into ``ssm_state``'s storage (no matrix product whose result is copied back).
-    ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G*N) -> y (B, H, P).
-    """
-    b, h, p, n = ssm_state.shape
-    r = h // g
-    new = (ssm_state * decay[:, :, None, None]).view(b, g, r, p, n)
-    new = new + xd.view(b, g, r, p, 1) * B.view(b, g, 1, 1, n)
-    ssm_state.copy_(new.view(b, h, p, n))
-    return (new * C.view(b, g, 1, 1, n)).sum(-1).view(b, h, p)
-
-
 def init_state(model, batch: int, dtype: torch.dtype | None = None, device=None) -> StreamState:
     """The zero state of ``model`` (a causal :class:`SkeletonMamba`) for ``batch`` streams."""
     if not model.config.causal:
         raise ValueError("frame-by-frame inference needs a causal backbone: SkeletonMambaConfig(causal=True)")
     rows = batch * model.skeleton.num_joints
     mixers = [block.temporal_scan.forward_mixer for block in model.blocks]
-    states = [allocate_mixer_state(mixer, rows, dtype, device) for mixer in mixers]
+    states = [mixer.allocate_inference_cache(rows, dtype=dtype, device=device) for mixer in mixers]
     return StreamState(batch, [c for c, _ in states], [s for _, s in states])
 
 
@@ -175,7 +95,7 @@ def block_step(
     x = block.spatial(x[:, None], ops)  # (B, 1, J, D): Group Scan and Joint Scan of this frame
     scan = block.temporal_scan
     seq = block.norm_time(x).reshape(b * j, d)
-    x = x + scan.proj(mixer_step(scan.forward_mixer, seq, conv_state, ssm_state)).view(b, 1, j, d)
+    x = x + scan.proj(scan.forward_mixer.step(seq, conv_state, ssm_state)).view(b, 1, j, d)
     return block.pointwise(x, context, context_mask)[:, 0]
 
 
@@ -269,12 +189,10 @@ def keep_freed_memory() -> bool:
 
 __all__ = [
     "StreamState",
-    "allocate_mixer_state",
     "block_step",
     "check_frame",
     "frame_forward",
     "init_state",
     "keep_freed_memory",
-    "mixer_step",
     "step",
 ]

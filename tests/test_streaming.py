@@ -5,7 +5,6 @@ import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig, streaming
 from skeleton_mamba.skeletons import SKELETONS
-from skeleton_mamba.streaming import allocate_mixer_state, mixer_step
 
 TINY_MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)
 
@@ -102,8 +101,8 @@ def test_state_size_does_not_grow_with_the_frames_seen():
 )
 @pytest.mark.parametrize("compiled_form", [False, True], ids=["eager", "compiled_form"])
 def test_mixer_step_with_grouped_B_and_C_equals_the_sequence_mixer(options, compiled_form, monkeypatch):
-    """Also in the form the step takes under torch.compile (the state updated element-wise,
-    ``_state_update_pointwise``), run eagerly here."""
+    """``Mamba2Mixer.step`` from ``allocate_inference_cache``, also in the form it takes under torch.compile
+    (the state updated element-wise, ``_state_update_pointwise``), run eagerly here."""
     torch.manual_seed(0)
     from skeleton_mamba import Mamba2Mixer
 
@@ -113,9 +112,9 @@ def test_mixer_step_with_grouped_B_and_C_equals_the_sequence_mixer(options, comp
     u = torch.randn(3, 21, 16, dtype=torch.float64)
     with torch.no_grad():
         full = mixer(u)
-        conv, ssm = allocate_mixer_state(mixer, 3)
+        conv, ssm = mixer.allocate_inference_cache(3)
         monkeypatch.setattr(torch.compiler, "is_compiling", lambda: compiled_form)
-        steps = torch.stack([mixer_step(mixer, u[:, t], conv, ssm) for t in range(21)], dim=1)
+        steps = torch.stack([mixer.step(u[:, t], conv, ssm) for t in range(21)], dim=1)
     torch.testing.assert_close(steps, full, rtol=0, atol=1e-10)
 
 

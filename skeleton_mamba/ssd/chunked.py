@@ -19,7 +19,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.chunk_scan import chunk_scan
-from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dtype, padded_inputs, skip_matrix
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.non_finite import confine_non_finite
 
@@ -35,7 +35,7 @@ def ssd_chunked(
     D: torch.Tensor | None = None,
     dt_bias: torch.Tensor | None = None,
     dt_softplus: bool = True,
-    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    dt_limit: tuple[float, float] = NO_DT_LIMIT,
     initial_state: torch.Tensor | None = None,
     return_final_state: bool = False,
     chunk_size: int = 64,
@@ -60,7 +60,7 @@ def ssd_chunked(
     # The log decays enter in float64 whatever the compute dtype: an fp32 cumsum over a chunk
     # (|cs| in the hundreds) puts errors of ~1e-5 on exp(cs_i - cs_j); see intra_chunk.py.
     a = (delta.to(torch.float64) * A.to(torch.float64)).transpose(1, 2)  # (n, H, Q) float64
-    D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
+    D2 = skip_matrix(D, H, P, ct)
     if c > 1 or initial_state is not None or return_final_state:
         h0 = x.new_zeros(b, H, N, P, dtype=ct) if initial_state is None else initial_state.transpose(-1, -2)
         y, final = chunk_scan(xc, delta, a, Bc, Cc, D2, h0)

@@ -12,6 +12,9 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+# dt_limit that leaves Δ unclamped: the default of every SSD form and of MixerConfig (as mamba_ssm).
+NO_DT_LIMIT: tuple[float, float] = (0.0, float("inf"))
+
 
 def compute_dtype(x: torch.Tensor) -> torch.dtype:
     """fp64 stays fp64 (the test oracle); every other dtype (fp16, bf16, fp32) computes in fp32."""
@@ -88,12 +91,19 @@ def discretize_dt(
     return delta
 
 
+def skip_matrix(D: torch.Tensor | None, H: int, P: int, dtype: torch.dtype) -> torch.Tensor | None:
+    """D (H,) per head or (H, P) per channel as an (H, P) tensor of ``dtype`` (``None`` stays ``None``)."""
+    if D is None:
+        return None
+    D = D.to(dtype)
+    return D[:, None].expand(H, P) if D.dim() == 1 else D
+
+
 def apply_skip(y: torch.Tensor, x: torch.Tensor, D: torch.Tensor | None) -> torch.Tensor:
-    """y + D ⊙ x with D (H,) or (H, P); y, x (b, L, H, P)."""
+    """y + D ⊙ x with D (H,) or (H, P); y, x (..., H, P), the result in y's dtype."""
     if D is None:
         return y
-    d = D.to(y.dtype)
-    return y + x.to(y.dtype) * (d[:, None] if d.dim() == 1 else d)
+    return torch.addcmul(y, x.to(y.dtype), skip_matrix(D, *y.shape[-2:], y.dtype))
 
 
 def padded_inputs(

@@ -15,6 +15,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.chunked import ssd_chunked
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
 from skeleton_mamba.ssd.kernel import kernel_available, ssd_kernel
 from skeleton_mamba.ssd.quadratic import ssd_quadratic
 from skeleton_mamba.ssd.recurrence import ssd_recurrence
@@ -45,7 +46,7 @@ def ssd(
     D: torch.Tensor | None = None,
     dt_bias: torch.Tensor | None = None,
     dt_softplus: bool = True,
-    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    dt_limit: tuple[float, float] = NO_DT_LIMIT,
     initial_state: torch.Tensor | None = None,
     return_final_state: bool = False,
     chunk_size: int = 64,

@@ -16,6 +16,8 @@ import types
 
 import torch
 
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
+
 KERNEL_MODULE = "mamba_ssm.ops.triton.ssd_combined"
 
 
@@ -68,7 +70,7 @@ def ssd_kernel(
     D: torch.Tensor | None = None,
     dt_bias: torch.Tensor | None = None,
     dt_softplus: bool = True,
-    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    dt_limit: tuple[float, float] = NO_DT_LIMIT,
     initial_state: torch.Tensor | None = None,
     return_final_state: bool = False,
     chunk_size: int = 64,

@@ -34,7 +34,7 @@ from collections.abc import Callable
 
 import torch
 
-from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, discretize_dt
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dtype, discretize_dt
 
 
 def _zero_non_finite(t: torch.Tensor) -> torch.Tensor:
@@ -62,7 +62,7 @@ def confine_non_finite(form: Callable) -> Callable:
     return_final_state, **kw)`` so that non-finite inputs behave as in the recurrence (module docstring)."""
 
     @functools.wraps(form)
-    def confined(x, dt, A, B, C, *, D=None, dt_bias=None, dt_softplus=True, dt_limit=(0.0, float("inf")),
+    def confined(x, dt, A, B, C, *, D=None, dt_bias=None, dt_softplus=True, dt_limit=NO_DT_LIMIT,
                  initial_state=None, return_final_state=False, **kwargs):  # fmt: skip
         kwargs.update(D=D, dt_bias=dt_bias, dt_softplus=dt_softplus, dt_limit=dt_limit,
                       initial_state=initial_state, return_final_state=return_final_state)  # fmt: skip

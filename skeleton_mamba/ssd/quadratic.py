@@ -23,7 +23,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.chunked import ssd_chunked
-from skeleton_mamba.ssd.discretize import check_inputs, compute_dtype, padded_inputs
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dtype, padded_inputs, skip_matrix
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.non_finite import confine_non_finite
 
@@ -71,7 +71,7 @@ def ssd_quadratic(
     D: torch.Tensor | None = None,
     dt_bias: torch.Tensor | None = None,
     dt_softplus: bool = True,
-    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    dt_limit: tuple[float, float] = NO_DT_LIMIT,
     initial_state: torch.Tensor | None = None,
     return_final_state: bool = False,
     block_size: int | None = None,
@@ -102,7 +102,7 @@ def ssd_quadratic(
     y_off = None
     if K > 1:
         y_off = below_diagonal(xc * delta[..., None], a.cumsum(dim=1), Bc, Cc, q).view(b * K, q, H, P)
-    D2 = None if D is None else D.to(ct)[:, None].expand(H, P) if D.dim() == 1 else D.to(ct)
+    D2 = skip_matrix(D, H, P, ct)
     n = b * K
     y = intra_chunk(xc.reshape(n, q, H, P), delta.reshape(n, q, H), a.view(n, q, H).transpose(1, 2),
                     Bc.reshape(n, q, G, N), Cc.reshape(n, q, G, N), D2, y_off).view(b, K * q, H, P)

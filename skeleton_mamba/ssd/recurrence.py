@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from einops import repeat
 
-from skeleton_mamba.ssd.discretize import apply_skip, check_inputs, compute_dtype, discretize_dt
+from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, apply_skip, check_inputs, compute_dtype, discretize_dt
 
 
 def ssd_recurrence(
@@ -23,7 +23,7 @@ def ssd_recurrence(
     D: torch.Tensor | None = None,
     dt_bias: torch.Tensor | None = None,
     dt_softplus: bool = True,
-    dt_limit: tuple[float, float] = (0.0, float("inf")),
+    dt_limit: tuple[float, float] = NO_DT_LIMIT,
     initial_state: torch.Tensor | None = None,
     return_final_state: bool = False,
 ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
