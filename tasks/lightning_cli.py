@@ -33,11 +33,17 @@ from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCL
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.checkpoints import load_checkpoint
+from skeleton_mamba.tasks.errors import InputError
 from skeleton_mamba.tasks.lightning_compat import install_accepted_links
 from skeleton_mamba.tasks.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
 from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty, resume_in_run_folder
-from skeleton_mamba.tasks.run_guards import InterruptRecorder, NonFiniteLossGuard, silence_interrupt_notice
+from skeleton_mamba.tasks.run_guards import (
+    InterruptRecorder,
+    NonFiniteLossGuard,
+    check_trained,
+    silence_interrupt_notice,
+)
 
 __all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "list_recipes", "run"]
 
@@ -81,15 +87,27 @@ def import_task_modules() -> list[str]:
     return imported
 
 
+class OneLineErrorParser(LightningArgumentParser):
+    """A parse error is an :class:`~skeleton_mamba.tasks.errors.InputError` on one line, which ``sm``
+    prints with exit status 2 like every command's errors (jsonargparse prints the whole usage first)."""
+
+    def error(self, message: str, ex: Exception | None = None):
+        if not self.exit_on_error:  # jsonargparse trying alternatives: it catches the ArgumentError
+            super().error(message, ex)
+        raise InputError(" ".join(line.strip() for line in message.splitlines() if line.strip())) from ex
+
+
 class SkeletonMambaCLI(LightningCLI):
     """LightningCLI with ``--recipe`` and the data-to-model links of :data:`DATA_TO_MODEL_LINKS`."""
 
     def init_parser(self, **kwargs) -> LightningArgumentParser:
-        """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``."""
+        """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``;
+        parse errors are one line (:class:`OneLineErrorParser`)."""
         kwargs.setdefault(
             "dump_header", [f"skeleton_mamba=={__version__}", f"lightning.pytorch=={pl.__version__}"]
         )
-        parser = self.parser_class(**kwargs)
+        custom = self.parser_class is not LightningArgumentParser
+        parser = (self.parser_class if custom else OneLineErrorParser)(**kwargs)
         parser.add_argument(
             "-c",
             "--config",
@@ -178,7 +196,7 @@ def run(argv: Sequence[str] | None = None) -> int:
     recorder = InterruptRecorder()
     silence_interrupt_notice()
     try:
-        SkeletonMambaCLI(
+        cli = SkeletonMambaCLI(
             LightningModule,
             LightningDataModule,
             subclass_mode_model=True,
@@ -190,6 +208,8 @@ def run(argv: Sequence[str] | None = None) -> int:
             },
             args=None if args == sys.argv[1:] else args,  # LightningCLI warns when both are given
         )
+        if cli.subcommand == "fit":
+            check_trained(cli.trainer)
     except SystemExit as err:
         _remove_empty_run_dirs(recorder)
         if recorder.stopped_by == "interrupt":  # Lightning turns Ctrl-C into sys.exit(1)

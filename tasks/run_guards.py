@@ -9,6 +9,9 @@ the batch rows whose tensors hold NaN or Inf). ``sm`` prints it on one line and 
 exit code (Lightning turns Ctrl-C into ``sys.exit(1)`` and SIGTERM into a ``SystemExit`` with code 0),
 and on SIGTERM during ``fit`` saves ``last.ckpt`` in the checkpoint folder so ``--ckpt_path last``
 resumes from the step where the run stopped.
+
+:func:`check_trained` makes a ``fit`` that ran no training batch (an empty training set, or one smaller
+than a batch with ``drop_last``) an error instead of a silent success with an empty run folder.
 """
 
 from __future__ import annotations
@@ -23,9 +26,15 @@ import lightning.pytorch as pl
 import torch
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 
-from skeleton_mamba.tasks.errors import NonFiniteLossError
+from skeleton_mamba.tasks.errors import InputError, NonFiniteLossError
 
-__all__ = ["InterruptRecorder", "NonFiniteLossGuard", "describe_batch", "silence_interrupt_notice"]
+__all__ = [
+    "InterruptRecorder",
+    "NonFiniteLossGuard",
+    "check_trained",
+    "describe_batch",
+    "silence_interrupt_notice",
+]
 
 _ID_KEYS = ("sample_id", "name", "frame_dir", "motion_id")
 MAX_LISTED = 8
@@ -139,3 +148,20 @@ def silence_interrupt_notice() -> None:
     logger = rank_zero.log  # the logger rank_zero_info writes to (Lightning sets it when imported)
     if not any(isinstance(f, _DropInterruptNotice) for f in logger.filters):
         logger.addFilter(_DropInterruptNotice())
+
+
+def check_trained(trainer: pl.Trainer) -> None:
+    """Raise :class:`~skeleton_mamba.tasks.errors.InputError` when ``trainer.fit`` ran no training batch."""
+    if trainer.num_training_batches != 0:
+        return
+    loader = trainer.train_dataloader
+    dataset = getattr(loader, "dataset", None)
+    try:
+        samples = f"{len(dataset)} training samples"
+    except TypeError:
+        samples = "a training set of unknown size"
+    batch = getattr(loader, "batch_size", None)
+    drop = " with drop_last" if getattr(loader, "drop_last", False) else ""
+    raise InputError(
+        f"the training data gives no batch ({samples}, batch_size {batch}{drop}); nothing was trained"
+    )

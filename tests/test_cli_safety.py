@@ -531,10 +531,10 @@ def test_prepare_with_every_file_bad_keeps_the_old_annotation_file(tmp_path, cap
 def test_a_yaml_syntax_error_names_the_recipe_file_and_line(tmp_path, capsys):
     recipe = tmp_path / "broken.yaml"
     recipe.write_text("trainer:\n  max_epochs: [1\nmodel: x\n")
-    with pytest.raises(SystemExit) as exit_info:
-        sm_main(["fit", "--recipe", str(recipe)])
-    assert exit_info.value.code == 2
-    assert f"{recipe}:3:6: YAML syntax error in the recipe" in capsys.readouterr().err
+    assert sm_main(["fit", "--recipe", str(recipe)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"sm fit: {recipe}:3:6: YAML syntax error in the recipe"), err
+    assert err.count("\n") == 1, err
 
 
 @pytest.mark.parametrize(
@@ -622,3 +622,16 @@ def test_a_checkpoint_with_nan_weights_is_refused_by_dance_and_generate(
     for line, path in zip(err, (ego, t2m)):
         assert f"{path}: weights are not finite (" in line and "1 of " in line and "NaN or Inf)" in line
     assert not out.exists()
+
+
+def test_fit_without_a_training_batch_is_an_error(tmp_path, monkeypatch, capsys):
+    """3 training samples, batch 8 with drop_last: no batch. One line, exit 2, no run folder left."""
+    monkeypatch.chdir(tmp_path)
+    args = ["fit", "--recipe", SYNTHETIC, "--data.init_args.train_per_class", "1"]
+    assert sm_main([*args, "--trainer.max_epochs", "1", "--trainer.enable_progress_bar", "false"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == (
+        "sm fit: the training data gives no batch (3 training samples, batch_size 8 with drop_last); "
+        "nothing was trained"
+    ), err
+    assert not any(p.is_dir() and any(p.iterdir()) for p in (tmp_path / "runs").glob("*/*"))
