@@ -187,7 +187,14 @@ def time_train_step(
 
 @torch.inference_mode()
 def time_sampling(
-    model, music, frames, diffusion, ddim_steps: int, step_repeats: int, max_run_s: float, ddpm_run: bool,
+    model,
+    music,
+    frames,
+    diffusion,
+    ddim_steps: int,
+    step_repeats: int,
+    max_run_s: float,
+    ddpm_run: bool,
     compile: bool = False,
 ) -> dict:
     """Condition encoding, the median guided step, and a real full DDIM run, for one sample.
@@ -223,8 +230,15 @@ def time_sampling(
     if ddim_estimate <= max_run_s:
         start = time.perf_counter()
         context = model.encode_condition(music, frames)  # a full run encodes its condition once
-        ddim_sample(diffusion, model, shape, cond=context, sampling_steps=ddim_steps, guidance_weight=2.0,
-                    device=music.device)
+        ddim_sample(
+            diffusion,
+            model,
+            shape,
+            cond=context,
+            sampling_steps=ddim_steps,
+            guidance_weight=2.0,
+            device=music.device,
+        )
         synchronize()
         ddim_s = time.perf_counter() - start
     ddpm_s = None
@@ -281,11 +295,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--compile", action="store_true",
-                    help="also time each denoiser's guided step compiled (torch.compile, weights frozen)")
-    ap.add_argument("--profile", type=int, default=0, metavar="N",
-                    help="print the N operators with the most self CPU time in one guided EMM sampling step "
-                         "(and the matrix products' share of it), then exit")
+    ap.add_argument(
+        "--compile",
+        action="store_true",
+        help="also time each denoiser's guided step compiled (torch.compile, weights frozen)",
+    )
+    ap.add_argument(
+        "--profile",
+        type=int,
+        default=0,
+        metavar="N",
+        help="print the N operators with the most self CPU time in one guided EMM sampling step "
+        "(and the matrix products' share of it), then exit",
+    )
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -333,8 +355,15 @@ def main(argv: list[str] | None = None) -> int:
             r["train_step_gflop_per_s"] = r["train_step_gflop"] / (r["train_step_ms"] / 1e3)
         r.update(
             time_sampling(
-                model, music[:1], frames, diffusion, args.ddim_steps, args.step_repeats, args.max_run_s,
-                args.ddpm_run, args.compile,
+                model,
+                music[:1],
+                frames,
+                diffusion,
+                args.ddim_steps,
+                args.step_repeats,
+                args.max_run_s,
+                args.ddpm_run,
+                args.compile,
             )
         )
         result["models"][name] = r
@@ -350,7 +379,8 @@ def main(argv: list[str] | None = None) -> int:
         k: e[k] / t[k]
         for k in e
         if k not in ("denoiser_params", "condition_encode_s", "compiled_max_abs_diff")
-        and e[k] is not None and t.get(k) is not None
+        and e[k] is not None
+        and t.get(k) is not None
     }
     print(json.dumps(result, indent=2) if args.json else result["ratios_emm_over_transformer"])
     return 0

@@ -92,8 +92,16 @@ def sdpa_gflop(batch: int, T: int) -> float:
     return (sdpa_flop_count(shape, shape, shape) + sdpa_backward_flop_count(shape, shape, shape, shape)) / 1e9
 
 
-def compiled_columns(inp: dict, small: dict, y_ref: torch.Tensor, chunk_size: int, impl: str, repeats: int,
-                     ssd_ms: float, sdpa_ms: float) -> dict:
+def compiled_columns(
+    inp: dict,
+    small: dict,
+    y_ref: torch.Tensor,
+    chunk_size: int,
+    impl: str,
+    repeats: int,
+    ssd_ms: float,
+    sdpa_ms: float,
+) -> dict:
     """The SSD forward + backward compiled by inductor (``torch.compile``, static shapes): its compile time
     (the first call), median ms, ratios and error against the float64 recurrence."""
     compiled = torch.compile(functools.partial(ssd, chunk_size=chunk_size, impl=impl), dynamic=False)
@@ -104,14 +112,27 @@ def compiled_columns(inp: dict, small: dict, y_ref: torch.Tensor, chunk_size: in
     ms = median_ms(run, repeats=repeats)
     with torch.no_grad():
         err = (compiled(**small).double() - y_ref).abs().max().item()
-    return dict(compiled_compile_s=round(compile_s, 1), compiled_ssd_ms=round(ms, 2),
-                compiled_max_abs_err=err, sdpa_over_compiled_ssd=round(sdpa_ms / ms, 2),
-                ssd_over_compiled_ssd=round(ssd_ms / ms, 2))
+    return dict(
+        compiled_compile_s=round(compile_s, 1),
+        compiled_ssd_ms=round(ms, 2),
+        compiled_max_abs_err=err,
+        sdpa_over_compiled_ssd=round(sdpa_ms / ms, 2),
+        ssd_over_compiled_ssd=round(ssd_ms / ms, 2),
+    )
 
 
-def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step_s: float | None,
-              err_batch: int, chunk_size: int, impl: str, gemm: dict,
-              compile: bool = False) -> tuple[dict, float | None]:
+def bench_row(
+    T: int,
+    batch: int,
+    repeats: int,
+    recurrence_budget_s: float,
+    step_s: float | None,
+    err_batch: int,
+    chunk_size: int,
+    impl: str,
+    gemm: dict,
+    compile: bool = False,
+) -> tuple[dict, float | None]:
     """One row; ``step_s`` is the recurrence time per time step measured on an earlier row."""
     inp = make_inputs(batch, T)
     ssd_run = fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl)
@@ -132,40 +153,62 @@ def bench_row(T: int, batch: int, repeats: int, recurrence_budget_s: float, step
         y_ref = ssd_recurrence(**{k: v.double() for k, v in small.items()})
         y_rec32 = ssd_recurrence(**small)
     err = (y.double() - y_ref).abs().max().item()
-    row = dict(T=T, batch=batch, ssd_ms=round(ssd_ms, 2),
-               recurrence_ms=None if recurrence_ms is None else round(recurrence_ms, 2),
-               sdpa_ms=round(sdpa_ms, 2), max_abs_err=err,
-               max_rel_err=err / y_ref.abs().max().item(),
-               fp32_recurrence_abs_err=(y_rec32.double() - y_ref).abs().max().item(),
-               sdpa_over_ssd=round(sdpa_ms / ssd_ms, 2),
-               finite_check_ms=round(check_ms, 3), finite_check_share=round(check_ms / ssd_ms, 4),
-               recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1),
-               ssd_rate=rate(matmul_gflop(ssd_run), ssd_ms, gemm),
-               sdpa_rate=rate(sdpa_gflop(batch, T), sdpa_ms, gemm))
+    row = dict(
+        T=T,
+        batch=batch,
+        ssd_ms=round(ssd_ms, 2),
+        recurrence_ms=None if recurrence_ms is None else round(recurrence_ms, 2),
+        sdpa_ms=round(sdpa_ms, 2),
+        max_abs_err=err,
+        max_rel_err=err / y_ref.abs().max().item(),
+        fp32_recurrence_abs_err=(y_rec32.double() - y_ref).abs().max().item(),
+        sdpa_over_ssd=round(sdpa_ms / ssd_ms, 2),
+        finite_check_ms=round(check_ms, 3),
+        finite_check_share=round(check_ms / ssd_ms, 4),
+        recurrence_over_ssd=None if recurrence_ms is None else round(recurrence_ms / ssd_ms, 1),
+        ssd_rate=rate(matmul_gflop(ssd_run), ssd_ms, gemm),
+        sdpa_rate=rate(sdpa_gflop(batch, T), sdpa_ms, gemm),
+    )
     if compile:
         row.update(compiled_columns(inp, small, y_ref, chunk_size, impl, repeats, ssd_ms, sdpa_ms))
     return row, step_s
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--lengths", type=int, nargs="+", default=[150, 1200, 4800])
-    parser.add_argument("--batch", type=int, nargs="+", default=None,
-                        help="batch per length (one value for all, or one per length); "
-                             f"default {TOKENS} tokens / T")
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs per median (after 1 warm-up); "
-                        "the recurrence runs once")
+    parser.add_argument(
+        "--batch",
+        type=int,
+        nargs="+",
+        default=None,
+        help=f"batch per length (one value for all, or one per length); default {TOKENS} tokens / T",
+    )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        help="timed runs per median (after 1 warm-up); the recurrence runs once",
+    )
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--chunk-size", type=int, default=64)
     parser.add_argument("--impl", default="torch", help="ssd impl (default: torch = auto without kernel)")
     parser.add_argument("--err-batch", type=int, default=2)
-    parser.add_argument("--recurrence-budget-s", type=float, default=40.0,
-                        help="skip the recurrence (null) where the cost measured at an earlier length "
-                             "predicts more than this many seconds")
+    parser.add_argument(
+        "--recurrence-budget-s",
+        type=float,
+        default=40.0,
+        help="skip the recurrence (null) where the cost measured at an earlier length "
+        "predicts more than this many seconds",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--compile", action="store_true",
-                        help="also time the SSD compiled (torch.compile, inductor) in the same run")
+    parser.add_argument(
+        "--compile",
+        action="store_true",
+        help="also time the SSD compiled (torch.compile, inductor) in the same run",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     batches = args.batch or [max(1, TOKENS // T) for T in args.lengths]
@@ -176,8 +219,18 @@ def main(argv: list[str] | None = None) -> int:
     gemm_before = gemm_gflop_per_s()
     rows, step_s = [], None
     for T, batch in zip(args.lengths, batches):
-        row, step_s = bench_row(T, batch, args.repeats, args.recurrence_budget_s, step_s, args.err_batch,
-                                args.chunk_size, args.impl, gemm_before, args.compile)
+        row, step_s = bench_row(
+            T,
+            batch,
+            args.repeats,
+            args.recurrence_budget_s,
+            step_s,
+            args.err_batch,
+            args.chunk_size,
+            args.impl,
+            gemm_before,
+            args.compile,
+        )
         rows.append(row)
         if not args.json:
             print(row, flush=True)

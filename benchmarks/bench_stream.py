@@ -155,8 +155,15 @@ def compiled_and_eager(model, backbone_step, count: int) -> dict:
     }
 
 
-def measure(width: str, frames: int, window: int, window_repeats: int, minutes: list[float],
-            memory_only: bool = False, compile_mode: str | None = None) -> dict:
+def measure(
+    width: str,
+    frames: int,
+    window: int,
+    window_repeats: int,
+    minutes: list[float],
+    memory_only: bool = False,
+    compile_mode: str | None = None,
+) -> dict:
     """All figures of one width (run in a subprocess); ``compile_mode``: None, or "default" (or a
     ``torch.compile`` mode) to add the compiled step."""
     import numpy as np
@@ -316,10 +323,18 @@ def main() -> int:
         "which keeps 2 threads usable on a loaded machine)",
     )
     p.add_argument("--memory-only", action="store_true", help="only the resident-memory figures (no timing)")
-    p.add_argument("--profile", type=int, default=0, metavar="N",
-                   help="print the N operators with the most self CPU time over 20 steps and exit")
-    p.add_argument("--adaptive-malloc", action="store_true",
-                   help="leave glibc's adaptive malloc thresholds (default: keep_freed_memory, as sm stream)")
+    p.add_argument(
+        "--profile",
+        type=int,
+        default=0,
+        metavar="N",
+        help="print the N operators with the most self CPU time over 20 steps and exit",
+    )
+    p.add_argument(
+        "--adaptive-malloc",
+        action="store_true",
+        help="leave glibc's adaptive malloc thresholds (default: keep_freed_memory, as sm stream)",
+    )
     p.add_argument(
         "--compile",
         nargs="?",
@@ -345,7 +360,12 @@ def main() -> int:
             print(json.dumps({"width": args.width_only, "profiled": True}))
             return 0
         figures = measure(
-            args.width_only, args.frames, args.window, args.window_repeats, minutes, args.memory_only,
+            args.width_only,
+            args.frames,
+            args.window,
+            args.window_repeats,
+            minutes,
+            args.memory_only,
             args.compile,
         )
         print(json.dumps(figures))

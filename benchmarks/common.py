@@ -57,8 +57,13 @@ def gemm_gflop_per_s(sizes: tuple[int, ...] = (1024, 2048, 4096), repeats: int =
         ms = median_ms(lambda a=a, b=b: a @ b, repeats=repeats, warmup=1)
         by_size[str(n)] = round(2 * n**3 / (ms / 1e3) / 1e9, 1)
     best = max(by_size, key=by_size.get)
-    return {"gflop_per_s": by_size[best], "size": int(best), "by_size": by_size,
-            "threads": torch.get_num_threads(), "device": device}
+    return {
+        "gflop_per_s": by_size[best],
+        "size": int(best),
+        "by_size": by_size,
+        "threads": torch.get_num_threads(),
+        "device": device,
+    }
 
 
 def matmul_gflop(fn: Callable[[], object]) -> float:
@@ -74,13 +79,23 @@ def matmul_gflop(fn: Callable[[], object]) -> float:
 def rate(gflop: float, ms: float, gemm: dict) -> dict:
     """Achieved GFLOP/s of ``gflop`` done in ``ms`` milliseconds, and its fraction of the GEMM rate."""
     achieved = gflop / (ms / 1e3)
-    return {"gflop": round(gflop, 3), "gflop_per_s": round(achieved, 1),
-            "fraction_of_gemm": round(achieved / gemm["gflop_per_s"], 3)}
+    return {
+        "gflop": round(gflop, 3),
+        "gflop_per_s": round(achieved, 1),
+        "fraction_of_gemm": round(achieved / gemm["gflop_per_s"], 3),
+    }
 
 
 # Matrix-product operators (the GEMM rate's work); the rest is element-wise work, copies and reductions.
-GEMM_OPERATORS = ("aten::mm", "aten::addmm", "aten::bmm", "aten::baddbmm", "aten::baddbmm_",
-                  "mkldnn::_linear_pointwise", "aten::_scaled_dot_product_flash_attention_for_cpu")
+GEMM_OPERATORS = (
+    "aten::mm",
+    "aten::addmm",
+    "aten::bmm",
+    "aten::baddbmm",
+    "aten::baddbmm_",
+    "mkldnn::_linear_pointwise",
+    "aten::_scaled_dot_product_flash_attention_for_cpu",
+)
 
 
 def operator_profile(fn: Callable[[], object], rows: int = 25) -> tuple[str, float]:

@@ -59,9 +59,7 @@ class SkeletonMambaBlock(nn.Module):
         self.norm_joint = nn.LayerNorm(width)
         self.joint_scan = JointScan(dim, group_size, mixer=mixer)
         self.norm_time = nn.LayerNorm(dim)
-        self.temporal_scan = TemporalScan(
-            dim, mixer=mixer, slice_elements=slice_elements, causal=causal
-        )
+        self.temporal_scan = TemporalScan(dim, mixer=mixer, slice_elements=slice_elements, causal=causal)
         self.cross_attention = None
         if context_dim is not None:
             self.norm_context = nn.LayerNorm(dim)

@@ -7,7 +7,7 @@ Inductor fuses chains of them into single loops, and with ``freezing`` it treats
 constants: it folds what depends only on them (e.g. ``-exp(A_log)``) and prepacks the weights of the
 matrix products for oneDNN. :func:`compile_for_inference` compiles any module or function so (the EMM
 denoiser: ``tasks/egodance/sampling.py``, ``CompiledDenoiser``); frozen means frozen: the compiled
-function keeps the parameter values of its first call. ``benchmarks/README.md`` has the measured gains.
+function keeps the parameter values of its first call.
 
 The frame step of a causal SkeletonMamba:
 
@@ -24,9 +24,9 @@ projections for oneDNN and fuses the element-wise operators into C++ loops.
   unchanged, updated in place: the compiled graph writes the new convolution and SSD states back
   into the state's tensors).
 - Compiling happens on the first call. It needs a C++ compiler (inductor's CPU backend) and takes
-  a minute or more at the paper width on 2 cores (measured: 60 to 70 s on a quiet machine, 10 minutes
-  the first time on one loaded with other jobs); inductor keeps the compiled graph and kernels on disk
-  (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``): 23 to 36 s the next time.
+  about a minute at the paper width on 2 cores, much longer on a loaded machine; inductor keeps the
+  compiled graph and kernels on disk (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``),
+  so the next time is faster.
 - The graph is specialised to the input signature: batch size, dtype, device, the context's shape,
   and whether the tensors are inference tensors (made under ``torch.inference_mode``) or not: make the
   frames and the state the same way as for the first call. A new signature compiles again. After
@@ -71,9 +71,7 @@ def compile_for_inference(
 
     Freezing is set in inductor's configuration around every call (compiling happens inside the call),
     not as a ``torch.compile`` option: passed as an option (torch 2.13) it has no effect, the weights
-    stay inputs of the graph and its matrix products plain ``mm`` on them (measured: 26.5 vs 22.4 ms
-    per paper-width stream frame, ``benchmarks/README.md``). ``tests/test_compiling.py`` checks that
-    frozen weights are constants of the compiled function.
+    stay inputs of the graph and its matrix products plain ``mm`` on them.
     """
     options = dict(torch._inductor.list_mode_options(mode)) if mode else {}
     compiled = torch.compile(fn, backend="inductor", fullgraph=fullgraph, dynamic=False, options=options)

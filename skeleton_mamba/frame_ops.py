@@ -7,9 +7,8 @@ the Joint Scan (G sequences of P = 6 joint tokens) from a zero state. :class:`Fr
 - :func:`linear`: a Linear on a few tokens. The step of the seed-size model is bound by reading its
   weights (about 150 MB per frame, most of it the Group Scan's projections, each applied to 5
   tokens). oneDNN's inner product reads a (out, in) weight faster than the default CPU GEMM at
-  such shapes (0.71x the time at 5 x 768 x 3224, 0.74x at 5 x 1536 x 768; ``benchmarks/README.md``,
-  Streaming), so the large fp32 projections go through it; small ones and other dtypes stay on
-  ``F.linear``, which was as fast or faster there.
+  such shapes, so the large fp32 projections go through it; small ones and other dtypes stay on
+  ``F.linear``, as fast or faster there.
 - :func:`short_mix`: at such sizes the cost of the sequence path (:meth:`Mamba2Mixer.mix`:
   autograd functions, tiling, the finiteness check of the SSD matrix forms) is the number of
   operations, not arithmetic. It computes the same quantity, ``mixer.mix(zxbcdt)``, by the
@@ -26,7 +25,7 @@ token makes the whole sequence's output non-finite (the matrix form multiplies i
 the mask), where the sequence path confines it to the later tokens
 (``skeleton_mamba/ssd/non_finite.py``). In a frame this changes nothing: the Group Scan's
 un-permuting average mixes every path position into every group, so one NaN joint makes the whole
-frame NaN either way (``tests/test_streaming.py``).
+frame NaN either way.
 """
 
 from __future__ import annotations

@@ -153,7 +153,10 @@ class Mamba2Mixer(nn.Module):
         return self.out_proj(self.mix(self.in_proj(u)))
 
     def allocate_inference_cache(
-        self, batch_size: int, max_seqlen: int | None = None, dtype: torch.dtype | None = None,
+        self,
+        batch_size: int,
+        max_seqlen: int | None = None,
+        dtype: torch.dtype | None = None,
         device: torch.device | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Zero states for :meth:`step`, as ``mamba_ssm.Mamba2.allocate_inference_cache``.

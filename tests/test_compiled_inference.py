@@ -75,7 +75,11 @@ def test_compiled_emm_denoiser_equals_eager():
     torch._dynamo.reset()
     torch.manual_seed(0)
     backbone = SkeletonMambaConfig(
-        dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16),
+        dim=16,
+        depth=1,
+        heads=2,
+        mlp_dim=32,
+        mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16),
         cpu_slice_elements=2048,  # eager runs in slices of frames; compiled in one call
     )
     model = EMM(backbone, EMMConfig(context_dim=16, use_vision=False, heads=2, transformer_ff=32)).eval()

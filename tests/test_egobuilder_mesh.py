@@ -55,8 +55,9 @@ def test_mesh_inside_a_wall_is_rejected_and_a_free_one_passes(tiny_model):
     inside = rest_body(model, (1.3, 1.0, 0.0))
     assert mesh_penetration_score(scene, inside.vertices, inside.joints, inside.anchor) > 2.0
     free = rest_body(model, (-2.5, 1.0, 0.0))
-    placement = random_placement(free.joints, boxes_scene([FLOOR]), np.random.default_rng(0), 0.0,
-                                 float(free.vertices[..., 1].min()))
+    placement = random_placement(
+        free.joints, boxes_scene([FLOOR]), np.random.default_rng(0), 0.0, float(free.vertices[..., 1].min())
+    )
     placed_v, placed_j = place_points(free.vertices, placement), place_points(free.joints, placement)
     assert placed_v[..., 1].min() == pytest.approx(0.0, abs=1e-12)  # the lowest vertex on the floor y = 0
     assert mesh_penetration_score(boxes_scene([FLOOR]), placed_v, placed_j, free.anchor) == pytest.approx(0.0)
@@ -121,8 +122,15 @@ def test_build_with_smpl_model_places_and_skips(tmp_path, tiny_model):
     assert json.loads((out / "build.json").read_text())["smpl_model"] == str(path.resolve())
 
     cfg = BuildConfig(
-        out=str(tmp_path / "blocked"), scenes=str(blocked_file), fps=10, window_s=1.0, width=8, height=8,
-        max_attempts=2, smpl_model=str(path), progress=False,
+        out=str(tmp_path / "blocked"),
+        scenes=str(blocked_file),
+        fps=10,
+        window_s=1.0,
+        width=8,
+        height=8,
+        max_attempts=2,
+        smpl_model=str(path),
+        progress=False,
     )
     (task,) = plan_windows(cfg, [motion])
     result = build_window(task, cfg)

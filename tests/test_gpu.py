@@ -65,8 +65,13 @@ def test_gpu_check_says_when_no_gpu_is_present(tmp_path):
     if torch.cuda.is_available():
         pytest.skip("a CUDA device is present: the script would run the real check")
     env = {**os.environ, "GPU_CHECK_PYTHON": sys.executable, "GPU_CHECK_VENV": str(tmp_path / "venv")}
-    out = subprocess.run(["bash", str(REPO / "benchmarks" / "gpu_check.sh")], capture_output=True, text=True,
-                         env=env, timeout=120)
+    out = subprocess.run(
+        ["bash", str(REPO / "benchmarks" / "gpu_check.sh")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert out.returncode == 3, out.stdout + out.stderr
     assert "no CUDA GPU" in out.stderr
     assert not (tmp_path / "venv").exists()
@@ -83,9 +88,15 @@ def test_kernel_equals_pure_pytorch_ssd_forward_and_backward():
     cuda_kernel_or_skip()
     g = torch.Generator().manual_seed(0)
     b, T, h, p, n = 2, 300, 4, 32, 16
-    inp = dict(x=torch.randn(b, T, h, p, generator=g), dt=torch.randn(b, T, h, generator=g),
-               A=-torch.rand(h, generator=g) * 8 - 1, B=torch.randn(b, T, 1, n, generator=g),
-               C=torch.randn(b, T, 1, n, generator=g), D=torch.ones(h), dt_bias=torch.full((h,), -2.0))
+    inp = dict(
+        x=torch.randn(b, T, h, p, generator=g),
+        dt=torch.randn(b, T, h, generator=g),
+        A=-torch.rand(h, generator=g) * 8 - 1,
+        B=torch.randn(b, T, 1, n, generator=g),
+        C=torch.randn(b, T, 1, n, generator=g),
+        D=torch.ones(h),
+        dt_bias=torch.full((h,), -2.0),
+    )
     results = {}
     for impl in ("kernel", "chunked"):
         leaves = {k: v.cuda().requires_grad_(True) for k, v in inp.items()}
@@ -101,9 +112,16 @@ def test_kernel_equals_pure_pytorch_ssd_forward_and_backward():
 def test_backbone_on_the_kernel_equals_the_pure_pytorch_backbone():
     cuda_kernel_or_skip()
     torch.manual_seed(0)
+
     def config(use_kernel: bool) -> SkeletonMambaConfig:
-        return SkeletonMambaConfig(skeleton="smpl24", in_channels=9, dim=32, depth=2, mlp_dim=64,
-                                   mixer=MixerConfig(headdim=16, d_state=16, use_kernel=use_kernel))
+        return SkeletonMambaConfig(
+            skeleton="smpl24",
+            in_channels=9,
+            dim=32,
+            depth=2,
+            mlp_dim=64,
+            mixer=MixerConfig(headdim=16, d_state=16, use_kernel=use_kernel),
+        )
 
     fast = SkeletonMamba(config(True)).cuda()
     plain = SkeletonMamba(config(False)).cuda()

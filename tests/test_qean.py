@@ -219,9 +219,7 @@ def test_model_output_shape_and_mamba_variant():
     assert any("backbone" in name for name, _ in mamba.named_parameters())
 
 
-@pytest.mark.parametrize(
-    "variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder"]
-)
+@pytest.mark.parametrize("variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder"])
 def test_generation_length_and_fast_equals_plain(variant):
     torch.manual_seed(0)
     backbone = SkeletonMambaConfig(

@@ -25,9 +25,14 @@ def make_inputs(b, L, H, P, G, N, dtype=F64, seed=0, d_shape="h"):
     g = torch.Generator().manual_seed(seed)
     r = lambda *s: torch.randn(*s, generator=g, dtype=F64)  # noqa: E731
     inp = dict(
-        x=r(b, L, H, P), dt=r(b, L, H), A=-(0.5 + 7.5 * torch.rand(H, generator=g, dtype=F64)),
-        B=r(b, L, G, N), C=r(b, L, G, N),
-        D=r(H) if d_shape == "h" else r(H, P), dt_bias=r(H) - 1.0, initial_state=r(b, H, P, N),
+        x=r(b, L, H, P),
+        dt=r(b, L, H),
+        A=-(0.5 + 7.5 * torch.rand(H, generator=g, dtype=F64)),
+        B=r(b, L, G, N),
+        C=r(b, L, G, N),
+        D=r(H) if d_shape == "h" else r(H, P),
+        dt_bias=r(H) - 1.0,
+        initial_state=r(b, H, P, N),
     )
     return {k: v.to(dtype) for k, v in inp.items()}
 
@@ -49,20 +54,21 @@ def naive_matrix_form(x, dt, A, B, C, D, dt_bias, h0):
             a = [math.exp(delta[t] * float(A[h])) for t in range(L)]
             for i in range(L):
                 for j in range(i + 1):
-                    m = math.prod(a[j + 1:i + 1])
+                    m = math.prod(a[j + 1 : i + 1])
                     cb = float(C[bi, i, g] @ B[bi, j, g])
                     y[bi, i, h] += m * cb * delta[j] * x[bi, j, h]
-                y[bi, i, h] += math.prod(a[:i + 1]) * (h0[bi, h] @ C[bi, i, g]) + D[h] * x[bi, i, h]
+                y[bi, i, h] += math.prod(a[: i + 1]) * (h0[bi, h] @ C[bi, i, g]) + D[h] * x[bi, i, h]
             final[bi, h] = math.prod(a) * h0[bi, h]
             for j in range(L):
-                final[bi, h] += math.prod(a[j + 1:]) * delta[j] * torch.outer(x[bi, j, h], B[bi, j, g])
+                final[bi, h] += math.prod(a[j + 1 :]) * delta[j] * torch.outer(x[bi, j, h], B[bi, j, g])
     return y, final
 
 
 def test_recurrence_equals_loop_built_matrix_form():
     inp = make_inputs(2, 7, 4, 3, 2, 5, seed=1)
-    y_ref, f_ref = naive_matrix_form(*(inp[k] for k in ("x", "dt", "A", "B", "C", "D", "dt_bias",
-                                                         "initial_state")))
+    y_ref, f_ref = naive_matrix_form(
+        *(inp[k] for k in ("x", "dt", "A", "B", "C", "D", "dt_bias", "initial_state"))
+    )
     y, f = ssd_recurrence(**inp, return_final_state=True)
     torch.testing.assert_close(y, y_ref, rtol=1e-12, atol=1e-12)
     torch.testing.assert_close(f, f_ref, rtol=1e-12, atol=1e-12)
@@ -74,7 +80,7 @@ def test_decay_mask_matches_stable_segsum_and_loops():
     torch.testing.assert_close(mask, segsum_stable(a).exp(), rtol=1e-12, atol=0)
     for i in range(9):
         for j in range(9):
-            expected = math.exp(float(a[1, j + 1:i + 1].sum())) if i >= j else 0.0
+            expected = math.exp(float(a[1, j + 1 : i + 1].sum())) if i >= j else 0.0
             assert mask[1, i, j].item() == pytest.approx(expected, rel=1e-12, abs=0)
     # fp32: the cumsum-difference mask stays within 1e-5 relative of the fp64 stable mask for
     # chunk-length sums (|cs| up to 64 * 2 = 128).
@@ -109,9 +115,17 @@ def test_matrix_forms_equal_recurrence_fp64(shape, fn):
 
 
 @given(
-    b=st.integers(1, 2), L=st.integers(1, 30), H=st.sampled_from([1, 2, 4]), P=st.integers(1, 4),
-    G=st.sampled_from([1, 2]), N=st.integers(1, 4), Q=st.integers(1, 12),
-    use_d=st.booleans(), use_bias=st.booleans(), use_h0=st.booleans(), final=st.booleans(),
+    b=st.integers(1, 2),
+    L=st.integers(1, 30),
+    H=st.sampled_from([1, 2, 4]),
+    P=st.integers(1, 4),
+    G=st.sampled_from([1, 2]),
+    N=st.integers(1, 4),
+    Q=st.integers(1, 12),
+    use_d=st.booleans(),
+    use_bias=st.booleans(),
+    use_h0=st.booleans(),
+    final=st.booleans(),
 )
 @settings(max_examples=25, deadline=None)
 def test_optional_arguments_hypothesis(b, L, H, P, G, N, Q, use_d, use_bias, use_h0, final):
@@ -121,9 +135,11 @@ def test_optional_arguments_hypothesis(b, L, H, P, G, N, Q, use_d, use_bias, use
     inp["dt_bias"] = inp["dt_bias"] if use_bias else None
     inp["initial_state"] = inp["initial_state"] if use_h0 else None
     ref = ssd_recurrence(**inp, return_final_state=final)
-    for out in (ssd_chunked(**inp, return_final_state=final, chunk_size=Q),
-                ssd_quadratic(**inp, return_final_state=final),
-                ssd(**inp, return_final_state=final, chunk_size=Q)):
+    for out in (
+        ssd_chunked(**inp, return_final_state=final, chunk_size=Q),
+        ssd_quadratic(**inp, return_final_state=final),
+        ssd(**inp, return_final_state=final, chunk_size=Q),
+    ):
         if final:
             torch.testing.assert_close(out[1], ref[1], rtol=1e-10, atol=1e-10)
             out, expected = out[0], ref[0]
@@ -151,7 +167,8 @@ def grads(fn, inp, **kw):
     y, f = fn(**leaves, return_final_state=True, **kw)
     g = torch.Generator().manual_seed(11)
     loss = (y * torch.randn(y.shape, generator=g, dtype=y.dtype)).sum() + (
-        f * torch.randn(f.shape, generator=g, dtype=f.dtype)).sum()
+        f * torch.randn(f.shape, generator=g, dtype=f.dtype)
+    ).sum()
     loss.backward()
     return {k: leaves[k].grad for k in GRAD_NAMES}
 
@@ -173,8 +190,10 @@ def test_gradients_without_state_or_skip():
     for k in ("D", "initial_state"):
         inp[k] = None
     for fn, kw in ((ssd_chunked, {"chunk_size": 4}), (ssd_quadratic, {})):
-        leaves = [{k: v.clone().requires_grad_(True) if v is not None else None for k, v in inp.items()}
-                  for _ in range(2)]
+        leaves = [
+            {k: v.clone().requires_grad_(True) if v is not None else None for k, v in inp.items()}
+            for _ in range(2)
+        ]
         ssd_recurrence(**leaves[0]).pow(2).sum().backward()
         fn(**leaves[1], **kw).pow(2).sum().backward()
         for k in ("x", "dt", "A", "B", "C", "dt_bias"):
@@ -184,8 +203,11 @@ def test_gradients_without_state_or_skip():
 def test_dt_limit_and_no_softplus():
     inp = make_inputs(1, 10, 2, 2, 1, 3, seed=2)
     inp["dt"], inp["dt_bias"] = inp["dt"].abs(), inp["dt_bias"].abs()  # Δ >= 0 without the softplus
-    limits = ({"dt_limit": (0.2, 0.5)}, {"dt_softplus": False},
-              {"dt_softplus": False, "dt_limit": (0.3, 1.0)})
+    limits = (
+        {"dt_limit": (0.2, 0.5)},
+        {"dt_softplus": False},
+        {"dt_softplus": False, "dt_limit": (0.3, 1.0)},
+    )
     for kw in limits:
         ref = ssd_recurrence(**inp, **kw)
         torch.testing.assert_close(ssd_chunked(**inp, chunk_size=3, **kw), ref, rtol=1e-10, atol=1e-10)
@@ -238,16 +260,48 @@ def install_fake_mamba_ssm(monkeypatch, calls):
         monkeypatch.setitem(sys.modules, name, mod)
 
     def mamba_chunk_scan_combined(
-        x, dt, A, B, C, chunk_size, D=None, z=None, dt_bias=None, initial_states=None, seq_idx=None,
-        cu_seqlens=None, dt_softplus=False, dt_limit=(0.0, float("inf")), return_final_states=False,
+        x,
+        dt,
+        A,
+        B,
+        C,
+        chunk_size,
+        D=None,
+        z=None,
+        dt_bias=None,
+        initial_states=None,
+        seq_idx=None,
+        cu_seqlens=None,
+        dt_softplus=False,
+        dt_limit=(0.0, float("inf")),
+        return_final_states=False,
         return_varlen_states=False,
     ):
-        calls.append(dict(chunk_size=chunk_size, D=D, z=z, dt_bias=dt_bias, initial_states=initial_states,
-                          dt_softplus=dt_softplus, dt_limit=dt_limit,
-                          return_final_states=return_final_states))
-        return ssd_recurrence(x, dt, A, B, C, D=D, dt_bias=dt_bias, dt_softplus=dt_softplus,
-                              dt_limit=dt_limit, initial_state=initial_states,
-                              return_final_state=return_final_states)
+        calls.append(
+            dict(
+                chunk_size=chunk_size,
+                D=D,
+                z=z,
+                dt_bias=dt_bias,
+                initial_states=initial_states,
+                dt_softplus=dt_softplus,
+                dt_limit=dt_limit,
+                return_final_states=return_final_states,
+            )
+        )
+        return ssd_recurrence(
+            x,
+            dt,
+            A,
+            B,
+            C,
+            D=D,
+            dt_bias=dt_bias,
+            dt_softplus=dt_softplus,
+            dt_limit=dt_limit,
+            initial_state=initial_states,
+            return_final_state=return_final_states,
+        )
 
     sys.modules[names[-1]].mamba_chunk_scan_combined = mamba_chunk_scan_combined
 
@@ -313,14 +367,17 @@ def test_quadratic_blocks_equal_recurrence_fp64(L, block):
     inp["initial_state"] = None
     ref = ssd_recurrence(**inp)
     torch.testing.assert_close(ssd_quadratic(**inp, block_size=block), ref, rtol=1e-10, atol=1e-10)
-    leaves = [{k: v.clone().requires_grad_(True) if v is not None else None for k, v in inp.items()}
-              for _ in range(2)]
+    leaves = [
+        {k: v.clone().requires_grad_(True) if v is not None else None for k, v in inp.items()}
+        for _ in range(2)
+    ]
     w = torch.randn(ref.shape, generator=torch.Generator().manual_seed(3), dtype=F64)
     (ssd_recurrence(**leaves[0]) * w).sum().backward()
     (ssd_quadratic(**leaves[1], block_size=block) * w).sum().backward()
     for k in ("x", "dt", "A", "B", "C", "D", "dt_bias"):
-        torch.testing.assert_close(leaves[1][k].grad, leaves[0][k].grad, rtol=1e-9, atol=1e-9,
-                                   msg=lambda m, k=k: f"grad {k}: {m}")
+        torch.testing.assert_close(
+            leaves[1][k].grad, leaves[0][k].grad, rtol=1e-9, atol=1e-9, msg=lambda m, k=k: f"grad {k}: {m}"
+        )
 
 
 def test_auto_dispatch_uses_blocks(monkeypatch):
@@ -341,9 +398,15 @@ def mamba2_init_inputs(b, L, H, P, N, seed):
     delta0[0] = 0.1  # the fastest decay of the range: |cs| reaches ~10²
     A = -torch.empty(H).uniform_(1.0, 16.0, generator=g)
     A[0] = -16.0
-    return dict(x=torch.randn(b, L, H, P, generator=g), dt=torch.randn(b, L, H, generator=g), A=A,
-                B=torch.randn(b, L, 1, N, generator=g), C=torch.randn(b, L, 1, N, generator=g),
-                D=torch.ones(H), dt_bias=delta0 + torch.log(-torch.expm1(-delta0)))
+    return dict(
+        x=torch.randn(b, L, H, P, generator=g),
+        dt=torch.randn(b, L, H, generator=g),
+        A=A,
+        B=torch.randn(b, L, 1, N, generator=g),
+        C=torch.randn(b, L, 1, N, generator=g),
+        D=torch.ones(H),
+        dt_bias=delta0 + torch.log(-torch.expm1(-delta0)),
+    )
 
 
 @pytest.mark.parametrize("L", [150, 300])
@@ -354,8 +417,12 @@ def test_fp32_accuracy_at_fast_decay(L):
     y_ref = ssd_recurrence(**{k: v.double() for k, v in inp.items()})
     delta = torch.nn.functional.softplus(inp["dt"] + inp["dt_bias"]).double()
     assert (delta * inp["A"].double()).sum(1).min() < -200  # the hard regime is really exercised
-    for y in (ssd_quadratic(**inp), ssd_quadratic(**inp, block_size=L), ssd_chunked(**inp, chunk_size=64),
-              ssd(**inp)):
+    for y in (
+        ssd_quadratic(**inp),
+        ssd_quadratic(**inp, block_size=L),
+        ssd_chunked(**inp, chunk_size=64),
+        ssd(**inp),
+    ):
         assert y.dtype == torch.float32
         assert (y.double() - y_ref).abs().max() <= 1e-5
 
@@ -373,7 +440,7 @@ def test_split_cumsum_gives_float64_mask():
     # entries are ≤ 1: the absolute error is the one that reaches y; the relative error grows as
     # u·|cs_i - cs_j| (exp of a correctly rounded difference), which is what bounds it here
     assert (mask - exact).abs().max() < 4e-7
-    log_gap = (segsum_stable(a).clamp_min(-80.0).abs() + 2.0)
+    log_gap = segsum_stable(a).clamp_min(-80.0).abs() + 2.0
     ok = exact > 1e-30
     assert ((mask - exact).abs() / exact)[ok].le(2 * 2.0**-24 * log_gap[ok]).all()
     assert (decay_mask(hi).double() - exact).abs().max() > 5e-6  # rounding cs to fp32 alone is not enough

@@ -12,8 +12,15 @@ TINY_MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)
 def _causal_model(skeleton: str, context_dim=None, mixer=TINY_MIXER, seed=0) -> SkeletonMamba:
     torch.manual_seed(seed)
     cfg = SkeletonMambaConfig(
-        skeleton=skeleton, in_channels=3, out_channels=5, dim=16, depth=2, mlp_dim=32,
-        context_dim=context_dim, mixer=mixer, causal=True,
+        skeleton=skeleton,
+        in_channels=3,
+        out_channels=5,
+        dim=16,
+        depth=2,
+        mlp_dim=32,
+        context_dim=context_dim,
+        mixer=mixer,
+        causal=True,
     )
     model = SkeletonMamba(cfg).double().eval()
     # Random A, dt and D (the initialisation makes D = 1 and A alike across heads).
@@ -58,8 +65,15 @@ def test_causal_forward_ignores_the_future_and_bidirectional_does_not():
         y, y2 = causal(x), causal(x2)
     torch.testing.assert_close(y[:, :12], y2[:, :12], rtol=0, atol=1e-12)
     assert not torch.allclose(y[:, 12:], y2[:, 12:])
-    bidir = SkeletonMamba(SkeletonMambaConfig(skeleton="ntu25", in_channels=3, dim=16, depth=1, mlp_dim=32,
-                                              mixer=TINY_MIXER)).double().eval()
+    bidir = (
+        SkeletonMamba(
+            SkeletonMambaConfig(
+                skeleton="ntu25", in_channels=3, dim=16, depth=1, mlp_dim=32, mixer=TINY_MIXER
+            )
+        )
+        .double()
+        .eval()
+    )
     with torch.no_grad():
         assert not torch.allclose(bidir(x)[:, :12], bidir(x2)[:, :12])
     # The causal Temporal Scan has one direction only.
@@ -129,8 +143,9 @@ def test_float32_step_matches_the_forward():
 
 
 def test_bad_use_is_explained():
-    bidir = SkeletonMamba(SkeletonMambaConfig(skeleton="ntu25", in_channels=3, dim=16, depth=1, mlp_dim=32,
-                                              mixer=TINY_MIXER))
+    bidir = SkeletonMamba(
+        SkeletonMambaConfig(skeleton="ntu25", in_channels=3, dim=16, depth=1, mlp_dim=32, mixer=TINY_MIXER)
+    )
     with pytest.raises(ValueError, match="causal"):
         bidir.init_state(1)
     model = _causal_model("ntu25")

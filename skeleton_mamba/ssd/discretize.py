@@ -40,21 +40,25 @@ def check_inputs(
     if tuple(A.shape) != (H,):
         raise ValueError(f"ssd: A must be (heads,) = ({H},), got {tuple(A.shape)}")
     if B.dim() != 4 or B.shape[:2] != (b, L):
-        raise ValueError(f"ssd: B must be (batch, length, groups, state) with batch, length = {b, L}, "
-                         f"got {tuple(B.shape)}")
+        raise ValueError(
+            f"ssd: B must be (batch, length, groups, state) with batch, length = {b, L}, got {tuple(B.shape)}"
+        )
     if tuple(C.shape) != tuple(B.shape):
         raise ValueError(f"ssd: C must have the shape of B {tuple(B.shape)}, got {tuple(C.shape)}")
     G, N = B.shape[2], B.shape[3]
     if G == 0 or H % G:
         raise ValueError(f"ssd: {H} heads cannot be split evenly over {G} B/C groups")
     if D is not None and tuple(D.shape) not in ((H,), (H, P)):
-        raise ValueError(f"ssd: D must be (heads,) or (heads, headdim) = ({H},) or ({H}, {P}), "
-                         f"got {tuple(D.shape)}")
+        raise ValueError(
+            f"ssd: D must be (heads,) or (heads, headdim) = ({H},) or ({H}, {P}), got {tuple(D.shape)}"
+        )
     if dt_bias is not None and tuple(dt_bias.shape) != (H,):
         raise ValueError(f"ssd: dt_bias must be (heads,) = ({H},), got {tuple(dt_bias.shape)}")
     if initial_state is not None and tuple(initial_state.shape) != (b, H, P, N):
-        raise ValueError(f"ssd: initial_state must be (batch, heads, headdim, state) = {(b, H, P, N)}, "
-                         f"got {tuple(initial_state.shape)}")
+        raise ValueError(
+            f"ssd: initial_state must be (batch, heads, headdim, state) = {(b, H, P, N)}, "
+            f"got {tuple(initial_state.shape)}"
+        )
 
 
 def discretize_dt(

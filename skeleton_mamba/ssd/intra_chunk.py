@@ -51,8 +51,9 @@ def _tiles(n: int, per_item: int) -> list[tuple[int, int]]:
     return [(i, min(n, i + step)) for i in range(0, n, step)]
 
 
-def split_cumsum(cs: torch.Tensor, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor | None,
-                                                                  torch.Tensor | None]:
+def split_cumsum(
+    cs: torch.Tensor, dtype: torch.dtype
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
     """hi = cs rounded to ``dtype`` and the factors r = exp(cs - hi), c = exp(hi - cs) in ``dtype``.
 
     r and c are ``None`` when cs already has ``dtype`` (nothing was rounded).
@@ -175,8 +176,7 @@ class IntraChunk(torch.autograd.Function):
                 dD += torch.linalg.vecdot(dy[t].flatten(0, 1), x[t].flatten(0, 1), dim=0)
         dy_off = dy if ctx.needs_input_grad[6] else None
         da = da.to(ctx.a_dtype) if ctx.needs_input_grad[2] else None
-        return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2),
-                dD, dy_off)
+        return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2), dD, dy_off)
 
 
 def intra_chunk(

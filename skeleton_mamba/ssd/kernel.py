@@ -85,17 +85,31 @@ def ssd_kernel(
         RuntimeError: mamba-ssm is not installed or x is not on a CUDA device.
     """
     if not is_cuda(x):
-        raise RuntimeError("ssd(impl='kernel'): the mamba-ssm Triton kernel needs CUDA tensors, x is on "
-                           f"{x.device}; use impl='chunked' or 'auto' on CPU")
+        raise RuntimeError(
+            "ssd(impl='kernel'): the mamba-ssm Triton kernel needs CUDA tensors, x is on "
+            f"{x.device}; use impl='chunked' or 'auto' on CPU"
+        )
     try:
         module = import_triton_ssd()
     except ImportError as err:
-        raise RuntimeError("ssd(impl='kernel') needs mamba-ssm (pip install mamba-ssm --no-build-isolation): "
-                           f"importing {KERNEL_MODULE} failed: {err}") from err
+        raise RuntimeError(
+            "ssd(impl='kernel') needs mamba-ssm (pip install mamba-ssm --no-build-isolation): "
+            f"importing {KERNEL_MODULE} failed: {err}"
+        ) from err
     out = module.mamba_chunk_scan_combined(
-        x, dt, A, B, C, chunk_size,
-        D=D, z=None, dt_bias=dt_bias, initial_states=initial_state,
-        dt_softplus=dt_softplus, dt_limit=tuple(dt_limit), return_final_states=return_final_state,
+        x,
+        dt,
+        A,
+        B,
+        C,
+        chunk_size,
+        D=D,
+        z=None,
+        dt_bias=dt_bias,
+        initial_states=initial_state,
+        dt_softplus=dt_softplus,
+        dt_limit=tuple(dt_limit),
+        return_final_states=return_final_state,
     )
     if return_final_state:
         y, final = out

@@ -9,7 +9,7 @@ padding that lets garbage in the padding reach the valid steps.
 :func:`confine_non_finite` wraps a matrix form so that it agrees with the recurrence:
 
 - fast path: one finiteness reduction over x, dt, B and C per call; when all are finite the form runs
-  unchanged (``benchmarks/bench_ssd.py`` measures the cost of the check);
+  unchanged;
 - otherwise the form runs on inputs whose non-finite entries are replaced by 0, and the outputs the
   recurrence makes non-finite are set to NaN. With Δ the discretised step (:func:`discretize_dt`; a
   raw ``dt = -inf`` gives Δ = 0, finite, as in the recurrence), head h reading B/C group g(h):

@@ -27,7 +27,7 @@ from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dty
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.non_finite import confine_non_finite
 
-# Target block length q (benchmarks/bench_ssd.py, L = 150, 4 heads, P = N = 64, fp32, 2 threads).
+# Target block length q, the fastest at L = 150 (4 heads, P = N = 64, fp32, 2 CPU threads).
 BLOCK_SIZE = 64
 
 
@@ -50,11 +50,11 @@ def below_diagonal(
     R = H // G
     parts = [xd.new_zeros(b, q, H, P)]
     for s in range(q, L, q):
-        alpha = cs[:, s - 1: s]  # (b, 1, H)
+        alpha = cs[:, s - 1 : s]  # (b, 1, H)
         v = torch.exp(alpha - cs[:, :s]).to(xd.dtype)  # (b, s, H), ≤ 1
-        u = torch.exp(cs[:, s: s + q] - alpha).to(xd.dtype)  # (b, q, H), ≤ 1
+        u = torch.exp(cs[:, s : s + q] - alpha).to(xd.dtype)  # (b, q, H), ≤ 1
         rhs = (xd[:, :s] * v[..., None]).view(b, s, G, R * P).transpose(1, 2)  # (b, G, s, R·P)
-        cb = torch.matmul(C[:, s: s + q].transpose(1, 2), B[:, :s].permute(0, 2, 3, 1))  # (b, G, q, s)
+        cb = torch.matmul(C[:, s : s + q].transpose(1, 2), B[:, :s].permute(0, 2, 3, 1))  # (b, G, q, s)
         z = torch.matmul(cb, rhs).view(b, G, q, R, P).transpose(1, 2).reshape(b, q, H, P)
         parts.append(z * u[..., None])
     return torch.cat(parts, dim=1)
@@ -84,8 +84,18 @@ def ssd_quadratic(
     """
     if initial_state is not None or return_final_state:
         return ssd_chunked(
-            x, dt, A, B, C, D=D, dt_bias=dt_bias, dt_softplus=dt_softplus, dt_limit=dt_limit,
-            initial_state=initial_state, return_final_state=return_final_state, chunk_size=max(1, x.shape[1]),
+            x,
+            dt,
+            A,
+            B,
+            C,
+            D=D,
+            dt_bias=dt_bias,
+            dt_softplus=dt_softplus,
+            dt_limit=dt_limit,
+            initial_state=initial_state,
+            return_final_state=return_final_state,
+            chunk_size=max(1, x.shape[1]),
         )
     check_inputs(x, dt, A, B, C, D, dt_bias, initial_state)
     block_size = BLOCK_SIZE if block_size is None else block_size
@@ -104,6 +114,13 @@ def ssd_quadratic(
         y_off = below_diagonal(xc * delta[..., None], a.cumsum(dim=1), Bc, Cc, q).view(b * K, q, H, P)
     D2 = skip_matrix(D, H, P, ct)
     n = b * K
-    y = intra_chunk(xc.reshape(n, q, H, P), delta.reshape(n, q, H), a.view(n, q, H).transpose(1, 2),
-                    Bc.reshape(n, q, G, N), Cc.reshape(n, q, G, N), D2, y_off).view(b, K * q, H, P)
+    y = intra_chunk(
+        xc.reshape(n, q, H, P),
+        delta.reshape(n, q, H),
+        a.view(n, q, H).transpose(1, 2),
+        Bc.reshape(n, q, G, N),
+        Cc.reshape(n, q, G, N),
+        D2,
+        y_off,
+    ).view(b, K * q, H, P)
     return y[:, :L].to(x.dtype)

@@ -12,6 +12,7 @@ from skeleton_mamba.tasks.diffusion.sampling import SAMPLERS
 
 __all__ = ["add_sampling_arguments", "sampling_overrides"]
 
+
 def _steps(text: str) -> int:
     try:
         steps = int(text)

@@ -22,7 +22,6 @@ from skeleton_mamba.tasks.motion.music import BEAT
 __all__ = ["DanceMetrics", "video_beats"]
 
 
-
 def video_beats(frames: torch.Tensor, fps: float = 30.0) -> list[np.ndarray]:
     """The visual beats B_z of MMV for a batch of frames (B, T, 3, H, W) in [0, 1] (motion-frame indices)."""
     videos = (frames.detach().float().clamp(0, 1) * 255).round().to(torch.uint8).permute(0, 1, 3, 4, 2)

@@ -127,9 +127,7 @@ class RotarySelfAttention(nn.Module):
         self.out = nn.Linear(dim, dim)
         self.rotary = SpinPositionEmbedding(dim // heads, base)
 
-    def project(
-        self, x: torch.Tensor, offset: int = 0
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def project(self, x: torch.Tensor, offset: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Per-token part: (B, T, dim) -> rotated q, k, v, each (B, heads, T, d), at positions offset + t.
 
         Attention scores depend on position differences only (Eq. 24), so tokens projected at absolute

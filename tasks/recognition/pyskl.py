@@ -53,8 +53,10 @@ def _validate_annotation(anno: Any, index: int, source: str) -> dict:
         raise AnnotationFileError(f"{where}: 'frame_dir' must be a non-empty string, got {frame_dir!r}")
     where = f"{source}: annotation {index} ({frame_dir})"
     if "keypoint" not in anno:
-        raise AnnotationFileError(f"{where}: no 'keypoint' array (annotations that keep keypoints "
-                                  "in separate kpfiles, like PYSKL's K400 file, are unsupported)")
+        raise AnnotationFileError(
+            f"{where}: no 'keypoint' array (annotations that keep keypoints "
+            "in separate kpfiles, like PYSKL's K400 file, are unsupported)"
+        )
     label = _int(anno.get("label"))
     if label is None or label < 0:
         raise AnnotationFileError(f"{where}: 'label' must be a 0-based integer, got {anno.get('label')!r}")

@@ -72,7 +72,6 @@ class CausalMusicFeatures:
         self.frames = 0
         self.resampler_delay_s = 0.0  # the largest delay of the streaming resampler so far
 
-
     def push(self, chunk: np.ndarray, last: bool = False) -> np.ndarray:
         """Append mono samples; return the (n, 34) float32 features of the frames they complete.
 

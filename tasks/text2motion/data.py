@@ -81,7 +81,6 @@ def collate_text_motion(items: list[dict]) -> dict:
 
 
 class _TextMotionDataModule(SplitDataModule):
-
     def statistics(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(Mean, Std) (263,) float32 used for normalisation."""
         mean, std = self._statistics()

@@ -150,8 +150,10 @@ class MMV(Metric):
         for seq, beats, vis in zip(sequences, music_beats, visual, strict=True):
             if not 0 <= self.head_joint < seq.shape[1]:
                 raise ValueError(f"head_joint {self.head_joint} out of range for {seq.shape[1]} joints")
-            b_z = np.asarray(vis, dtype=np.int64) if video_beats is not None else visual_beats(
-                vis, self.fps, self.video_fps
+            b_z = (
+                np.asarray(vis, dtype=np.int64)
+                if video_beats is not None
+                else visual_beats(vis, self.fps, self.video_fps)
             )
             b_z = b_z[b_z < seq.shape[0] - 1]
             head = kinematic_beats(seq[:, [self.head_joint]], "bailando", self.fps)
