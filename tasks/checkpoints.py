@@ -23,6 +23,7 @@ from __future__ import annotations
 import io
 import pickle
 import re
+import warnings
 from collections.abc import Iterator
 from os import PathLike
 from pathlib import Path
@@ -30,7 +31,7 @@ from typing import Any, TypeVar
 
 import torch
 
-from skeleton_mamba.tasks.errors import CheckpointError
+from skeleton_mamba.tasks.errors import CheckpointError, RandomWeightsWarning
 
 __all__ = [
     "TRUSTED_CLASS_PREFIXES",
@@ -165,7 +166,9 @@ def load_module_and_checkpoint(
     if isinstance(stored, str) and stored.rsplit(".", 1)[-1] != cls.__name__:
         raise CheckpointError(f"{p}: holds a {stored}, not a {cls.__name__}")
     try:
-        module = cls.load_from_checkpoint(io.BytesIO(data), map_location=map_location, weights_only=True)  # type: ignore[attr-defined]
+        with warnings.catch_warnings():  # the checkpoint's weights replace any random initialisation
+            warnings.simplefilter("ignore", RandomWeightsWarning)
+            module = cls.load_from_checkpoint(io.BytesIO(data), map_location=map_location, weights_only=True)  # type: ignore[attr-defined]
     except (KeyError, TypeError, RuntimeError) as err:
         raise CheckpointError(f"{p}: does not fit {cls.__name__} ({type(err).__name__}: {err})") from err
     check_finite_state(module, str(p))

@@ -64,6 +64,12 @@ class NonFiniteLossError(SkeletonMambaError, FloatingPointError):
     """The training loss became NaN or infinite; the message names the step and the batch's samples."""
 
 
+class RandomWeightsWarning(UserWarning):
+    """A part of a network starts from random instead of pretrained weights (moot when a checkpoint's
+    weights are loaded over it: :func:`~skeleton_mamba.tasks.checkpoints.load_module_and_checkpoint`
+    silences it)."""
+
+
 def expected_failure(err: BaseException | None) -> BaseException | None:
     """The expected failure behind ``err``: itself or an explicit cause (jsonargparse wraps with ``from``).
 

@@ -61,6 +61,8 @@ DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
     ("batch_size", "batch_size"),
     ("image_size", "image_size"),
     ("fps", "fps"),
+    ("music_dim", "network.music_dim"),  # EMM's and QEAN's music width
+    ("music_dim", "music_dim"),  # the streaming dancer's
     ("seed_frames", "network.seed_frames"),  # QEAN's window lengths
     ("music_frames", "network.music_frames"),
     ("predict_frames", "network.predict_frames"),

@@ -55,6 +55,15 @@ def print_config(args: list[str], capsys) -> dict:
 # --- recipe resolution --------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("name", ["recognition_synthetic.yaml", "recognition_synthetic_causal.yaml"])
+def test_synthetic_recognition_keeps_the_lowest_validation_loss(name):
+    """The generated classes are separable: top-1 is 1.0 after an epoch, and ModelCheckpoint keeps the first
+    of tied scores, so monitoring top-1 kept an almost untrained model (best-epoch=000)."""
+    callbacks = yaml.safe_load((RECIPES_DIR / name).read_text())["trainer"]["callbacks"]
+    best = [c["init_args"] for c in callbacks if "monitor" in c.get("init_args", {})]
+    assert best == [{"monitor": "val/loss", "mode": "min", "save_top_k": 1, "filename": "best-{epoch:03d}"}]
+
+
 def test_packaged_recipes_are_the_top_level_yaml_files():
     on_disk = {p.name for p in RECIPES_DIR.glob("*.yaml")}
     assert set(packaged_recipes()) == on_disk
@@ -226,6 +235,51 @@ def test_qean_window_lengths_are_linked_from_the_data_module(tmp_path):
     assert cli.model.test_evaluation.protocol.seed_frames == 12
     recipe = yaml.safe_load((RECIPES_DIR / "qean.yaml").read_text())["model"]["init_args"]
     assert not set(lengths) & (set(recipe) | set(recipe["network"]))  # stated once, on the data module
+
+
+@pytest.mark.parametrize(
+    "recipe, data_module, encoder",
+    [
+        ("egodance_demo.yaml", "egodance.data", lambda m: m.model.music_encoder.proj),
+        ("qean.yaml", "qean.data", lambda m: m.model.audio_embed.linear),
+        ("stream_dance_demo.yaml", "stream.data", None),
+    ],
+)
+def test_music_width_is_linked_from_the_data_module(recipe, data_module, encoder, tmp_path, monkeypatch):
+    """The music width is the data module's (``music_dim``); the model receives it, no recipe states it."""
+    monkeypatch.chdir(tmp_path)
+    import importlib
+    import warnings
+
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+
+    import_task_modules()
+    data = importlib.import_module(f"skeleton_mamba.tasks.{data_module}")
+    constant = "NUM_FEATURES" if data_module == "stream.data" else "NUM_MUSIC_FEATURES"
+    monkeypatch.setattr(data, constant, 7)
+    for folder in ("motions", "music"):  # the AIST++ layout qean's data module checks at construction
+        (tmp_path / folder).mkdir()
+    args = ["--config", recipe, "--trainer.logger", "false"]
+    if recipe == "qean.yaml":
+        args += [f"--data.init_args.root={tmp_path}", "--model.init_args.network.hidden=32"]
+        args += ["--model.init_args.network.heads=2"]
+    if recipe == "egodance_demo.yaml":
+        args += ["--model.init_args.head_source", "none"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the demo's random ResNet
+        cli = SkeletonMambaCLI(
+            LightningModule, LightningDataModule, subclass_mode_model=True, subclass_mode_data=True,
+            run=False, args=args,
+        )  # fmt: skip
+    assert cli.datamodule.music_dim == 7
+    if encoder is None:  # the streaming dancer: pose channels + music features per joint token
+        assert cli.model.hparams.music_dim == 7 and cli.model.model.music_mean.shape == (7,)
+    else:
+        assert cli.model.hparams["network"]["music_dim"] == 7 and encoder(cli.model).in_features == 7
+    init = yaml.safe_load((RECIPES_DIR / recipe).read_text())["model"]["init_args"]
+    assert "music_dim" not in init and "music_dim" not in (init.get("network") or {})
 
 
 def test_overlay_recipes_are_their_base_with_their_own_keys(capsys):

@@ -131,3 +131,22 @@ def test_sm_dance_refuses_long_tracks_for_heading_canonical_checkpoints(inputs):
     # 360 frames would be stitched from windows in the world-yaw frame: a clear error instead
     with pytest.raises(InputError, match="canonicalize_init_head.*at most 150 frames"):
         _dance(tmp, canonical, wav, tmp / "canonical_out", "--no-render")
+
+
+def test_a_checkpoint_loads_without_the_random_resnet_warning(inputs, tiny_egodance_module):
+    """Built alone, the tiny module warns that its ResNet is random; loaded from a checkpoint, whose weights
+    replace it, it does not."""
+    import warnings
+
+    from skeleton_mamba.tasks.checkpoints import load_module_and_checkpoint
+    from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+    from skeleton_mamba.tasks.errors import RandomWeightsWarning
+
+    with pytest.warns(RandomWeightsWarning, match="randomly initialised"):
+        tiny_egodance_module()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        module, _ = load_module_and_checkpoint(EgoDanceModule, inputs[1])
+    assert isinstance(module, EgoDanceModule)
+    random_weights = [str(w.message) for w in caught if issubclass(w.category, RandomWeightsWarning)]
+    assert not random_weights

@@ -46,7 +46,7 @@ from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
@@ -231,6 +231,7 @@ class EgoDanceDataModule(SplitDataModule):
         self.save_hyperparameters()
         self.root = Path(root)
         self.fps, self.image_size = fps, image_size  # linked to the model
+        self.music_dim = NUM_MUSIC_FEATURES  # the width of the 30 fps librosa features, linked too
 
     def check_data(self) -> list[Path]:
         """The complete sample folders; raises :class:`DatasetNotFoundError` saying what is missing."""

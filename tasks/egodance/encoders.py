@@ -24,6 +24,8 @@ from transformers import ResNetConfig, ResNetModel
 
 from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.egodance.frames import resize_frames
+from skeleton_mamba.tasks.errors import RandomWeightsWarning
+from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 
 __all__ = [
@@ -88,7 +90,7 @@ class MusicEncoder(nn.Module):
 
     def __init__(
         self,
-        music_dim: int = 35,
+        music_dim: int = NUM_MUSIC_FEATURES,
         dim: int = 256,
         layers: int = 2,
         heads: int = 4,
@@ -146,6 +148,7 @@ class VisionEncoder(nn.Module):
         else:
             warnings.warn(
                 "VisionEncoder: no resnet_path given, the ResNet is randomly initialised (not pretrained)",
+                RandomWeightsWarning,
                 stacklevel=2,
             )
             self.resnet = ResNetModel(resnet_config or ResNetConfig())

@@ -29,6 +29,7 @@ from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
+from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 
 __all__ = ["EMM", "EMMConfig"]
@@ -59,7 +60,7 @@ class EMMConfig:
     """
 
     context_dim: int = 256
-    music_dim: int = 35
+    music_dim: int = NUM_MUSIC_FEATURES
     use_vision: bool = True
     resnet_layers: dict | None = None
     freeze_resnet: bool = True

@@ -42,7 +42,7 @@ from tqdm import tqdm
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.qean.generate import pad_music
 from skeleton_mamba.tasks.qean.representation import features_to_joints, motion_to_features
 
@@ -175,6 +175,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         self.synthetic = synthetic
         self.batch_size = batch_size
         self.seed_frames, self.music_frames = seed_frames, music_frames  # linked to the model
+        self.music_dim = NUM_MUSIC_FEATURES  # the width of the 60 fps librosa features, linked too
         self.predict_frames, self.generate_frames = predict_frames, generate_frames
         self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.datasets: dict[str, Dataset] = {}

@@ -25,6 +25,7 @@ from einops import rearrange
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
 
 __all__ = [
@@ -36,7 +37,6 @@ __all__ = [
 ]
 
 MOTION_DIM = 219
-MUSIC_DIM = 35
 
 
 @dataclasses.dataclass
@@ -44,7 +44,7 @@ class QEANConfig:
     """Sizes of QEAN (defaults: [QEAN] Sec. 4.2; layer counts, MLP width, P: FACT / our choice)."""
 
     motion_dim: int = MOTION_DIM
-    music_dim: int = MUSIC_DIM
+    music_dim: int = NUM_MUSIC_FEATURES
     hidden: int = 800
     heads: int = 16
     motion_layers: int = 2

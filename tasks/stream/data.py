@@ -27,7 +27,7 @@ from torch.utils.data import DataLoader, Dataset
 from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.music import load_audio
-from skeleton_mamba.tasks.stream.features import music_features
+from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
 
 __all__ = ["StreamDanceDataModule", "write_synthetic_aistpp"]
@@ -152,6 +152,7 @@ class StreamDanceDataModule(LightningDataModule):
         self.save_hyperparameters()
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
+        self.music_dim = NUM_FEATURES  # the causal features' width, linked to the model
         self.datasets: dict[str, Dataset] = {}
         self._music: dict[Path, torch.Tensor] = {}  # features per track (AIST++ reuses each track)
         if not synthetic:  # fail before the model is built
