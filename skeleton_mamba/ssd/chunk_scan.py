@@ -49,7 +49,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.intra_chunk import column_weights, compute_inputs, split_cumsum
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward, sum_over_positions
 from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
 
 
@@ -145,7 +145,7 @@ class ChunkScan(torch.autograd.Function):
             dx.addcmul_(dy, D)
         dD = None
         if D is not None and ctx.needs_input_grad[5]:
-            dD = torch.linalg.vecdot(dy.flatten(0, 1), x.flatten(0, 1), dim=0)
+            dD = sum_over_positions(dy, x)
         return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2), dD, dh0)
 
 

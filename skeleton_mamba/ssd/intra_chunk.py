@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import torch
 
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward, sum_over_positions
 
 # Most Q×Q entries (chunks · heads · Q²) per tile: 64 MB per buffer in fp32.
 TILE_ELEMENTS = 1 << 24
@@ -138,7 +138,7 @@ class IntraChunk(torch.autograd.Function):
         dB_t = B.new_empty(n, G, Q, B.shape[3])
         dC_t = torch.empty_like(dB_t)
         want_dD = D is not None and ctx.needs_input_grad[5]
-        dD = torch.zeros_like(D) if want_dD else None
+        dD = torch.zeros_like(D) if want_dD else None  # a sum over tiles of float64-accurate sums
         tiles = _tiles(n, H * Q * Q)
         m = tiles[0][1]
         if kept:
@@ -173,7 +173,7 @@ class IntraChunk(torch.autograd.Function):
             if D is not None:
                 dx[t].addcmul_(dy[t], D)
             if want_dD:
-                dD += torch.linalg.vecdot(dy[t].flatten(0, 1), x[t].flatten(0, 1), dim=0)
+                dD += sum_over_positions(dy[t], x[t])
         dy_off = dy if ctx.needs_input_grad[6] else None
         da = da.to(ctx.a_dtype) if ctx.needs_input_grad[2] else None
         return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2), dD, dy_off)

@@ -59,6 +59,13 @@ def decay_mask(
     return torch.sub(cs[..., :, None], cs[..., None, :], out=out).add_(bias).exp_()
 
 
+def sum_over_positions(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Σ a ⊙ b over chunks and positions, (n, Q, H, P) -> (H, P) in a's dtype: summed per chunk, then over
+    the chunks in float64, so the sum of n·Q terms (the gradient of D) stays accurate also where inductor
+    reduces sequentially (``torch.compile`` traces the hand-written backwards)."""
+    return torch.mul(a, b).sum(1).to(torch.float64).sum(0).to(a.dtype)
+
+
 def decay_mask_backward(M: torch.Tensor) -> torch.Tensor:
     """The gradient of the log decays a through a decay mask, from M = Lmask ∘ ∂L/∂Lmask.
 
