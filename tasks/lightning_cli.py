@@ -100,16 +100,18 @@ class OneLineErrorParser(LightningArgumentParser):
 
 
 class SkeletonMambaCLI(LightningCLI):
-    """LightningCLI with ``--recipe`` and the data-to-model links of :data:`DATA_TO_MODEL_LINKS`."""
+    """LightningCLI with ``--recipe``, the data-to-model links of :data:`DATA_TO_MODEL_LINKS` and one-line
+    parse errors (``parser_class`` defaults to :class:`OneLineErrorParser`)."""
+
+    def __init__(self, *args, parser_class: type[LightningArgumentParser] = OneLineErrorParser, **kwargs):
+        super().__init__(*args, parser_class=parser_class, **kwargs)
 
     def init_parser(self, **kwargs) -> LightningArgumentParser:
-        """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``;
-        parse errors are one line (:class:`OneLineErrorParser`)."""
+        """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``."""
         kwargs.setdefault(
             "dump_header", [f"skeleton_mamba=={__version__}", f"lightning.pytorch=={pl.__version__}"]
         )
-        custom = self.parser_class is not LightningArgumentParser
-        parser = (self.parser_class if custom else OneLineErrorParser)(**kwargs)
+        parser = self.parser_class(**kwargs)
         parser.add_argument(
             "-c",
             "--config",

@@ -48,8 +48,9 @@ from __future__ import annotations
 
 import torch
 
+from skeleton_mamba.ssd.discretize import sum_over_positions
 from skeleton_mamba.ssd.intra_chunk import column_weights, compute_inputs, split_cumsum
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward, sum_over_positions
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
 from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
 
 

@@ -40,7 +40,8 @@ from __future__ import annotations
 
 import torch
 
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward, sum_over_positions
+from skeleton_mamba.ssd.discretize import sum_over_positions
+from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
 
 # Most Q×Q entries (chunks · heads · Q²) per tile: 64 MB per buffer in fp32.
 TILE_ELEMENTS = 1 << 24
@@ -138,7 +139,7 @@ class IntraChunk(torch.autograd.Function):
         dB_t = B.new_empty(n, G, Q, B.shape[3])
         dC_t = torch.empty_like(dB_t)
         want_dD = D is not None and ctx.needs_input_grad[5]
-        dD = torch.zeros_like(D) if want_dD else None  # a sum over tiles of float64-accurate sums
+        dD = torch.zeros_like(D) if want_dD else None
         tiles = _tiles(n, H * Q * Q)
         m = tiles[0][1]
         if kept:

@@ -62,6 +62,7 @@ __all__ = [
     "aist_start_bpm",
     "audio_stack",
     "compute_music_features",
+    "describe_audio_stack",
     "extract_music_features",
     "fold_tempo",
     "load_audio",
@@ -157,14 +158,19 @@ def audio_stack() -> dict[str, str]:
     }
 
 
-def record_audio_stack(loggers) -> str:
+def describe_audio_stack() -> str:
+    """:func:`audio_stack` as one line for a printed table: ``"librosa 0.11.0, numpy 2.4.6, ..."``."""
+    stack = audio_stack()
+    libs = ", ".join(f"{name} {stack[name]}" for name in ("librosa", "numpy", "soundfile", "libsndfile"))
+    return f"{libs}, resampler {stack['resampler']} ({stack['resampler_package']})"
+
+
+def record_audio_stack(loggers) -> None:
     """Log :func:`audio_stack` as the hyperparameter ``audio_stack`` of every logger (a Lightning module's
-    ``loggers``); returns it as one line, ``"librosa 0.11.0, numpy 2.4.6, ..."``, for a printed table."""
+    ``loggers``)."""
     stack = audio_stack()
     for logger in loggers:
         logger.log_hyperparams({"audio_stack": stack})
-    libs = ", ".join(f"{name} {stack[name]}" for name in ("librosa", "numpy", "soundfile", "libsndfile"))
-    return f"{libs}, resampler {stack['resampler']} ({stack['resampler_package']})"
 
 
 def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:

@@ -35,7 +35,7 @@ from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.music import BEAT, record_audio_stack
+from skeleton_mamba.tasks.motion.music import BEAT, describe_audio_stack, record_audio_stack
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.qean.representation import FPS, features_to_joints, features_to_smpl
@@ -141,7 +141,7 @@ class QEANModule(BackboneModule):
     # ----- test -----
     def on_test_epoch_start(self) -> None:
         self._generated_count = 0
-        self._audio_stack = record_audio_stack(self.loggers)  # the versions that decide the music beats
+        record_audio_stack(self.loggers)  # the versions that decide the music beats
         if self._reference_loaded:
             return
         datamodule = self.trainer.datamodule
@@ -202,7 +202,7 @@ class QEANModule(BackboneModule):
             f"protocol {protocol}: {sequences} generated sequences x {frames} frames "
             f"(paper: {PAPER_SEQUENCES} x {PAPER_FRAMES}); real set: {self._reference_count} sequences",
             f"NOT COMPARABLE with [QEAN] Table 1: {'; '.join(reasons)}" if reasons else "paper protocol",
-            f"audio stack: {getattr(self, '_audio_stack', None) or record_audio_stack(())}",
+            f"audio stack: {describe_audio_stack()}",
             f"{'metric':<10} {'ours':>10} {'QEAN (paper)':>12} {'AIST++ GT':>10}",
         ]
         for name, value in values.items():
