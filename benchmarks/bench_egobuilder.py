@@ -207,7 +207,7 @@ def peak_rss_make_ego(caster: str, args: list[str], timeout_s: float) -> dict:
     with tempfile.TemporaryFile() as err:
         start = time.perf_counter()
         proc = subprocess.Popen(
-            [sys.executable, "-m", "skeleton_mamba", "make-ego", *args, "--workers", "1"],
+            [sys.executable, "-m", "skeleton_mamba.tasks", "make-ego", *args, "--workers", "1"],
             env=env,
             stdout=subprocess.DEVNULL,
             stderr=err,

@@ -51,13 +51,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, operator_profile  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
-from skeleton_mamba.tasks.diffusion.samplers import guided_x0  # noqa: E402
 from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa: E402
 from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import encode_motion  # noqa: E402
 from skeleton_mamba.tasks.egodance.sampling import CompiledDenoiser  # noqa: E402
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample  # noqa: E402
+from skeleton_mamba.tasks.training.diffusion.samplers import guided_x0  # noqa: E402
 
 SIZES = {
     # [EgoMusic] supp. Table 2 (D 128, Dc 256, N 8, 4 heads, MLP 1024, Transformer 512) + recipes/backbones

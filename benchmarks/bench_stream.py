@@ -66,8 +66,8 @@ def build(width: str):
     import yaml
 
     from skeleton_mamba.recipes import __file__ as recipes_init
-    from skeleton_mamba.tasks.backbone_config import backbone_config
     from skeleton_mamba.tasks.stream.model import StreamDancer
+    from skeleton_mamba.tasks.training.backbone_config import backbone_config
 
     fragment = Path(recipes_init).parent / "backbones" / WIDTHS[width]
     config = backbone_config(yaml.safe_load(fragment.read_text()))
@@ -121,7 +121,7 @@ def compiled_and_eager(model, backbone_step, count: int) -> dict:
     import numpy as np
     import torch
 
-    from skeleton_mamba.tasks.stream.live import latency_summary
+    from skeleton_mamba.tasks.training.frame_timing import latency_summary
 
     music = torch.randn(1, 34)
     prev = torch.zeros(1, 24, 12)
@@ -171,7 +171,7 @@ def measure(
 
     from skeleton_mamba import streaming
     from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
-    from skeleton_mamba.tasks.stream.live import latency_summary
+    from skeleton_mamba.tasks.training.frame_timing import latency_summary
 
     torch.manual_seed(0)
     model = build(width)

@@ -35,7 +35,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample, guided_x0  # noqa: E402
 from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser, width_for_parameters  # noqa: E402
 from skeleton_mamba.tasks.text2motion.features import recover_from_ric  # noqa: E402
 from skeleton_mamba.tasks.text2motion.metrics import RPrecision, embedding_fid  # noqa: E402
@@ -44,6 +43,7 @@ from skeleton_mamba.tasks.text2motion.model import (  # noqa: E402
     TextCondition,
     TextToMotionDenoiser,
 )
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, ddim_sample, ddpm_sample, guided_x0  # noqa: E402
 
 TEXT_DIM = 384
 GUIDANCE = 2.5

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch.utils.data import RandomSampler, SequentialSampler, TensorDataset
 
-from skeleton_mamba.tasks.base_data import SplitDataModule
+from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
 
 class _Numbers(SplitDataModule):

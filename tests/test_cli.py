@@ -1,6 +1,6 @@
 """``sm fit|validate|test|predict`` (LightningCLI) with ``--recipe``, and ``sm recipes``.
 
-Parse-level behaviour runs in-process through ``skeleton_mamba.cli.main`` (the console script's
+Parse-level behaviour runs in-process through ``skeleton_mamba.tasks.training.cli.main`` (the console script's
 function); training runs go through the real ``sm`` executable in a subprocess.
 """
 
@@ -15,9 +15,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-import skeleton_mamba.tasks.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
-from skeleton_mamba.cli import main as sm_main
-from skeleton_mamba.tasks.recipe_resolution import packaged_recipes, recipe_description, resolve_recipe
+import skeleton_mamba.tasks.training.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
+from skeleton_mamba.tasks.training.cli import main as sm_main
+from skeleton_mamba.tasks.training.recipe_resolution import (
+    packaged_recipes,
+    recipe_description,
+    resolve_recipe,
+)
 
 RECIPES_DIR = Path(__file__).resolve().parents[1] / "recipes"
 EXPECTED_RECIPES = {
@@ -193,7 +197,7 @@ def test_sm_fit_ddp_over_two_cpu_processes(tmp_path):
 def test_image_size_and_fps_are_linked_from_the_data_module():
     from lightning.pytorch import LightningDataModule, LightningModule
 
-    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+    from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
     import_task_modules()
     data = ["--data.init_args.image_size", "48", "--data.init_args.fps", "20"]
@@ -215,7 +219,7 @@ def test_qean_window_lengths_are_linked_from_the_data_module(tmp_path):
     ``generate_frames`` the module, from the data module alone."""
     from lightning.pytorch import LightningDataModule, LightningModule
 
-    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+    from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
     import_task_modules()
     for folder in ("motions", "music"):  # the AIST++ layout the data module checks at construction
@@ -253,7 +257,7 @@ def test_music_width_is_linked_from_the_data_module(recipe, data_module, encoder
 
     from lightning.pytorch import LightningDataModule, LightningModule
 
-    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+    from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
     import_task_modules()
     data = importlib.import_module(f"skeleton_mamba.tasks.{data_module}")
@@ -323,7 +327,7 @@ def test_the_trainer_method_gets_weights_only_true(tmp_path, monkeypatch):
     """Lightning's own load of ``--ckpt_path`` is restricted to weights (``weights_only=True``)."""
     from lightning.pytorch import LightningDataModule, LightningModule
 
-    from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
+    from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
     received: dict = {}
 

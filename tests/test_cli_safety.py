@@ -1,7 +1,7 @@
 """The ``sm`` safety policy: checked checkpoints, one-line errors (exit 2), atomic writes, interruption.
 
-Quick cases run in-process through ``skeleton_mamba.cli.main``; signals (Ctrl-C, SIGTERM) go to the
-real ``sm`` executable in a subprocess.
+Quick cases run in-process through ``skeleton_mamba.tasks.training.cli.main``; signals (Ctrl-C, SIGTERM) go to
+the real ``sm`` executable in a subprocess.
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ from test_cli import run_sm, sm_executable
 from test_ntu import body_motion, write_skeleton
 from torch.utils.data import DataLoader, Dataset
 
-from skeleton_mamba.cli import main as sm_main
-from skeleton_mamba.tasks.checkpoints import check_class_paths, load_checkpoint
-from skeleton_mamba.tasks.errors import CheckpointError, expected_failure, one_line_message
 from skeleton_mamba.tasks.motion import render as render_module
 from skeleton_mamba.tasks.motion.atomic import atomic_open, atomic_path
-from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty
-from skeleton_mamba.tasks.run_guards import describe_batch
+from skeleton_mamba.tasks.motion.errors import CheckpointError, expected_failure, one_line_message
+from skeleton_mamba.tasks.training.checkpoints import check_class_paths, load_checkpoint
+from skeleton_mamba.tasks.training.cli import main as sm_main
+from skeleton_mamba.tasks.training.run_folders import find_last_checkpoint, remove_if_empty
+from skeleton_mamba.tasks.training.run_guards import describe_batch
 
 SYNTHETIC = "recognition_synthetic.yaml"
 

@@ -94,9 +94,9 @@ def test_compiled_emm_denoiser_equals_eager():
 
 @pytest.mark.slow  # compiles a one-block EMM: about a minute on 2 CPU cores
 def test_sample_dance_compiled_equals_eager():
-    from skeleton_mamba.tasks.diffusion import GaussianDiffusion
     from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
     from skeleton_mamba.tasks.egodance.sampling import sample_dance
+    from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion
 
     torch._dynamo.reset()
     torch.manual_seed(1)

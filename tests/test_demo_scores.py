@@ -7,8 +7,6 @@ import math
 import pytest
 import torch
 
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion
-from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.demo_scores import (
     COLUMNS,
     METRICS,
@@ -23,6 +21,8 @@ from skeleton_mamba.tasks.motion.metrics.pose_distance import (
     pose_set_distance,
 )
 from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion
+from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
 
 
 def _yaw(points: torch.Tensor, angle: float) -> torch.Tensor:

@@ -4,7 +4,7 @@ A tiny denoiser overfits two windows with its module's own ``training_step`` and
 hundred steps; its x0 error at a middle timestep must then have halved, and at a small timestep its x0
 prediction must beat simply returning x_t (mean squared error over the data channels, fixed noise). Both
 failed before the kinematic losses were scaled per coordinate and the denoisers got their
-preconditioning (:mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
+preconditioning (:mod:`skeleton_mamba.tasks.training.diffusion.parameterisation`).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from skeleton_mamba.tasks.diffusion import (
+from skeleton_mamba.tasks.training.diffusion import (
     GaussianDiffusion,
     GuidanceTerm,
     NoiseSchedule,
@@ -17,7 +17,7 @@ from skeleton_mamba.tasks.diffusion import (
     stitch_windows,
     window_starts,
 )
-from skeleton_mamba.tasks.diffusion.stitching import split_windows
+from skeleton_mamba.tasks.training.diffusion.stitching import split_windows
 
 
 def _closed_form_abar(num_steps: int, s: float = 0.008) -> np.ndarray:

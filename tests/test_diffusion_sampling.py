@@ -13,7 +13,7 @@ import torch
 from torch import nn
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.diffusion import (
+from skeleton_mamba.tasks.training.diffusion import (
     GaussianDiffusion,
     NullConditioned,
     SamplingOptions,
@@ -24,7 +24,7 @@ from skeleton_mamba.tasks.diffusion import (
     sample,
     sinusoidal_embedding,
 )
-from skeleton_mamba.tasks.diffusion.samplers import concat_conditions
+from skeleton_mamba.tasks.training.diffusion.samplers import concat_conditions
 
 TINY = SkeletonMambaConfig(
     dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
@@ -80,7 +80,7 @@ def test_sampling_options_check_override_and_describe():
 def test_cli_sampling_arguments():
     import argparse
 
-    from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
+    from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 
     parser = argparse.ArgumentParser()
     add_sampling_arguments(parser)
@@ -292,8 +292,8 @@ def test_text2motion_sampling_arguments_are_checked(text2motion_module_class):
 
 
 def test_old_egodance_checkpoint_without_eta_loads(tiny_egodance_module, tmp_path):
-    from skeleton_mamba.tasks.checkpoints import load_module
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+    from skeleton_mamba.tasks.training.checkpoints import load_module
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # random ResNet
@@ -306,8 +306,8 @@ def test_old_egodance_checkpoint_without_eta_loads(tiny_egodance_module, tmp_pat
 # ------------------------------------------------------------------------------- long dances
 def _previous_sample_long_dance(model, diffusion, music, frames, head, window, overlap, **kwargs):
     """sample_long_dance before it used the shared sample_long (verbatim, sampler options renamed)."""
-    from skeleton_mamba.tasks.diffusion.stitching import split_windows, stitch_windows, window_starts
     from skeleton_mamba.tasks.egodance.sampling import root_xz_mask, sample_dance
+    from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, stitch_windows, window_starts
 
     total = music.shape[0]
     if total <= window:

@@ -121,7 +121,7 @@ def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch):
 
 
 def test_sm_dance_refuses_long_tracks_for_heading_canonical_checkpoints(inputs):
-    from skeleton_mamba.tasks.errors import InputError
+    from skeleton_mamba.tasks.motion.errors import InputError
 
     tmp, ckpt, wav = inputs
     checkpoint = torch.load(ckpt, weights_only=True)
@@ -138,9 +138,9 @@ def test_a_checkpoint_loads_without_the_random_resnet_warning(inputs, tiny_egoda
     replace it, it does not."""
     import warnings
 
-    from skeleton_mamba.tasks.checkpoints import load_module_and_checkpoint
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
-    from skeleton_mamba.tasks.errors import RandomWeightsWarning
+    from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
+    from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 
     with pytest.warns(RandomWeightsWarning, match="randomly initialised"):
         tiny_egodance_module()

@@ -8,7 +8,6 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, ddim_sample
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera
 from skeleton_mamba.tasks.egodance.guidance import (
     HeadGuidance,
@@ -25,6 +24,7 @@ from skeleton_mamba.tasks.egodance.losses import (
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import decode_motion, encode_motion, motion_joints
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, ddim_sample
 
 IDENTITY_6D = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]  # first two columns of the identity
 
@@ -240,7 +240,7 @@ def test_alignment_loss_by_hand():
 
 
 def test_batched_classifier_free_guidance_equals_two_calls():
-    from skeleton_mamba.tasks.diffusion import guided_x0
+    from skeleton_mamba.tasks.training.diffusion import guided_x0
 
     torch.manual_seed(0)
     model = _tiny_emm(use_vision=False).eval()

@@ -16,7 +16,7 @@ from torch.utils.data import DataLoader
 
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.music import audio_stack
 
 

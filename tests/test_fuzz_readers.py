@@ -17,11 +17,11 @@ from conftest import shared_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.bvh import load_bvh
+from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.kinetics import NUM_JOINTS as KINETICS_JOINTS
 from skeleton_mamba.tasks.recognition.kinetics import read_kinetics_clip
-from skeleton_mamba.tasks.recognition.ntu import read_skeleton_file
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.humanml3d import read_features
 

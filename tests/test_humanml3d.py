@@ -9,7 +9,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 from skeleton_mamba.tasks.text2motion import features as F
 from skeleton_mamba.tasks.text2motion.convert_cli import main as convert_main

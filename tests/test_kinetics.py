@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeleton_mamba.cli import main as sm_main
 from skeleton_mamba.tasks.recognition.kinetics import KineticsFileError, read_kinetics_clip
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
+from skeleton_mamba.tasks.training.cli import main as sm_main
 
 
 def person(seed: int, score: float) -> dict:

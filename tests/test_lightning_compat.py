@@ -1,9 +1,10 @@
-"""The Lightning internals the project still relies on, all in ``tasks/lightning_compat.py``.
+"""The Lightning internals the project still relies on, all in ``tasks/training/lightning_compat.py``.
 
 Checked against lightning 2.5.2 to 2.6.6 (``CHECKED_LIGHTNING``). These tests fail with a message naming the
 private name and that range when a Lightning release removes or changes what the adapter builds on, or when
 LightningCLI stops calling the public hook the adapter is installed from in the order it needs. Also here:
-:func:`~skeleton_mamba.tasks.base_module.attached_trainer`, the public replacement of ``module._trainer``.
+:func:`~skeleton_mamba.tasks.training.base_module.attached_trainer`, the public replacement of
+``module._trainer``.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ import torch
 from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import LightningCLI
 
-from skeleton_mamba.tasks import lightning_compat
-from skeleton_mamba.tasks.base_module import attached_trainer
-from skeleton_mamba.tasks.lightning_compat import (
+from skeleton_mamba.tasks.training import lightning_compat
+from skeleton_mamba.tasks.training.base_module import attached_trainer
+from skeleton_mamba.tasks.training.lightning_compat import (
     CHECKED_LIGHTNING,
     PRIVATE_NAMES,
     install_accepted_links,
@@ -26,7 +27,7 @@ from skeleton_mamba.tasks.lightning_compat import (
 )
 
 CHECKED = (
-    f"lightning {pl.__version__} installed; tasks/lightning_compat.py was checked against lightning "
+    f"lightning {pl.__version__} installed; tasks/training/lightning_compat.py was checked against lightning "
     f"{CHECKED_LIGHTNING[0]} to {CHECKED_LIGHTNING[1]}"
 )
 

@@ -10,18 +10,18 @@ import pytest
 from conftest import shared_file
 from test_bvh import HAND_BVH
 
-from skeleton_mamba.cli import main as sm_main
-from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
 from skeleton_mamba.tasks.motion.bvh import BvhError, load_bvh
+from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, MotionFileError, load_motion, save_motion
 from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, read_skeleton_file
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.value_checks import check_fps, load_npy, non_finite_message
 from skeleton_mamba.tasks.recognition.kinetics import KineticsFileError, read_kinetics_clip
-from skeleton_mamba.tasks.recognition.ntu import SkeletonFileError, read_skeleton_file
 from skeleton_mamba.tasks.recognition.pyskl import AnnotationFileError, save_annotations
 from skeleton_mamba.tasks.text2motion.humanml3d import NonFiniteFeaturesError, load_clips, read_features
+from skeleton_mamba.tasks.training.cli import main as sm_main
 
 NTU_SAMPLE = "ntu/S001C001P001R001A001.skeleton"
 POISONS = ["nan", "-inf", "1e999", "1e39"]  # 1e39 is finite in float64 but Inf once stored as float32

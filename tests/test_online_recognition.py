@@ -13,8 +13,8 @@ import torch
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.recognition.early import EarlyRecognitionCurve, online_probabilities
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
+from skeleton_mamba.tasks.recognition.online import OnlineRecognizer
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
-from skeleton_mamba.tasks.stream.online_recognition import OnlineRecognizer
 
 
 def _recognizer(causal=True) -> ActionRecognizer:
@@ -65,7 +65,7 @@ def test_early_curve_counts_the_prediction_at_each_observed_fraction():
 
 
 def _sm(args, cwd) -> subprocess.CompletedProcess:
-    proc = subprocess.run([sys.executable, "-m", "skeleton_mamba.cli", *args], cwd=cwd, capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "skeleton_mamba.tasks", *args], cwd=cwd, capture_output=True,
                           text=True, timeout=600)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc

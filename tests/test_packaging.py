@@ -45,7 +45,7 @@ def test_sm_entry_point_help_and_version():
     out = subprocess.run(["sm", "--version"], capture_output=True, text=True, check=True).stdout
     assert __version__ in out
     help_text = subprocess.run(
-        [sys.executable, "-m", "skeleton_mamba", "--help"], capture_output=True, text=True, check=True
+        [sys.executable, "-m", "skeleton_mamba.tasks", "--help"], capture_output=True, text=True, check=True
     ).stdout
     assert "usage: sm COMMAND" in help_text
     bad = subprocess.run(["sm", "no-such-command"], capture_output=True, text=True)

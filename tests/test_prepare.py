@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from test_ntu import as_written, body_motion, write_skeleton
 
-from skeleton_mamba.cli import main as sm_main
 from skeleton_mamba.tasks.motion.safe_pickle import UnsafePickleError
 from skeleton_mamba.tasks.recognition.pyskl import AnnotationFileError, load_annotations, save_annotations
+from skeleton_mamba.tasks.training.cli import main as sm_main
 
 # name -> (X-Sub side, X-View side) for NTU60; subjects 1, 2, 8 train, 3, 40 test; cameras 2, 3 train
 NTU60_SAMPLES = {

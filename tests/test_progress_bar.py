@@ -1,4 +1,4 @@
-"""Progress bars with epoch totals (``tasks/progress_bar.py``) and their installation by ``sm fit``."""
+"""Progress bars with epoch totals (``training/progress_bar.py``) and their installation by ``sm fit``."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.callbacks import Callback, TQDMProgressBar
 from torch.utils.data import DataLoader, TensorDataset
 
-from skeleton_mamba.tasks.lightning_cli import SkeletonMambaCLI, import_task_modules
-from skeleton_mamba.tasks.progress_bar import (
+from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
+from skeleton_mamba.tasks.training.progress_bar import (
     EpochTotalRichProgressBar,
     EpochTotalTQDMProgressBar,
     default_progress_bar,

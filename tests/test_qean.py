@@ -12,6 +12,12 @@ from scipy.linalg import polar
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.fact_features import (
+    features_to_joints,
+    features_to_smpl,
+    nearest_rotation,
+    smpl_to_features,
+)
 from skeleton_mamba.tasks.qean.attention import (
     QuaternionRotaryAttention,
     quaternion_rotary_attention,
@@ -24,12 +30,6 @@ from skeleton_mamba.tasks.qean.quaternion import (
     quaternion_conjugate,
     quaternion_flatten,
     quaternion_parameterise,
-)
-from skeleton_mamba.tasks.qean.representation import (
-    features_to_joints,
-    features_to_smpl,
-    nearest_rotation,
-    smpl_to_features,
 )
 from skeleton_mamba.tasks.qean.rotary import SpinPositionEmbedding, apply_rotary
 

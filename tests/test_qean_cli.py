@@ -11,13 +11,13 @@ import soundfile
 import torch
 from lightning.pytorch import Trainer
 
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
-from skeleton_mamba.tasks.lightning_cli import run
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.fact_features import smpl_to_features
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
 from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule
-from skeleton_mamba.tasks.qean.representation import smpl_to_features
+from skeleton_mamba.tasks.training.lightning_cli import run
 
 NAMES = ["gBR_sBM_cAll_d04_mBR0_ch01", "gPO_sBM_cAll_d10_mPO1_ch02", "gBR_sBM_cAll_d05_mBR0_ch03"]
 TINY_NETWORK = {

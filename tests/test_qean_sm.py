@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from skeleton_mamba.tasks.lightning_cli import run
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
+from skeleton_mamba.tasks.training.lightning_cli import run
 
 TRAIN = ["gBR_sBM_cAll_d04_mBR0_ch01", "gPO_sBM_cAll_d10_mPO1_ch02"]
 VAL = ["gBR_sBM_cAll_d05_mBR0_ch05"]
@@ -78,7 +78,7 @@ def _overrides(root, backbone: bool) -> list[str]:
 
 
 def _sm(args: list[str], cwd) -> subprocess.CompletedProcess:
-    command = [sys.executable, "-m", "skeleton_mamba.cli", *args]
+    command = [sys.executable, "-m", "skeleton_mamba.tasks", *args]
     proc = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     return proc

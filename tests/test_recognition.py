@@ -16,14 +16,14 @@ import yaml
 from lightning.pytorch import Trainer
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.data import RecognitionDataModule
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, body_presence
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.recognition.pyskl import save_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
+from skeleton_mamba.tasks.training.backbone_config import backbone_config
 
 TINY = SkeletonMambaConfig(
     skeleton="ntu25",

@@ -30,7 +30,7 @@ from skeleton_mamba.tasks.stream.module import StreamDanceModule
 
 def _sm(args, cwd, stdin=None) -> subprocess.CompletedProcess:
     proc = subprocess.run(
-        [sys.executable, "-m", "skeleton_mamba.cli", *args], cwd=cwd, capture_output=True, timeout=600,
+        [sys.executable, "-m", "skeleton_mamba.tasks", *args], cwd=cwd, capture_output=True, timeout=600,
         input=stdin,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr.decode()[-3000:]

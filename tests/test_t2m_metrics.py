@@ -192,7 +192,7 @@ def test_contrastive_loss_by_hand():
 def test_evaluator_trains_one_step_through_sm(tmp_path, monkeypatch):
     import pickle
 
-    from skeleton_mamba.cli import main
+    from skeleton_mamba.tasks.training.cli import main
 
     root, glove = tmp_path / "humanml3d", tmp_path / "glove"
     (root / "new_joint_vecs").mkdir(parents=True)

@@ -7,7 +7,6 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.diffusion import guided_x0
 from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser
 from skeleton_mamba.tasks.text2motion.data import TextMotionDataset, collate_text_motion
 from skeleton_mamba.tasks.text2motion.features import group_statistics
@@ -20,6 +19,7 @@ from skeleton_mamba.tasks.text2motion.model import (
     features_to_tokens,
     tokens_to_features,
 )
+from skeleton_mamba.tasks.training.diffusion import guided_x0
 
 TINY = SkeletonMambaConfig(
     dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8, chunk_size=16)
@@ -142,7 +142,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
     import subprocess
     import sys
 
-    from skeleton_mamba.cli import main
+    from skeleton_mamba.tasks.training.cli import main
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
@@ -196,7 +196,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
     test += ["--model.evaluation.mm_times", "2"]
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
     done = subprocess.run(
-        [sys.executable, "-m", "skeleton_mamba.cli", *test],
+        [sys.executable, "-m", "skeleton_mamba.tasks", *test],
         capture_output=True,
         text=True,
         env=env,
@@ -219,7 +219,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
 
 
 def test_humanml3d_data_module_batches_and_missing_folder(tmp_path):
-    from skeleton_mamba.tasks.errors import DatasetNotFoundError
+    from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
     from skeleton_mamba.tasks.text2motion.data import HumanML3DDataModule
 
     with pytest.raises(DatasetNotFoundError, match="HumanML3D not found"):

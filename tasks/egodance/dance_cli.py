@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
-from skeleton_mamba.tasks.errors import InputError
+from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 
 __all__ = ["main", "build_parser"]
 
@@ -176,11 +176,11 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
-    from skeleton_mamba.tasks.checkpoints import load_module_and_checkpoint
     from skeleton_mamba.tasks.egodance.export import write_dance
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
     from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
     from skeleton_mamba.tasks.motion.render import RenderStyle
+    from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint(EgoDanceModule, args.ckpt)

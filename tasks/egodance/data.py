@@ -36,19 +36,19 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from skeleton_mamba.tasks.base_data import SplitDataModule
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
 __all__ = [
     "EgoDanceDataset",

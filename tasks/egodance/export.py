@@ -1,56 +1,19 @@
-"""Write a sampled dance as files: our motion ``.npz``, a BVH and an mp4 rendering with the music muxed in.
+"""Write a sampled EMM dance (motion tokens) as files: ``.npz``, BVH and an mp4 with the music muxed in.
 
-Used by ``sm dance`` (:mod:`.dance_cli`) and the demo callback (:mod:`.demo`). The music of the rendering
-is the slice of the track the dance was sampled for (``music_start_s``), cut to the dance's length and
-written next to the video as a wav, so that the mp4's audio starts where the dance starts.
+Used by ``sm dance`` (:mod:`.dance_cli`) and the demo callback (:mod:`.demo`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.sampling import tokens_to_motion
-from skeleton_mamba.tasks.motion.atomic import atomic_path
-from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
+from skeleton_mamba.tasks.motion.export import DanceFiles, write_motion
+from skeleton_mamba.tasks.motion.render import RenderStyle
 
-__all__ = ["DanceFiles", "write_music_slice", "write_dance", "write_motion"]
-
-
-@dataclass
-class DanceFiles:
-    """Paths of one written dance (``mp4``/``wav`` None when not rendered / no music)."""
-
-    npz: Path
-    bvh: Path
-    mp4: Path | None = None
-    wav: Path | None = None
-
-    def lines(self) -> list[str]:
-        return [f"  {kind:4s} {path}" for kind, path in vars(self).items() if path is not None]
-
-
-def write_music_slice(src: str | Path, start_s: float, duration_s: float, out: str | Path) -> Path:
-    """Write ``duration_s`` seconds of the audio file ``src`` from ``start_s`` as 16-bit wav at ``out``."""
-    import librosa
-    import soundfile as sf
-
-    src = Path(src)
-    if not src.is_file():
-        raise FileNotFoundError(f"{src}: no such music file")
-    audio, sr = librosa.load(src, sr=None, mono=True, offset=max(0.0, start_s), duration=duration_s)
-    if audio.size == 0:
-        raise ValueError(f"{src}: no audio between {start_s:.2f} s and {start_s + duration_s:.2f} s")
-    out = Path(out)
-    with atomic_path(out) as tmp:
-        sf.write(tmp, audio, sr, subtype="PCM_16")
-    return out
+__all__ = ["write_dance"]
 
 
 def write_dance(
@@ -69,56 +32,9 @@ def write_dance(
 
     Args:
         tokens: the sampled dance (:mod:`.representation`).
-        out_dir: output folder (created).
-        name: file stem.
-        music: the audio file the dance was sampled for (None: a silent video).
-        music_start_s: where in ``music`` the dance starts.
         fps: frame rate of the dance.
-        render: write the mp4.
-        style: image size and colours of the rendering.
-        title: text drawn on the video.
-        progress: show a rendering progress bar.
+        The others as :func:`~skeleton_mamba.tasks.motion.export.write_motion`.
     """
     return write_motion(
         tokens_to_motion(tokens, fps), out_dir, name, music, music_start_s, render, style, title, progress
     )
-
-
-def write_motion(
-    motion: MotionData,
-    out_dir: str | Path,
-    name: str,
-    music: str | Path | None = None,
-    music_start_s: float = 0.0,
-    render: bool = True,
-    style: RenderStyle | None = None,
-    title: str | None = None,
-    progress: bool = False,
-) -> DanceFiles:
-    """An SMPL-24 :class:`MotionData` (with joints) -> ``<name>.npz``, ``.bvh`` and ``.mp4`` in ``out_dir``.
-
-    Arguments as :func:`write_dance`.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    fps = motion.fps
-    files = DanceFiles(
-        npz=save_motion(out_dir / f"{name}.npz", motion),
-        bvh=save_bvh(out_dir / f"{name}.bvh", smpl_to_bvh(motion.poses, motion.trans, fps)),
-    )
-    if render:
-        if music is not None:
-            duration = motion.num_frames / fps
-            files.wav = write_music_slice(music, music_start_s, duration, out_dir / f"{name}.wav")
-        files.mp4 = render_motion(
-            np.asarray(motion.joints),
-            SMPL24.parents,
-            out_dir / f"{name}.mp4",
-            fps,
-            music=files.wav,
-            names=SMPL24.joint_names,
-            style=style,
-            title=title,
-            progress=progress,
-        )
-    return files

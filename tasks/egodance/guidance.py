@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.diffusion.samplers import GuidanceTerm
 from skeleton_mamba.tasks.egodance.builder.camera import HEAD_TO_CAMERA
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
+from skeleton_mamba.tasks.training.diffusion.samplers import GuidanceTerm
 
 __all__ = ["head_pose_from_camera", "head_targets_from_camera", "head_guidance_objective", "HeadGuidance"]
 

@@ -9,11 +9,11 @@
         to [time token; c]) -> Linear -> F -> x0_hat = mu + c_skip (x_t - a mu) + c_out F (B, T, 24, 10)
 
 (the preconditioning with the training data's per-channel mean and standard deviation, set by
-:meth:`EMM.set_data_statistics`: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`)
+:meth:`EMM.set_data_statistics`: :mod:`skeleton_mamba.tasks.training.diffusion.parameterisation`)
 
-``forward(x_t, t, context)`` is a denoiser for :mod:`skeleton_mamba.tasks.diffusion` (``context=None``:
-the learned null condition, for classifier-free guidance). Defaults are [EgoMusic]'s: D 128, Dc 256, G 5,
-P 6, E 768, N 8, 4 heads, MLP 1024, Transformer feed-forward 512.
+``forward(x_t, t, context)`` is a denoiser for :mod:`skeleton_mamba.tasks.training.diffusion`
+(``context=None``: the learned null condition, for classifier-free guidance). Defaults are [EgoMusic]'s:
+D 128, Dc 256, G 5, P 6, E 768, N 8, 4 heads, MLP 1024, Transformer feed-forward 512.
 """
 
 from __future__ import annotations
@@ -25,12 +25,12 @@ from torch import nn
 from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
-from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
+from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
+from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
 
 __all__ = ["EMM", "EMMConfig"]
 
@@ -160,7 +160,7 @@ class EMM(nn.Module):
 
     def null_condition(self, context: torch.Tensor) -> torch.Tensor:
         """The learned null condition shaped like ``context`` (B, S, Dc)
-        (:class:`~skeleton_mamba.tasks.diffusion.NullConditioned`: guidance in one call)."""
+        (:class:`~skeleton_mamba.tasks.training.diffusion.NullConditioned`: guidance in one call)."""
         return self.null_context.to(context.dtype).expand_as(context)
 
     def drop_condition(self, context: torch.Tensor, drop: torch.Tensor) -> torch.Tensor:
@@ -188,7 +188,7 @@ class EMM(nn.Module):
         b, n = x_t.shape[:2]
         if context is None:
             context = self.null_context.to(x_t.dtype).expand(b, n, -1)
-        # the [sin, cos] timestep embedding (EDGE's order; :mod:`skeleton_mamba.tasks.diffusion.embedding`)
+        # the [sin, cos] timestep embedding (EDGE's order; diffusion/embedding.py)
         temb = self.time_mlp(sinusoidal_embedding(t, self.input_proj.out_features).to(x_t.dtype))
         h = self.input_proj(self.skip_x0.network_input(x_t, t)) + temb[:, None, None, :]
         if self.frame_condition is not None:

@@ -35,9 +35,6 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchmetrics import MeanMetric
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config
-from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
 from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadEstimatorConfig,
@@ -52,6 +49,9 @@ from skeleton_mamba.tasks.egodance.sampling import sample_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.music import record_audio_stack
+from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
+from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, SamplingOptions
 
 __all__ = ["EgoDanceModule", "HEAD_SOURCES"]
 
@@ -86,7 +86,7 @@ class EgoDanceModule(BackboneModule):
         lr: AdamW learning rate (2e-4). weight_decay: AdamW weight decay.
         ema_decay: EMA decay. ema_every: update the EMA every this many optimizer steps.
         sampler: ``ddim`` or ``ddpm`` at test/predict time. sampling_steps: DDIM steps. eta: DDIM noise
-            (EDGE: 1) (:class:`~skeleton_mamba.tasks.diffusion.SamplingOptions`).
+            (EDGE: 1) (:class:`~skeleton_mamba.tasks.training.diffusion.SamplingOptions`).
         guidance_weight: classifier-free guidance weight w (EDGE: 2).
         head_guidance_weight: G_head step size (0 disables). head_guidance_steps: gradient steps per step.
         head_source: where head guidance takes its targets: ``estimate`` (from the frames), ``oracle`` (the

@@ -1,9 +1,9 @@
 """Dance generation with a trained EMM: one window, or long-form by stitched windows, and decoding.
 
-Sampling goes through the shared entry point :func:`~skeleton_mamba.tasks.diffusion.sample` (DDIM, EDGE:
-50 steps, eta 1; or ancestral DDPM, the original code, 1000 steps) with classifier-free guidance
+Sampling goes through the shared entry point :func:`~skeleton_mamba.tasks.training.diffusion.sample`
+(DDIM, EDGE: 50 steps, eta 1; or ancestral DDPM, the original code, 1000 steps) with classifier-free guidance
 (``guidance_weight``) and the head guidance G_head when head targets are given (:mod:`.guidance`);
-long tracks through :func:`~skeleton_mamba.tasks.diffusion.sample_long`. With ``compile=True`` the
+long tracks through :func:`~skeleton_mamba.tasks.training.diffusion.sample_long`. With ``compile=True`` the
 denoiser runs compiled with its weights frozen (:func:`skeleton_mamba.compiling.compile_for_inference`).
 """
 
@@ -13,8 +13,6 @@ import numpy as np
 import torch
 
 from skeleton_mamba.compiling import compile_for_inference
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, sample, sample_long
-from skeleton_mamba.tasks.diffusion.stitching import split_windows, window_starts
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
@@ -26,6 +24,8 @@ from skeleton_mamba.tasks.egodance.representation import (
 )
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.rotations import matrix_to_axis_angle
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, sample, sample_long
+from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, window_starts
 
 __all__ = ["CompiledDenoiser", "sample_dance", "sample_long_dance", "tokens_to_motion", "root_xz_mask"]
 
@@ -33,7 +33,7 @@ __all__ = ["CompiledDenoiser", "sample_dance", "sample_long_dance", "tokens_to_m
 class CompiledDenoiser:
     """A denoiser's call ``(x_t, t, context) -> x0`` (an EMM's) compiled for inference, weights frozen.
 
-    A :class:`~skeleton_mamba.tasks.diffusion.samplers.NullConditioned` denoiser like the model, so
+    A :class:`~skeleton_mamba.tasks.training.diffusion.samplers.NullConditioned` denoiser like the model, so
     classifier-free guidance stays one call on the doubled batch. The first call compiles (about 2 minutes
     of CPU at the seed size); every denoising step after it reuses the compiled code.
     """
@@ -82,7 +82,7 @@ def sample_dance(
     """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
 
     ``sampler``, ``sampling_steps``, ``eta`` and ``guidance_weight`` are the options of
-    :class:`~skeleton_mamba.tasks.diffusion.SamplingOptions`; ``head_guidance_weight`` and
+    :class:`~skeleton_mamba.tasks.training.diffusion.SamplingOptions`; ``head_guidance_weight`` and
     ``head_guidance_steps`` those of :class:`.guidance.HeadGuidance`. The condition (music + vision
     encoders + fusion) is encoded once, not per denoising step. ``compile``: run the denoiser as a
     :class:`CompiledDenoiser` (same samples to float32 rounding; worth it for many steps on a CPU).
@@ -126,8 +126,8 @@ def sample_long_dance(
 
     The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75; one padded
     window when the track is shorter), sampled as one batch by
-    :func:`~skeleton_mamba.tasks.diffusion.sample_long` (overlaps in-painted after every step, the root's
-    horizontal position relative to each window's start, as in training) and stitched into one
+    :func:`~skeleton_mamba.tasks.training.diffusion.sample_long` (overlaps in-painted after every step, the
+    root's horizontal position relative to each window's start, as in training) and stitched into one
     continuous dance in the first window's frame. Head targets (T, 3) are moved into each window's frame
     by the head's own horizontal displacement since frame 0 (an approximation of the root's, which is only
     known once sampled). Other arguments as :func:`sample_dance`.

@@ -27,8 +27,8 @@ from typing import NoReturn
 import numpy as np
 
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.value_checks import check_fps, non_finite_message
 
 __all__ = ["MotionData", "MotionFileError", "save_motion", "load_motion"]

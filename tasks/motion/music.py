@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.errors import DataFileError
 from skeleton_mamba.tasks.motion.cache import FeatureCache
+from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
 
 __all__ = [

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.errors import one_line_message
+from skeleton_mamba.tasks.motion.errors import one_line_message
 from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
 
 __all__ = ["JointsClip", "load_joints", "render_file", "main"]
@@ -88,7 +88,7 @@ def load_joints(
         bvh = load_bvh(path)
         return JointsClip(bvh.joint_positions(), list(bvh.parents), list(bvh.names), motion_fps or bvh.fps)
     if suffix == ".skeleton":
-        from skeleton_mamba.tasks.recognition.ntu import read_skeleton_file
+        from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 
         keypoints = read_skeleton_file(path).keypoints(max_bodies=2)  # (M, T, 25, 3)
         if keypoints.shape[1] == 0:

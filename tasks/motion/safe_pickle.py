@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from skeleton_mamba.tasks.errors import SkeletonMambaError
+from skeleton_mamba.tasks.motion.errors import SkeletonMambaError
 
 __all__ = [
     "UnsafePickleError",

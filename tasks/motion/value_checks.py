@@ -18,7 +18,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.motion.errors import DataFileError
 
 __all__ = ["FPS_RANGE", "check_finite", "check_fps", "load_npy", "non_finite_message", "read_npy_header"]
 

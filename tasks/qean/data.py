@@ -39,12 +39,12 @@ from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.qean.generate import pad_music
-from skeleton_mamba.tasks.qean.representation import features_to_joints, motion_to_features
 
 __all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
 

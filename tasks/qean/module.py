@@ -30,15 +30,15 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import config_from, plain_backbone_config
-from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
+from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, features_to_smpl
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.music import BEAT, describe_audio_stack, record_audio_stack
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
-from skeleton_mamba.tasks.qean.representation import FPS, features_to_joints, features_to_smpl
+from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
+from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
 
 __all__ = ["QEANModule", "QEAN_TABLE1"]
 

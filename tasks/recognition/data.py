@@ -24,11 +24,11 @@ import torch
 from torch.utils.data import Dataset
 
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.base_data import SplitDataModule
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline
+from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
 __all__ = ["RecognitionDataModule", "SkeletonClipDataset", "SyntheticRecognitionDataModule"]
 

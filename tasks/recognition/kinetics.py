@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from skeleton_mamba.tasks.errors import DataFileError
+from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
 __all__ = ["NUM_JOINTS", "KineticsFileError", "read_kinetics_clip", "read_kinetics_labels"]

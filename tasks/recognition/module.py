@@ -32,7 +32,6 @@ from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.early import (
     FRACTIONS,
@@ -42,6 +41,7 @@ from skeleton_mamba.tasks.recognition.early import (
 )
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 from skeleton_mamba.tasks.recognition.prediction_writer import PredictionCSVWriter
+from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
 
 __all__ = ["ActionRecognitionModule"]
 

@@ -34,13 +34,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from skeleton_mamba.tasks.errors import SkeletonMambaError, worker_ignores_ctrl_c
+from skeleton_mamba.tasks.motion.errors import SkeletonMambaError, worker_ignores_ctrl_c
+from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,
     read_kinetics_labels,
 )
-from skeleton_mamba.tasks.recognition.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
 from skeleton_mamba.tasks.recognition.pyskl import KEYPOINT_DTYPES, AnnotationFileError, save_annotations
 from skeleton_mamba.tasks.recognition.splits import benchmark_splits, in_dataset, load_missing_samples
 

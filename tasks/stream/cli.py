@@ -18,7 +18,7 @@ and ``<name>_stream.json`` (frame count, latency figures, file paths), and print
 the audio-to-pose latency: median / p99 / max over frames of the time from the delivery of the audio
 chunk that completes a frame to its pose.
 
-Recognition (``--task recognition``): see :mod:`skeleton_mamba.tasks.stream.online_recognition`.
+Recognition (``--task recognition``): see :mod:`skeleton_mamba.tasks.recognition.online`.
 """
 
 from __future__ import annotations
@@ -29,12 +29,35 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+import soundfile as sf
+
+from skeleton_mamba.tasks.motion.export import write_motion
+from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.stream.audio_input import AudioSource
+from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
+from skeleton_mamba.tasks.stream.live import LiveDancer
+from skeleton_mamba.tasks.stream.model import tokens_to_motion
+from skeleton_mamba.tasks.stream.module import StreamDanceModule
+from skeleton_mamba.tasks.training.checkpoints import load_module
+from skeleton_mamba.tasks.training.frame_timing import (
+    announce_compile,
+    latency_summary,
+    prepare_live,
+    report_compile,
+)
+
 __all__ = ["build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm stream", description=__doc__.split("\n\n")[0])
-    p.add_argument("--task", choices=("dance", "recognition"), default="dance")
+    p.add_argument(
+        "--task",
+        choices=("dance", "recognition"),
+        default="dance",
+        help="dance (these options) or online action recognition (sm stream --task recognition --help)",
+    )
     p.add_argument(
         "--ckpt", required=True, help="a checkpoint of stream_dance*.yaml or a causal recognition recipe"
     )
@@ -62,23 +85,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def announce_compile(enabled: bool) -> bool:
-    """Say, before it starts, that compiling takes a while; returns ``enabled``."""
-    if enabled:
-        print(
-            "sm stream: compiling the frame step with torch.compile (about a minute at the paper width)...",
-            file=sys.stderr,
-            flush=True,
-        )
-    return enabled
-
-
-def report_compile(seconds: float | None, enabled: bool) -> None:
-    """The compile time, or nothing (not asked; or it failed and the warning said so)."""
-    if enabled and seconds is not None:
-        print(f"sm stream: frame step compiled in {seconds:.0f} s", file=sys.stderr)
-
-
 def realtime_hint(latency: dict[str, float], compiled: bool, fps: int) -> str | None:
     """A hint when, without --compile, frames were late (p99 latency above one frame period)."""
     period_ms = 1e3 / fps
@@ -92,22 +98,10 @@ def realtime_hint(latency: dict[str, float], compiled: bool, fps: int) -> str | 
 
 
 def _load_dancer(ckpt: str):
-    from skeleton_mamba.tasks.checkpoints import load_module
-    from skeleton_mamba.tasks.stream.module import StreamDanceModule
-
     return load_module(StreamDanceModule, ckpt).model.eval()
 
 
 def stream_dance(args: argparse.Namespace) -> int:
-    import numpy as np
-    import soundfile as sf
-
-    from skeleton_mamba.tasks.egodance.export import write_motion
-    from skeleton_mamba.tasks.motion.render import RenderStyle
-    from skeleton_mamba.tasks.stream.audio_input import AudioSource
-    from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
-    from skeleton_mamba.tasks.stream.live import LiveDancer, latency_summary
-    from skeleton_mamba.tasks.stream.model import tokens_to_motion
 
     if not args.music:
         print("sm stream: --music FILE (or -) is required for --task dance", file=sys.stderr)
@@ -188,29 +182,16 @@ def stream_dance(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from skeleton_mamba.tasks.checkpoints import check_checkpoint_path
-
     args = build_parser().parse_args(argv)
-    try:
-        check_checkpoint_path(args.ckpt)  # a URL is refused, a missing file named, before any work
-    except FileNotFoundError:
-        print(f"sm stream: checkpoint {args.ckpt} not found", file=sys.stderr)
+    if args.task == "recognition":  # sm routes it to skeleton_mamba.tasks.recognition.online
+        print(
+            "sm stream: --task recognition runs through sm (sm stream --task recognition ...)",
+            file=sys.stderr,
+        )
         return 2
-    except (OSError, ValueError) as err:
-        print(f"sm stream: checkpoint {args.ckpt}: {err}", file=sys.stderr)
-        return 2
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
-    from skeleton_mamba.streaming import keep_freed_memory
-
-    keep_freed_memory()  # no page faults from the allocator in the per-frame path
+    if (code := prepare_live(args.ckpt, args.threads)) is not None:
+        return code
     try:
-        if args.task == "recognition":
-            from skeleton_mamba.tasks.stream.online_recognition import stream_recognition
-
-            return stream_recognition(args)
         return stream_dance(args)
     except (FileNotFoundError, ValueError) as err:  # bad input files: one line, no traceback
         print(f"sm stream: {err}", file=sys.stderr)

@@ -24,8 +24,8 @@ import torch
 from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens

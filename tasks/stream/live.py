@@ -22,18 +22,7 @@ from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer
 
-__all__ = ["LiveDancer", "latency_summary"]
-
-
-def latency_summary(values_ms: np.ndarray) -> dict[str, float]:
-    """Median, 99th percentile and maximum of per-frame times in ms (NaN when empty)."""
-    if len(values_ms) == 0:
-        return {"median_ms": float("nan"), "p99_ms": float("nan"), "max_ms": float("nan")}
-    return {
-        "median_ms": float(np.median(values_ms)),
-        "p99_ms": float(np.percentile(values_ms, 99)),
-        "max_ms": float(np.max(values_ms)),
-    }
+__all__ = ["LiveDancer"]
 
 
 @dataclass

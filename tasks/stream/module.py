@@ -12,9 +12,9 @@ import torch
 import torch.nn.functional as F
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.base_module import BackboneModule
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES
 from skeleton_mamba.tasks.stream.model import StreamDancer, teacher_forcing_inputs
+from skeleton_mamba.tasks.training.base_module import BackboneModule
 
 __all__ = ["StreamDanceModule"]
 

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.errors import one_line_message
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 from skeleton_mamba.tasks.text2motion.features import denormalize, recover_from_ric
 from skeleton_mamba.tasks.text2motion.humanml3d import read_features, read_statistics

@@ -18,8 +18,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from skeleton_mamba.tasks.base_data import SplitDataModule
-from skeleton_mamba.tasks.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.text2motion.features import group_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import (
     UNIT_LENGTH,
@@ -29,6 +28,7 @@ from skeleton_mamba.tasks.text2motion.humanml3d import (
     read_statistics,
 )
 from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clips
+from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
 __all__ = [
     "TextMotionDataset",

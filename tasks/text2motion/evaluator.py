@@ -24,8 +24,8 @@ import torch
 from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
 
-from skeleton_mamba.tasks.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
+from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
 
 __all__ = [
     "TextEncoderBiGRUCo",
@@ -159,8 +159,8 @@ class T2MEvaluator(nn.Module):
     def from_checkpoint(cls, path: str | PathLike[str], feature_dim: int = 263, **sizes: int) -> T2MEvaluator:
         """Load the official ``finest.tar`` (keys ``text_encoder``, ``movement_encoder``, ``motion_encoder``).
 
-        Read with :func:`~skeleton_mamba.tasks.checkpoints.load_checkpoint` (``weights_only=True``): tensors
-        and plain values only, nothing executed.
+        Read with :func:`~skeleton_mamba.tasks.training.checkpoints.load_checkpoint` (``weights_only=True``):
+        tensors and plain values only, nothing executed.
         """
         path = Path(path)
         if not path.is_file():

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.checkpoints import check_checkpoint_path, load_module
-from skeleton_mamba.tasks.diffusion.cli_options import add_sampling_arguments, sampling_overrides
-from skeleton_mamba.tasks.errors import one_line_message
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.errors import one_line_message
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
+from skeleton_mamba.tasks.training.checkpoints import check_checkpoint_path, load_module
+from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 
 __all__ = ["parse_length", "slug", "save_generated", "main"]
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, FPS
 

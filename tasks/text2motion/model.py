@@ -20,7 +20,7 @@ channels and also forms the first cross-attention token; the caption's token emb
 (projected to ``text_dim``). The unconditional prediction used by classifier-free guidance masks out
 every text token, leaving the timestep token. The denoiser predicts x0 (MDM), preconditioned
 with the per-feature statistics of the normalised training features (``mu + c_skip (x_t - a mu) + c_out F``
-with the backbone's output F: :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
+with the backbone's output F: :mod:`skeleton_mamba.tasks.training.diffusion.parameterisation`).
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
-from skeleton_mamba.tasks.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
+from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
+from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
 
 __all__ = [
     "JOINT_CHANNELS",
@@ -84,8 +84,9 @@ def tokens_to_features(tokens: torch.Tensor) -> torch.Tensor:
 
 
 TIME_EMBEDDING_ORDER = "cos_sin"
-"""The text-to-motion denoisers' timestep embedding layout (guided-diffusion's ``[cos, sin]``)
-of :func:`~skeleton_mamba.tasks.diffusion.sinusoidal_embedding`, kept so checkpoints keep their outputs."""
+"""The text-to-motion denoisers' timestep embedding layout (guided-diffusion's ``[cos, sin]``) of
+:func:`~skeleton_mamba.tasks.training.diffusion.sinusoidal_embedding`, kept so checkpoints keep their
+outputs."""
 
 
 def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
@@ -114,7 +115,7 @@ class LengthMaskedDenoiser:
     """A text-to-motion denoiser at fixed frame masks, as the samplers call it: ``(x_t, t, cond) -> x0``.
 
     ``model(x_t, t, cond, mask)`` is either denoiser of this package; ``mask`` (B, T) bool marks valid
-    frames. It implements :class:`~skeleton_mamba.tasks.diffusion.NullConditioned` (the null caption
+    frames. It implements :class:`~skeleton_mamba.tasks.training.diffusion.NullConditioned` (the null caption
     :meth:`TextCondition.null`); on the doubled batch of classifier-free guidance the mask repeats.
     """
 
@@ -142,7 +143,7 @@ class TextToMotionDenoiser(nn.Module):
         time_channels: timestep channels appended to every joint token.
         time_embedding_dim: sinusoidal embedding size of the timestep.
         diffusion_steps: T of the noise schedule (scales the skip connection from x_t,
-            :mod:`skeleton_mamba.tasks.diffusion.parameterisation`).
+            :mod:`skeleton_mamba.tasks.training.diffusion.parameterisation`).
     """
 
     def __init__(

@@ -1,11 +1,11 @@
 """LightningModule for text-to-motion diffusion ([EgoMusic] supp. Sec. 8.2, [MDM]'s recipe).
 
 Training (MDM, ``GuyTevet/motion-diffusion-model``): x0 prediction with the shared
-:class:`~skeleton_mamba.tasks.diffusion.GaussianDiffusion` (cosine schedule, 1,000 steps, uniform t),
+:class:`~skeleton_mamba.tasks.training.diffusion.GaussianDiffusion` (cosine schedule, 1,000 steps, uniform t),
 masked MSE ``|x0 - x0_hat|^2`` over valid frames, the caption dropped with probability 0.1 for
 classifier-free guidance, AdamW (lr 1e-4, weight decay 0). Sampling (the shared
-:func:`~skeleton_mamba.tasks.diffusion.sample`): classifier-free guidance ``unc + s (cond - unc)`` with
-s = ``guidance_weight`` = 2.5, ``sampler`` ancestral DDPM over all steps (MDM) or DDIM with
+:func:`~skeleton_mamba.tasks.training.diffusion.sample`): classifier-free guidance ``unc + s (cond - unc)``
+with s = ``guidance_weight`` = 2.5, ``sampler`` ancestral DDPM over all steps (MDM) or DDIM with
 ``sampling_steps`` steps and noise ``eta``.
 
 The text encoder (:class:`~.text_encoder.TextEncoder`, frozen) is kept outside the module's state:
@@ -32,9 +32,6 @@ import numpy as np
 import torch
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import config_from
-from skeleton_mamba.tasks.base_module import BackboneModule, attached_trainer
-from skeleton_mamba.tasks.diffusion import GaussianDiffusion, SamplingOptions, sample
 from skeleton_mamba.tasks.text2motion.evaluation import T2MEvalConfig, T2MEvaluation
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     COMPARABLE,
@@ -49,6 +46,9 @@ from skeleton_mamba.tasks.text2motion.glove import HashedWordVectorizer, WordVec
 from skeleton_mamba.tasks.text2motion.humanml3d import read_feature_vector
 from skeleton_mamba.tasks.text2motion.model import LengthMaskedDenoiser, TextCondition, TextToMotionDenoiser
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
+from skeleton_mamba.tasks.training.backbone_config import config_from
+from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
+from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, SamplingOptions, sample
 
 __all__ = ["TextToMotionModule"]
 
@@ -249,7 +249,7 @@ class TextToMotionModule(BackboneModule):
             generator: CPU generator for reproducible noise.
             guidance_weight, sampling_steps, sampler, eta: overrides of the module's :attr:`sampling`
                 (``None`` keeps its setting; a step count alone selects DDIM:
-                :meth:`~skeleton_mamba.tasks.diffusion.SamplingOptions.override`).
+                :meth:`~skeleton_mamba.tasks.training.diffusion.SamplingOptions.override`).
             progress: show a progress bar.
 
         Returns:

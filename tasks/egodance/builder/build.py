@@ -43,8 +43,8 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
-from skeleton_mamba.tasks.errors import DataFileError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion import aistpp
+from skeleton_mamba.tasks.motion.errors import DataFileError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle

@@ -1,7 +1,7 @@
 """Callbacks the ``sm`` Lightning CLI adds to every recipe: stop at a non-finite loss, save on SIGTERM.
 
 :class:`NonFiniteLossGuard` checks the loss before each backward pass: a NaN or infinite loss stops
-training before it reaches the weights, with a :class:`~skeleton_mamba.tasks.errors.NonFiniteLossError`
+training before it reaches the weights, with a :class:`~skeleton_mamba.tasks.motion.errors.NonFiniteLossError`
 naming the step, the batch and its samples (the ``sample_id`` / ``name`` entries of a dict batch, and
 the batch rows whose tensors hold NaN or Inf). ``sm`` prints it on one line and exits with status 2.
 
@@ -26,7 +26,7 @@ import lightning.pytorch as pl
 import torch
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 
-from skeleton_mamba.tasks.errors import InputError, NonFiniteLossError
+from skeleton_mamba.tasks.motion.errors import InputError, NonFiniteLossError
 
 __all__ = [
     "InterruptRecorder",
@@ -151,7 +151,7 @@ def silence_interrupt_notice() -> None:
 
 
 def check_trained(trainer: pl.Trainer) -> None:
-    """Raise :class:`~skeleton_mamba.tasks.errors.InputError` when ``trainer.fit`` ran no training batch."""
+    """Raise an :class:`~skeleton_mamba.tasks.motion.errors.InputError` when ``fit`` ran no training batch."""
     if trainer.num_training_batches != 0:
         return
     loader = trainer.train_dataloader

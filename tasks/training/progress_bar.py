@@ -5,7 +5,7 @@ bounded by ``max_steps`` (or ``max_time``) leaves ``max_epochs`` unset, which Li
 the rich bar read ``Epoch 14/-2``. Here the last epoch is ``max_epochs - 1`` when set, else derived from
 ``max_steps`` and the optimizer steps per epoch (``ceil(num_training_batches / accumulate_grad_batches)``);
 a run bounded only by time shows the time left. ``sm fit`` installs :func:`default_progress_bar` unless
-the recipe configures a progress bar or turns it off (``tasks/lightning_cli.py``).
+the recipe configures a progress bar or turns it off (``tasks/training/lightning_cli.py``).
 """
 
 from __future__ import annotations

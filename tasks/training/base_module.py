@@ -2,7 +2,7 @@
 
 Task modules take a :class:`~skeleton_mamba.SkeletonMambaConfig` (``backbone``) and, where their network
 has its own settings, a config dataclass (``EMMConfig``); checkpoints store them as plain dicts and lists
-so that they load with ``weights_only=True`` (:mod:`skeleton_mamba.tasks.backbone_config`).
+so that they load with ``weights_only=True`` (:mod:`skeleton_mamba.tasks.training.backbone_config`).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import lightning.pytorch as pl
 from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.training.backbone_config import backbone_config, plain_backbone_config
 
 __all__ = ["BackboneModule", "attached_trainer"]
 

@@ -2,7 +2,7 @@
 
 A denoiser is any callable ``(x_t (B, ...), t (B,) long, cond) -> x0_hat (B, ...)``; ``cond=None`` asks
 for the unconditional prediction (the task model substitutes its learned null condition). Task code
-samples through the one entry point :func:`~skeleton_mamba.tasks.diffusion.sampling.sample`.
+samples through the one entry point :func:`~skeleton_mamba.tasks.training.diffusion.sampling.sample`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 from tqdm.auto import tqdm
 
-from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion, _extract
+from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion, _extract
 
 __all__ = [
     "Denoiser",

@@ -6,8 +6,8 @@ a running mean of the joint-averaged features per body, then the linear head ove
 so far. This is :func:`skeleton_mamba.tasks.recognition.early.online_probabilities` computed
 incrementally, in constant memory.
 
-``sm stream --task recognition --ckpt CKPT --skeleton FILE.npy --out DIR`` reads keypoints in the
-network's input convention (as the recipe's data pipeline hands them to the model: (T, J, C) for
+``sm stream --task recognition --ckpt CKPT --skeleton FILE.npy --out DIR`` (:func:`main`) reads keypoints
+in the network's input convention (as the recipe's data pipeline hands them to the model: (T, J, C) for
 one body or (M, T, J, C)), feeds them frame by frame, and writes ``DIR/<name>_online.csv`` (frame,
 top class, probability of each class), ``DIR/<name>_online.png`` (probabilities over time) and
 prints the top class after the last frame.
@@ -26,9 +26,16 @@ import torch
 
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
-from skeleton_mamba.tasks.stream.live import latency_summary
+from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
+from skeleton_mamba.tasks.training.checkpoints import load_module
+from skeleton_mamba.tasks.training.frame_timing import (
+    announce_compile,
+    latency_summary,
+    prepare_live,
+    report_compile,
+)
 
-__all__ = ["OnlineRecognizer", "stream_recognition"]
+__all__ = ["OnlineRecognizer", "build_parser", "main", "stream_recognition"]
 
 
 class OnlineRecognizer:
@@ -102,15 +109,36 @@ def _plot(prob: np.ndarray, names: list[str], path: Path) -> None:
     plt.close(fig)
 
 
-def stream_recognition(args: argparse.Namespace) -> int:
-    """``sm stream --task recognition`` (see the module docstring)."""
-    from skeleton_mamba.tasks.checkpoints import load_module
-    from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
-    from skeleton_mamba.tasks.stream.cli import announce_compile, report_compile
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="sm stream --task recognition", description="Online action recognition of a skeleton stream."
+    )
+    p.add_argument("--task", choices=("recognition",), default="recognition", help=argparse.SUPPRESS)
+    p.add_argument("--ckpt", required=True, help="a checkpoint of a causal recognition recipe")
+    p.add_argument(
+        "--skeleton", required=True, help="keypoints: a .npy of (T, J, C) or (M, T, J, C), the model's input"
+    )
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--name", default=None, help="file stem (default: the skeleton file's stem)")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    p.add_argument("--compile", action="store_true", help="compile the frame step with torch.compile first")
+    return p
 
-    if not args.skeleton:
-        print("sm stream: --skeleton FILE.npy is required for --task recognition", file=sys.stderr)
+
+def main(argv: list[str] | None = None) -> int:
+    """``sm stream --task recognition`` (see the module docstring); returns the exit code."""
+    args = build_parser().parse_args(argv)
+    if (code := prepare_live(args.ckpt, args.threads)) is not None:
+        return code
+    try:
+        return stream_recognition(args)
+    except (FileNotFoundError, ValueError) as err:  # bad input files: one line, no traceback
+        print(f"sm stream: {err}", file=sys.stderr)
         return 2
+
+
+def stream_recognition(args: argparse.Namespace) -> int:
+    """Feed ``args.skeleton`` frame by frame to the checkpoint's recognizer; write the table and the plot."""
     path = Path(args.skeleton)
     keypoints = _load_keypoints(path)
     module = load_module(ActionRecognitionModule, args.ckpt)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.tasks.diffusion.sampling import SAMPLERS
+from skeleton_mamba.tasks.training.diffusion.sampling import SAMPLERS
 
 __all__ = ["add_sampling_arguments", "sampling_overrides"]
 

@@ -31,7 +31,7 @@ from typing import Any, TypeVar
 
 import torch
 
-from skeleton_mamba.tasks.errors import CheckpointError, RandomWeightsWarning
+from skeleton_mamba.tasks.motion.errors import CheckpointError, RandomWeightsWarning
 
 __all__ = [
     "TRUSTED_CLASS_PREFIXES",

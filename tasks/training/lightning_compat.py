@@ -8,7 +8,7 @@ but lists it), so a ``batch_size`` link to a module without ``batch_size`` lands
 fails already at instantiation. LightningCLI builds those hyper-parameters in its private ``_InstantiatorFn``
 and offers no hook to filter the links it receives, so :class:`AcceptedLinksInstantiator` subclasses it.
 Everything else the project needs from LightningCLI goes through its documented hooks
-(:mod:`skeleton_mamba.tasks.lightning_cli`).
+(:mod:`skeleton_mamba.tasks.training.lightning_cli`).
 
 :data:`CHECKED_LIGHTNING` names the releases this was read against; importing this module on a Lightning whose
 ``_InstantiatorFn`` is gone or has another signature (:func:`private_api_problems`) raises an
@@ -42,7 +42,7 @@ PRIVATE_NAMES = ("lightning.pytorch.cli._InstantiatorFn",)
 
 def _unsupported(reason: str) -> ImportError:
     return ImportError(
-        f"lightning {pl.__version__}: {reason}; skeleton_mamba.tasks.lightning_compat builds on it "
+        f"lightning {pl.__version__}: {reason}; skeleton_mamba.tasks.training.lightning_compat builds on it "
         f"(checked with lightning {CHECKED_LIGHTNING[0]} to {CHECKED_LIGHTNING[1]}): install "
         f"lightning<={CHECKED_LIGHTNING[1]} or port the adapter"
     )

@@ -1,6 +1,6 @@
 """The project's error types and the one-line messages ``sm`` prints for expected failures.
 
-Policy (applied by ``skeleton_mamba.cli.main`` to every command):
+Policy (applied by ``skeleton_mamba.tasks.training.cli.main`` to every command):
 
 - an expected failure (a :class:`SkeletonMambaError`, or an :class:`OSError` such as a missing or
   unwritable path, or a directory where a file belongs) prints one line ``sm COMMAND: message`` naming
@@ -66,7 +66,7 @@ class NonFiniteLossError(SkeletonMambaError, FloatingPointError):
 
 class RandomWeightsWarning(UserWarning):
     """A part of a network starts from random instead of pretrained weights (moot when a checkpoint's
-    weights are loaded over it: :func:`~skeleton_mamba.tasks.checkpoints.load_module_and_checkpoint`
+    weights are loaded over it: :func:`~skeleton_mamba.tasks.training.checkpoints.load_module_and_checkpoint`
     silences it)."""
 
 

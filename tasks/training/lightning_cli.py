@@ -9,14 +9,14 @@ A recipe composes a task's LightningModule and LightningDataModule through ``cla
     sm fit --recipe ntu60.yaml --ckpt_path last         # resume the latest run, in its own version_N
     sm fit --recipe ntu60.yaml --print_config
 
-``--recipe`` is an alias of ``-c/--config`` (:mod:`skeleton_mamba.tasks.recipe_resolution`);
+``--recipe`` is an alias of ``-c/--config`` (:mod:`skeleton_mamba.tasks.training.recipe_resolution`);
 config files and dotted overrides merge left to right. Values that follow from the data set are
 linked from the instantiated data module to the model (:data:`DATA_TO_MODEL_LINKS`), never typed
 twice; a link applies when both the data module has the attribute and the model the argument.
 
-Every run gets :class:`~skeleton_mamba.tasks.run_guards.NonFiniteLossGuard` and
-:class:`~skeleton_mamba.tasks.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
-:mod:`skeleton_mamba.tasks.checkpoints` before Lightning reads it (README "Safety and errors").
+Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGuard` and
+:class:`~skeleton_mamba.tasks.training.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
+:mod:`skeleton_mamba.tasks.training.checkpoints` before Lightning reads it (README "Safety and errors").
 """
 
 from __future__ import annotations
@@ -32,13 +32,21 @@ from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCLI
 
 from skeleton_mamba import __version__
-from skeleton_mamba.tasks.checkpoints import load_checkpoint
-from skeleton_mamba.tasks.errors import InputError
-from skeleton_mamba.tasks.lightning_compat import install_accepted_links
-from skeleton_mamba.tasks.progress_bar import with_default_progress_bar
-from skeleton_mamba.tasks.recipe_resolution import RecipeConfigAction, packaged_recipes, recipe_description
-from skeleton_mamba.tasks.run_folders import find_last_checkpoint, remove_if_empty, resume_in_run_folder
-from skeleton_mamba.tasks.run_guards import (
+from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
+from skeleton_mamba.tasks.training.lightning_compat import install_accepted_links
+from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
+from skeleton_mamba.tasks.training.recipe_resolution import (
+    RecipeConfigAction,
+    packaged_recipes,
+    recipe_description,
+)
+from skeleton_mamba.tasks.training.run_folders import (
+    find_last_checkpoint,
+    remove_if_empty,
+    resume_in_run_folder,
+)
+from skeleton_mamba.tasks.training.run_guards import (
     InterruptRecorder,
     NonFiniteLossGuard,
     check_trained,
@@ -90,7 +98,7 @@ def import_task_modules() -> list[str]:
 
 
 class OneLineErrorParser(LightningArgumentParser):
-    """A parse error is an :class:`~skeleton_mamba.tasks.errors.InputError` on one line, which ``sm``
+    """A parse error is an :class:`~skeleton_mamba.tasks.motion.errors.InputError` on one line, which ``sm``
     prints with exit status 2 like every command's errors (jsonargparse prints the whole usage first)."""
 
     def error(self, message: str, ex: Exception | None = None):
@@ -132,9 +140,8 @@ class SkeletonMambaCLI(LightningCLI):
         ``last`` becomes the last checkpoint of the latest run of this recipe; the file must be local and
         load with ``weights_only=True``, and the class paths in its hyper-parameters must be the project's,
         all before Lightning parses them (which imports the classes they name). ``sm fit`` resumes in the
-        checkpoint's own run folder (:func:`~skeleton_mamba.tasks.run_folders.resume_in_run_folder`). The
-        trainer method's ``weights_only`` is set to True, so that Lightning's own load of the checkpoint is
-        restricted too.
+        checkpoint's own run folder (:func:`~.run_folders.resume_in_run_folder`). The trainer method's
+        ``weights_only`` is set to True, so that Lightning's own load of the checkpoint is restricted too.
         """
         super().parse_arguments(parser, args)
         subcommand = self.config.get("subcommand")
@@ -158,7 +165,7 @@ class SkeletonMambaCLI(LightningCLI):
         Lightning stores every applied data-to-model link in the checkpoint's hyper-parameters and parses
         them back on ``--ckpt_path``; a link the model has no argument for (``batch_size`` on a module
         without one) would then break ``sm test|predict --ckpt_path``
-        (:mod:`skeleton_mamba.tasks.lightning_compat`).
+        (:mod:`skeleton_mamba.tasks.training.lightning_compat`).
         """
         install_accepted_links(self)
 
@@ -169,7 +176,7 @@ class SkeletonMambaCLI(LightningCLI):
         free ``version_N`` lazily, so the second would see the first's new folder and take N + 1.
         Reading all versions up front gives both the same folder. The folders this run creates are
         recorded so that a run stopping before it wrote anything leaves none behind. The progress bar shows
-        the epoch total (:mod:`skeleton_mamba.tasks.progress_bar`) unless the recipe configures its own.
+        the epoch total (:mod:`.progress_bar`) unless the recipe configures its own.
         """
         config = {**_subcommand_config(self.config_init, self.subcommand).get("trainer", {}), **kwargs}
         kwargs["callbacks"] = with_default_progress_bar(

@@ -18,7 +18,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from skeleton_mamba.tasks.errors import CheckpointError
+from skeleton_mamba.tasks.motion.errors import CheckpointError
 
 __all__ = ["BOOKKEEPING", "find_last_checkpoint", "logger_folders", "remove_if_empty", "resume_in_run_folder"]
 

@@ -6,18 +6,18 @@ unconditional (null-condition) prediction used by classifier-free guidance. Task
 :func:`sample` (DDIM or DDPM, :class:`SamplingOptions`), long sequences through :func:`sample_long`.
 """
 
-from skeleton_mamba.tasks.diffusion.embedding import sinusoidal_embedding
-from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion
-from skeleton_mamba.tasks.diffusion.samplers import (
+from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
+from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion
+from skeleton_mamba.tasks.training.diffusion.samplers import (
     GuidanceTerm,
     NullConditioned,
     ddim_sample,
     ddpm_sample,
     guided_x0,
 )
-from skeleton_mamba.tasks.diffusion.sampling import SAMPLERS, SamplingOptions, sample
-from skeleton_mamba.tasks.diffusion.schedule import NoiseSchedule, cosine_betas
-from skeleton_mamba.tasks.diffusion.stitching import (
+from skeleton_mamba.tasks.training.diffusion.sampling import SAMPLERS, SamplingOptions, sample
+from skeleton_mamba.tasks.training.diffusion.schedule import NoiseSchedule, cosine_betas
+from skeleton_mamba.tasks.training.diffusion.stitching import (
     WindowConsistency,
     sample_long,
     stitch_windows,

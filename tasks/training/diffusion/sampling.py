@@ -16,8 +16,8 @@ from typing import Any
 
 import torch
 
-from skeleton_mamba.tasks.diffusion.gaussian import GaussianDiffusion
-from skeleton_mamba.tasks.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion
+from skeleton_mamba.tasks.training.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
 
 __all__ = ["SAMPLERS", "SamplingOptions", "sample"]
 

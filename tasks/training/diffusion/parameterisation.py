@@ -24,7 +24,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from skeleton_mamba.tasks.diffusion.schedule import NoiseSchedule
+from skeleton_mamba.tasks.training.diffusion.schedule import NoiseSchedule
 
 __all__ = ["SkipX0"]
 

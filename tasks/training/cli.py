@@ -1,11 +1,11 @@
-"""``sm``: the Skeleton Mamba command line.
+"""``sm``: the Skeleton Mamba command line, its command table and its error policy.
 
-``sm fit|validate|test|predict --recipe NAME`` runs LightningCLI (``skeleton_mamba.tasks``);
-the helper commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the
-task code that implements them. Every command shares one error policy (``skeleton_mamba.tasks.errors``):
-expected failures print one line and exit 2, Ctrl-C prints one line and exits 130.
-Everything is imported lazily, so ``import skeleton_mamba`` and
-``sm --help`` stay light (torch and einops only).
+``sm fit|validate|test|predict --recipe NAME`` runs LightningCLI (:mod:`.lightning_cli`); the helper
+commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the task or toolkit code
+that implements them and are named here as strings, imported only when their command runs (lazy for
+start-up time: ``sm --help`` imports neither Lightning nor a task). Every command shares one error policy:
+an expected failure (:func:`~skeleton_mamba.tasks.motion.errors.expected_failure`) prints one line and exits
+2, Ctrl-C prints one line and exits 130, anything else keeps its traceback.
 """
 
 from __future__ import annotations
@@ -17,15 +17,16 @@ import sys
 from collections.abc import Sequence
 
 from skeleton_mamba import __version__
+from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
 
 # name -> ("module:function", one-line help). Each function takes the arguments after the
 # command name (the LightningCLI entry also receives the subcommand) and returns an exit code.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "fit": ("skeleton_mamba.tasks.lightning_cli:run", "train a model from a recipe (LightningCLI)"),
-    "validate": ("skeleton_mamba.tasks.lightning_cli:run", "run the validation loop of a recipe"),
-    "test": ("skeleton_mamba.tasks.lightning_cli:run", "evaluate a checkpoint on the test split"),
-    "predict": ("skeleton_mamba.tasks.lightning_cli:run", "run a recipe's prediction loop"),
-    "recipes": ("skeleton_mamba.tasks.lightning_cli:list_recipes", "list the packaged recipes"),
+    "fit": ("skeleton_mamba.tasks.training.lightning_cli:run", "train a model from a recipe (LightningCLI)"),
+    "validate": ("skeleton_mamba.tasks.training.lightning_cli:run", "run the validation loop of a recipe"),
+    "test": ("skeleton_mamba.tasks.training.lightning_cli:run", "evaluate a checkpoint on the test split"),
+    "predict": ("skeleton_mamba.tasks.training.lightning_cli:run", "run a recipe's prediction loop"),
+    "recipes": ("skeleton_mamba.tasks.training.lightning_cli:list_recipes", "list the packaged recipes"),
     "prepare": ("skeleton_mamba.tasks.recognition.prepare:main", "build NTU / Kinetics annotation files"),
     "analyze-music": (
         "skeleton_mamba.tasks.motion.analyze_music:main",
@@ -38,6 +39,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),
     "generate": ("skeleton_mamba.tasks.text2motion.generate_cli:main", "generate motion from text"),
     "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
+}
+# command -> {value of its --task option: "module:function"}: a task's own variant of a shared command
+TASK_VARIANTS: dict[str, dict[str, str]] = {
+    "stream": {"recognition": "skeleton_mamba.tasks.recognition.online:main"},
 }
 LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
 EXIT_BAD_INPUT = 2  # an expected failure: bad or missing input, unwritable output (one line, no traceback)
@@ -86,7 +91,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if command not in commands:
         print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
         return 2
-    module_name, func_name = commands[command][0].split(":")
+    module_name, func_name = _target(command, rest, commands[command][0]).split(":")
     if command in LIGHTNING_SUBCOMMANDS:
         rest = [command, *rest]
     try:
@@ -104,15 +109,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     return int(result or 0)
 
 
-def _expected_failure_message(err: BaseException) -> str | None:
-    """The one-line message for an expected failure (bad input, missing or unwritable path); else None.
+def _target(command: str, args: list[str], default: str) -> str:
+    """The function that runs ``command``: its ``--task`` variant when it has one (:data:`TASK_VARIANTS`)."""
+    variants = TASK_VARIANTS.get(command, {})
+    for i, arg in enumerate(args):
+        value = arg.split("=", 1)[1] if arg.startswith("--task=") else None
+        if arg == "--task" and i + 1 < len(args):
+            value = args[i + 1]
+        if value is not None:
+            return variants.get(value, default)
+    return default
 
-    The policy lives in ``skeleton_mamba.tasks.errors`` (imported here, lazily, like every command).
-    """
-    try:
-        from skeleton_mamba.tasks.errors import expected_failure, one_line_message
-    except ImportError:
-        return None
+
+def _expected_failure_message(err: BaseException) -> str | None:
+    """The one-line message for an expected failure (bad input, missing or unwritable path); else None."""
     failure = expected_failure(err)
     return None if failure is None else one_line_message(failure)
 

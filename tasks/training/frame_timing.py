@@ -1,0 +1,63 @@
+"""What the live commands (``sm stream``: dance and online recognition) share: the checks before the first
+frame, per-frame latency figures and the notices around compiling the frame step with ``torch.compile``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import torch
+
+from skeleton_mamba.streaming import keep_freed_memory
+from skeleton_mamba.tasks.training.checkpoints import check_checkpoint_path
+
+__all__ = ["announce_compile", "latency_summary", "prepare_live", "report_compile"]
+
+
+def prepare_live(ckpt: str, threads: int | None, prog: str = "sm stream") -> int | None:
+    """Check the checkpoint, set the CPU threads and keep freed memory; an exit code on failure, else None.
+
+    A URL or a missing checkpoint is refused before any work; ``threads`` (None: torch's default) sets
+    ``torch.set_num_threads``; the allocator keeps freed memory so that the per-frame path has no page faults.
+    """
+    try:
+        check_checkpoint_path(ckpt)
+    except FileNotFoundError:
+        print(f"{prog}: checkpoint {ckpt} not found", file=sys.stderr)
+        return 2
+    except (OSError, ValueError) as err:
+        print(f"{prog}: checkpoint {ckpt}: {err}", file=sys.stderr)
+        return 2
+    if threads:
+        torch.set_num_threads(threads)
+    keep_freed_memory()
+    return None
+
+
+def latency_summary(values_ms: np.ndarray) -> dict[str, float]:
+    """Median, 99th percentile and maximum of per-frame times in ms (NaN when empty)."""
+    if len(values_ms) == 0:
+        return {"median_ms": float("nan"), "p99_ms": float("nan"), "max_ms": float("nan")}
+    return {
+        "median_ms": float(np.median(values_ms)),
+        "p99_ms": float(np.percentile(values_ms, 99)),
+        "max_ms": float(np.max(values_ms)),
+    }
+
+
+def announce_compile(enabled: bool, prog: str = "sm stream") -> bool:
+    """Say, before it starts, that compiling takes a while; returns ``enabled``."""
+    if enabled:
+        print(
+            f"{prog}: compiling the frame step with torch.compile (about a minute at the paper width)...",
+            file=sys.stderr,
+            flush=True,
+        )
+    return enabled
+
+
+def report_compile(seconds: float | None, enabled: bool, prog: str = "sm stream") -> None:
+    """The compile time, or nothing (not asked; or it failed and the warning said so)."""
+    if enabled and seconds is not None:
+        print(f"{prog}: frame step compiled in {seconds:.0f} s", file=sys.stderr)
