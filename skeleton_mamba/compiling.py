@@ -86,7 +86,7 @@ def compile_for_inference(
 def inductor_unavailable() -> str | None:
     """Why inductor cannot compile for the CPU here (no C++ compiler found), or None if it can."""
     try:
-        from torch._inductor.cpp_builder import get_cpp_compiler
+        from torch._inductor.cpp_builder import get_cpp_compiler  # lazy: inductor only when compiling
 
         get_cpp_compiler()
     except Exception as err:  # no C++ compiler, or an inductor without its CPU backend

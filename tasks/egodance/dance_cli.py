@@ -27,10 +27,21 @@ import json
 import sys
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.egodance.builder.layout import read_frames
+from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
+from skeleton_mamba.tasks.egodance.export import write_dance
+from skeleton_mamba.tasks.egodance.frames import resize_frames
+from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
+from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 
 __all__ = ["main", "build_parser"]
@@ -81,7 +92,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _read_video(path: Path) -> np.ndarray:
     """(T, H, W, 3) uint8 frames of a video file or a folder of images (sorted by name)."""
-    import imageio.v3 as iio
 
     if path.is_dir():
         images = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp"))
@@ -115,8 +125,6 @@ def _conditions(
     args, module, canonical: bool = False
 ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
     """music (T, L), frames (T, 3, S, S) or None, ground-truth head targets (T, 3) (--sample) or None."""
-    from skeleton_mamba.tasks.egodance.builder.layout import read_frames
-    from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 
     size = module.hparams.image_size
     vision = module.model.config.use_vision
@@ -130,8 +138,6 @@ def _conditions(
             [folder], window=num_frames, load_frames=vision, image_size=size, canonicalize_init_head=canonical
         )[0]
         return item["music"], item.get("frames"), item["head"]
-    from skeleton_mamba.tasks.egodance.frames import resize_frames
-    from skeleton_mamba.tasks.motion.music import extract_music_features
 
     fps = module.hparams.get("fps", 30)  # the frame rate the model was trained at
     music = torch.from_numpy(extract_music_features(args.music, fps=fps).features.astype(np.float32))
@@ -166,7 +172,6 @@ def _head_targets(args, module, frames: torch.Tensor | None, oracle: torch.Tenso
             raise SystemExit(
                 f"sm dance: {args.ckpt} has no head-trajectory estimator (music-only); use --head none"
             )
-        from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
 
         return source, estimate_long_trajectory(module.head_estimator.eval(), frames, args.window)[0]
     return source, None
@@ -176,11 +181,6 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
-    from skeleton_mamba.tasks.egodance.export import write_dance
-    from skeleton_mamba.tasks.egodance.module import EgoDanceModule
-    from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
-    from skeleton_mamba.tasks.motion.render import RenderStyle
-    from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint(EgoDanceModule, args.ckpt)

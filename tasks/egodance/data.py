@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.frames import resize_frames
@@ -47,6 +48,8 @@ from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.synthetic import make_demo_set
+from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
@@ -344,7 +347,6 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
 
     def assign_splits(self, sources: list[str]) -> dict[str, str]:
         """Generated dance -> split, stratified by style (class docstring)."""
-        from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
 
         n = len(set(sources))
         val, test = (math.ceil(f * n) for f in (self.hparams.val_fraction, self.hparams.test_fraction))
@@ -352,8 +354,6 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
 
     def prepare_data(self) -> None:
         """Generate and build the set unless a finished build is already there."""
-        from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
-        from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 
         hp = self.hparams
         motions = self.source_root / "motions"

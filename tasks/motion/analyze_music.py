@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack
+from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack, extract_music_features
 
 __all__ = ["main"]
 
@@ -58,9 +59,7 @@ def _check_out(out: Path) -> str | None:
 
 def _analyse(args: argparse.Namespace):
     """The analysis, or a one-line reason naming the file when the audio cannot be analysed."""
-    import librosa
-
-    from skeleton_mamba.tasks.motion.music import extract_music_features
+    import librosa  # lazy: librosa's import is slow (numba)
 
     try:
         with warnings.catch_warnings():  # librosa's CQT notes, overflow warnings: errors are one line
@@ -89,8 +88,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sm analyze-music: error: {analysis}", file=sys.stderr)
         return 2
     if args.out is not None:
-        from skeleton_mamba.tasks.motion.atomic import atomic_open
-
         try:
             with atomic_open(args.out, "wb") as f:  # exactly args.out: np.save on a handle adds no suffix
                 np.save(f, np.ascontiguousarray(analysis.features), allow_pickle=False)

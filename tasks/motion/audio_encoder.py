@@ -27,6 +27,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
+from skeleton_mamba.tasks.motion.music import load_audio
 
 __all__ = ["PretrainedAudioEncoder", "resample_frames"]
 
@@ -76,7 +77,7 @@ class PretrainedAudioEncoder(nn.Module):
         freeze: bool = True,
     ) -> None:
         super().__init__()
-        from transformers import AutoFeatureExtractor, AutoModel
+        from transformers import AutoFeatureExtractor, AutoModel  # lazy: transformers' import is slow
 
         self.model_dir = Path(model_path).expanduser()
         if not (self.model_dir / "config.json").is_file():
@@ -148,7 +149,7 @@ class PretrainedAudioEncoder(nn.Module):
 
     def encode(self, audio: np.ndarray, sr: int, num_frames: int | None = None) -> torch.Tensor:
         """Embed ``(N,)`` audio at any sample rate (resampled with librosa first)."""
-        import librosa
+        import librosa  # lazy: librosa's import is slow (numba)
 
         audio = np.asarray(audio, dtype=np.float32)
         if sr != self.sampling_rate:
@@ -163,7 +164,6 @@ class PretrainedAudioEncoder(nn.Module):
         use_cache: bool = True,
     ) -> torch.Tensor:
         """Embed an audio file, with the on-disk cache (default ``~/.cache/skeleton_mamba/audio_encoder``)."""
-        from skeleton_mamba.tasks.motion.music import load_audio
 
         settings = {
             "kind": "pretrained_audio_encoder",

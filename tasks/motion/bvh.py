@@ -26,6 +26,7 @@ from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
+from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
 
 __all__ = ["BvhError", "BvhMotion", "load_bvh", "save_bvh", "smpl_to_bvh", "bvh_to_smpl"]
@@ -317,7 +318,6 @@ def smpl_to_bvh(
 
     Leaf joints (toes, head, hands) get an End Site half as long as their own bone, continuing it.
     """
-    from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 
     if not (math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps}")

@@ -26,6 +26,12 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from skeleton_mamba.tasks.motion.aistpp import music_id
+from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
+from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
+from skeleton_mamba.tasks.motion.music import audio_stack
+from skeleton_mamba.tasks.motion.render_cli import load_joints
+
 __all__ = ["evaluate_folders", "main"]
 
 MOTION_SUFFIXES = (".npz", ".pkl")
@@ -48,7 +54,6 @@ def _motion_files(folder: Path) -> list[Path]:
 
 def _music_for(motion: Path, music_dir: Path) -> Path:
     """``<music id>.<ext>`` for an AIST++ name in the motion's file name, else the audio with its stem."""
-    from skeleton_mamba.tasks.motion.aistpp import music_id
 
     try:
         stems = [music_id(motion.stem), motion.stem]
@@ -63,7 +68,6 @@ def _music_for(motion: Path, music_dir: Path) -> Path:
 
 
 def _joints(path: Path):
-    from skeleton_mamba.tasks.motion.render_cli import load_joints
 
     try:
         clip = load_joints(path)
@@ -88,7 +92,6 @@ def evaluate_folders(
         The :meth:`.metrics.evaluation.DanceEvaluation.compute` dict plus ``protocol``, file counts and
         ``audio_stack`` (:func:`.music.audio_stack`: the versions that decide the music beats).
     """
-    from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 
     evaluation = DanceEvaluation(protocol)
     sets = (("generated", _motion_files(generated)), ("real", _motion_files(real)))
@@ -113,7 +116,6 @@ def evaluate_folders(
             f"{generated} / {real}: FID and Div need at least 2 clips in each set, got "
             f"{values['generated_clips']} generated and {values['real_clips']} real"
         )
-    from skeleton_mamba.tasks.motion.music import audio_stack
 
     return {"protocol": protocol, **counts, **values, "audio_stack": audio_stack()}
 
@@ -136,7 +138,6 @@ def format_table(result: dict) -> str:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
 
     p = argparse.ArgumentParser(
         prog="sm evaluate-dance",

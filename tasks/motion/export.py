@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.atomic import atomic_path
@@ -36,8 +37,7 @@ class DanceFiles:
 
 def write_music_slice(src: str | Path, start_s: float, duration_s: float, out: str | Path) -> Path:
     """Write ``duration_s`` seconds of the audio file ``src`` from ``start_s`` as 16-bit wav at ``out``."""
-    import librosa
-    import soundfile as sf
+    import librosa  # lazy: librosa's import is slow (numba)
 
     src = Path(src)
     if not src.is_file():

@@ -26,7 +26,7 @@ LOCK_PATH = Path(tempfile.gettempdir()) / "skeleton_mamba_librosa_jit.lock"
 def librosa_lock() -> Iterator[None]:
     """Hold :data:`LOCK_PATH` exclusively for the duration of the block."""
     try:
-        import fcntl
+        import fcntl  # lazy: POSIX only
     except ImportError:  # not POSIX
         yield
         return

@@ -25,10 +25,12 @@ from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
+import torch
 
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 from skeleton_mamba.tasks.motion.value_checks import check_fps, non_finite_message
 
 __all__ = ["MotionData", "MotionFileError", "save_motion", "load_motion"]
@@ -118,9 +120,6 @@ class MotionData:
         """(T, J, 3) joint positions in metres: the stored joints, else SMPL forward kinematics."""
         if self.joints is not None:
             return self.joints
-        import torch
-
-        from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 
         poses = torch.from_numpy(np.asarray(self.poses, dtype=np.float64))
         root = torch.from_numpy(np.asarray(self.root_position(), dtype=np.float64))

@@ -36,13 +36,16 @@ and every setting; tempo and beats are re-derived from the cached beat column, s
 
 from __future__ import annotations
 
+import inspect
 import os
 import re
 import warnings
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
+import soundfile
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
 from skeleton_mamba.tasks.motion.errors import DataFileError
@@ -136,11 +139,8 @@ def audio_stack() -> dict[str, str]:
     ``soxr_hq`` from librosa 0.10 on, ``kaiser_best`` (resampy) before) and ``resampler_package`` (the
     package behind it, ``"name version"``).
     """
-    import inspect
-    from importlib import metadata
 
-    import librosa
-    import soundfile
+    import librosa  # lazy: librosa's import is slow (numba)
 
     res_type = str(inspect.signature(librosa.resample).parameters["res_type"].default)
     package = _RESAMPLER_PACKAGES.get(res_type.split("_")[0], "unknown")
@@ -181,7 +181,7 @@ def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
         ValueError: the file cannot be decoded or holds no samples (the message names the file).
         DataFileError: a decoded sample is NaN or Inf (the message gives the time of the first).
     """
-    import librosa
+    import librosa  # lazy: librosa's import is slow (numba)
 
     path = Path(path)
     if not path.is_file():
@@ -268,7 +268,7 @@ def compute_music_features(
     Returns:
         A :class:`MusicAnalysis` whose ``features`` are ``(1 + N // 512, 35)``.
     """
-    import librosa
+    import librosa  # lazy: librosa's import is slow (numba)
 
     sr = int(fps) * HOP_LENGTH
     y = np.asarray(y, dtype=np.float32)
@@ -319,7 +319,7 @@ def extract_music_features(
         cache_dir: cache folder (default ``~/.cache/skeleton_mamba/music``).
         use_cache: ``False`` always recomputes and writes nothing.
     """
-    import librosa
+    import librosa  # lazy: librosa's import is slow (numba)
 
     if fps <= 0 or int(fps) != fps:
         raise ValueError(f"fps must be a positive integer, got {fps}")

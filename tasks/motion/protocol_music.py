@@ -26,6 +26,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
 from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
@@ -67,7 +68,7 @@ def bailando_beats(
     path: str | os.PathLike, cache_dir: str | os.PathLike | None = None, use_cache: bool = True
 ) -> np.ndarray:
     """Beat frames (60 fps) of the whole track from the HPSS-percussive onset envelope (Bailando's recipe)."""
-    import librosa
+    import librosa  # lazy: librosa's import is slow (numba)
 
     cache = FeatureCache("music", cache_dir, enabled=use_cache)
     key = cache.key(path, {"kind": "bailando_beats", "version": _VERSION, "librosa": librosa.__version__})
@@ -110,8 +111,7 @@ def edge_start_bpm(slice_name: str) -> float | None:
 
 def _wav16_roundtrip(audio: np.ndarray, sr: int, target_sr: int) -> np.ndarray:
     """``sf.write`` of a slice as a (16-bit PCM) wav, then ``librosa.load(..., sr=target_sr)``, in memory."""
-    import librosa
-    import soundfile as sf
+    import librosa  # lazy: librosa's import is slow (numba)
 
     buffer = io.BytesIO()
     sf.write(buffer, audio, sr, format="WAV")  # soundfile's default wav subtype is PCM_16, as in EDGE
@@ -132,7 +132,7 @@ def edge_slice_features(
     Slice ``i`` covers ``[start_s + 2.5 i, start_s + 2.5 i + 5)`` seconds; ``S = 0`` when less than 5 s of
     audio remains.
     """
-    import librosa
+    import librosa  # lazy: librosa's import is slow (numba)
 
     path = Path(path)
     settings = {"kind": "edge_slices", "version": _VERSION, "start_s": float(start_s),

@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import math
 import re
+import subprocess
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -26,7 +27,9 @@ from os import PathLike
 from pathlib import Path
 
 import cv2
+import imageio_ffmpeg
 import numpy as np
+from PIL import Image
 from tqdm import tqdm
 
 from skeleton_mamba.tasks.motion.atomic import atomic_path, check_writable
@@ -262,7 +265,6 @@ def _write_gif(out: Path, frames: list[np.ndarray], fps: float) -> None:
     One palette (median cut over up to 8 sampled frames) is much faster than a palette per frame and
     suits the few flat colours drawn here. GIF delays are whole 1/100 s, so 30 fps plays at ~30.3 fps.
     """
-    from PIL import Image
 
     samples = frames[:: max(1, len(frames) // 8)][:8]
     palette = Image.fromarray(np.concatenate(samples, axis=0)).quantize(256, method=Image.Quantize.MEDIANCUT)
@@ -272,9 +274,6 @@ def _write_gif(out: Path, frames: list[np.ndarray], fps: float) -> None:
 
 def _check_audio(path: Path) -> None:
     """Fail before rendering when ffmpeg cannot decode ``path`` (rather than a broken pipe mid-video)."""
-    import subprocess
-
-    import imageio_ffmpeg
 
     if not path.is_file():
         raise FileNotFoundError(2, "No such music file", str(path))
@@ -341,7 +340,6 @@ def _write_mp4(
     out: Path, frames: Iterable[np.ndarray], fps: float, style: RenderStyle, music: str | PathLike[str] | None
 ) -> None:
     """Encode RGB frames to an H.264 mp4 with the ffmpeg binary of imageio-ffmpeg (music muxed as AAC)."""
-    import imageio_ffmpeg
 
     writer = imageio_ffmpeg.write_frames(
         str(out),

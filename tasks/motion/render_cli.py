@@ -27,7 +27,13 @@ import numpy as np
 import torch
 
 from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
+from skeleton_mamba.tasks.motion.bvh import load_bvh
 from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.render import render_motion
+from skeleton_mamba.tasks.motion.resample import resample_linear
 from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
 
 __all__ = ["JointsClip", "load_joints", "render_file", "main"]
@@ -60,13 +66,9 @@ def load_joints(
         raise FileNotFoundError(f"{path}: no such motion file")
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        from skeleton_mamba.tasks.motion.motion_file import load_motion
-
         motion = load_motion(path)
         return _from_skeleton(motion.joint_positions(), motion.skeleton, motion_fps or motion.fps)
     if suffix == ".pkl":
-        from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
-
         motion = load_aistpp_motion(path)
         return _from_skeleton(motion.joint_positions(), "smpl24", motion_fps or motion.fps)
     if suffix == ".npy":
@@ -83,13 +85,9 @@ def load_joints(
         joints = check_finite(joints.astype(np.float64), str(path), "joints", ("frame", "joint"))
         return _from_skeleton(joints, name, fps)
     if suffix == ".bvh":
-        from skeleton_mamba.tasks.motion.bvh import load_bvh
-
         bvh = load_bvh(path)
         return JointsClip(bvh.joint_positions(), list(bvh.parents), list(bvh.names), motion_fps or bvh.fps)
     if suffix == ".skeleton":
-        from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
-
         keypoints = read_skeleton_file(path).keypoints(max_bodies=2)  # (M, T, 25, 3)
         if keypoints.shape[1] == 0:
             raise ValueError(f"{path}: no frame lists a body")
@@ -114,8 +112,6 @@ def render_file(
     progress: bool = True,
 ) -> Path:
     """Load ``motion`` (any supported file), resample to ``fps`` if given, and render it to ``out``."""
-    from skeleton_mamba.tasks.motion.render import render_motion
-    from skeleton_mamba.tasks.motion.resample import resample_linear
 
     clip = load_joints(motion, skeleton=skeleton, motion_fps=motion_fps)
     joints, out_fps = clip.joints, check_fps(clip.fps, f"{motion}: motion frame rate")

@@ -120,7 +120,7 @@ def matrix_to_euler(matrix: torch.Tensor | np.ndarray, order: str) -> np.ndarray
 
     The inverse of :func:`euler_to_matrix` for the same ``order`` (used when writing BVH files).
     """
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: scipy only for this conversion
 
     order = _check_order(order)
     if isinstance(matrix, torch.Tensor):

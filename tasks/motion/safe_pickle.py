@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import codecs
 import collections
+import io
 import pickle
 from os import PathLike
 from pathlib import Path
@@ -142,8 +143,8 @@ def _reconstructor(cls: Any, base: Any, state: Any) -> Any:
 def _numpy_core_attr(module: str, name: str) -> Any:
     # numpy 2 keeps its internals in numpy._core; numpy.core is a deprecated alias. Resolve the
     # object directly so that reading a numpy-1 pickle neither imports numpy.core nor warns.
-    import numpy._core.multiarray as multiarray
-    import numpy._core.numeric as numeric
+    import numpy._core.multiarray as multiarray  # lazy: numpy 2 only
+    import numpy._core.numeric as numeric  # lazy: numpy 2 only
 
     return {"multiarray": multiarray, "numeric": numeric}[module].__dict__[name]
 
@@ -253,6 +254,5 @@ def safe_load_pickle(path: str | PathLike[str], encoding: str = "ASCII") -> Any:
 
 def safe_loads_pickle(data: bytes, source: str = "<bytes>", encoding: str = "ASCII") -> Any:
     """:func:`safe_load_pickle` for an in-memory pickle; ``source`` names it in error messages."""
-    import io
 
     return _load(io.BytesIO(data), source, encoding)

@@ -35,6 +35,7 @@ from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.music import BEAT, describe_audio_stack, record_audio_stack
+from skeleton_mamba.tasks.motion.render_cli import render_file
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
@@ -229,8 +230,6 @@ class QEANModule(BackboneModule):
             path = save_motion(out_dir / f"{name}.npz", motion)
             written.append(path)
             if self.hparams.render:
-                from skeleton_mamba.tasks.motion.render_cli import render_file
-
                 written.append(render_file(path, path.with_suffix(".mp4"), music=batch["music_path"][i]))
             rank_zero_info(
                 f"QEAN: wrote {', '.join(str(p) for p in written[-2 if self.hparams.render else -1 :])}"

@@ -70,10 +70,10 @@ def save_early_curve(
     accuracy: torch.Tensor, path: str | Path, fractions: tuple[float, ...] = FRACTIONS
 ) -> Path:
     """Write the curve as ``path`` (PNG) and ``path.csv`` (fraction, top1); returns the PNG path."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for this figure
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib only for this figure
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -93,10 +93,10 @@ def _load_keypoints(path: Path) -> np.ndarray:
 
 
 def _plot(prob: np.ndarray, names: list[str], path: Path) -> None:
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for this figure
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib only for this figure
 
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=120)
     for k in np.argsort(-prob.max(axis=0))[:5]:

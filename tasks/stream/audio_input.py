@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 
 __all__ = ["AudioChunk", "AudioSource"]
 
@@ -74,8 +75,6 @@ class AudioSource:
                 self.sample_rate, self.channels = self._wave.getframerate(), self._wave.getnchannels()
             self._stdin = stdin
         else:
-            import soundfile as sf
-
             path = Path(source)
             if not path.is_file():
                 raise FileNotFoundError(f"{path}: music file not found")

@@ -20,6 +20,7 @@ import pickle
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 import torch
 from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
@@ -27,6 +28,8 @@ from torch.utils.data import DataLoader, Dataset
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
+from skeleton_mamba.tasks.motion.synthetic.dance import STYLES
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
 
@@ -43,8 +46,6 @@ def write_synthetic_aistpp(
 
     The last ``val_count`` names go to ``splits/crossmodal_val.txt``, the others to ``crossmodal_train.txt``.
     """
-    from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
-    from skeleton_mamba.tasks.motion.synthetic.dance import STYLES
 
     if not 0 <= val_count < count <= 10 * len(GENRES):
         raise ValueError(f"need 0 <= val_count < count <= {10 * len(GENRES)}, got {val_count}, {count}")
@@ -84,7 +85,6 @@ def write_synthetic_aistpp(
 
 def audio_rate(path: Path) -> int:
     """The sample rate of an audio file (raises naming the file when it is missing or unreadable)."""
-    import soundfile as sf
 
     if not path.is_file():
         raise FileNotFoundError(f"{path}: music file not found")

@@ -28,6 +28,7 @@ track through the same streaming extractor.
 from __future__ import annotations
 
 import numpy as np
+import soxr
 
 __all__ = ["FPS", "HOP", "N_FFT", "NUM_FEATURES", "SR", "CausalMusicFeatures", "music_features"]
 
@@ -54,7 +55,7 @@ class CausalMusicFeatures:
     """
 
     def __init__(self, sample_rate: int = SR):
-        import librosa
+        import librosa  # lazy: librosa's import is slow (numba)
 
         if sample_rate <= 0:
             raise ValueError(f"sample rate must be positive, got {sample_rate}")
@@ -64,8 +65,6 @@ class CausalMusicFeatures:
         self.chroma = librosa.filters.chroma(sr=SR, n_fft=N_FFT, tuning=0.0)
         self.resampler = None
         if self.sample_rate != SR:
-            import soxr
-
             self.resampler = soxr.ResampleStream(self.sample_rate, SR, 1, dtype="float32", quality="LQ")
         self.buffer = np.zeros(N_FFT - HOP, dtype=np.float32)  # the window's samples before this frame
         self.previous_logmel: np.ndarray | None = None
@@ -95,7 +94,7 @@ class CausalMusicFeatures:
 
     def _features(self, frames: np.ndarray) -> np.ndarray:
         """(n, N_FFT) windows -> (n, 34) features; keeps the last log-mel frame for the onset flux."""
-        import librosa
+        import librosa  # lazy: librosa's import is slow (numba)
 
         power = np.abs(np.fft.rfft(frames.astype(np.float64) * self.window, axis=1)) ** 2  # (n, 1025)
         logmel = librosa.power_to_db(power @ self.mel.T, ref=1.0, top_db=None)  # (n, 128)

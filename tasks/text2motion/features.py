@@ -156,7 +156,7 @@ def facing_angle(joints: torch.Tensor, smooth_sigma: float = 20.0) -> torch.Tens
     Returns:
         (T,) heading angles in radians.
     """
-    from scipy.ndimage import gaussian_filter1d
+    from scipy.ndimage import gaussian_filter1d  # lazy: scipy only for this filter
 
     across = (joints[:, 1] - joints[:, 2]) + (joints[:, 17] - joints[:, 16])
     across = across / across.norm(dim=-1, keepdim=True)

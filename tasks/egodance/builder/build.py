@@ -21,6 +21,7 @@ The manual verification step of [EgoMusic] supp. Sec. 5 is left to the user (``m
 
 from __future__ import annotations
 
+import json
 import logging
 import multiprocessing
 import os
@@ -33,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm.auto import tqdm
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
@@ -404,8 +406,6 @@ def _check_settings(cfg: BuildConfig) -> None:
     path = Path(cfg.out) / "build.json"
     settings = {k: getattr(cfg, k) for k in _FIXED_SETTINGS}
     if path.is_file():
-        import json
-
         old = json.loads(path.read_text(encoding="utf-8"))
         diff = {k: (old.get(k), v) for k, v in settings.items() if old.get(k) != v}
         if diff:
@@ -450,8 +450,6 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
         if result["status"] == "skipped":
             log.warning("skipped %s: %s", result["sample_id"], result["reason"])
             summary.skip_reasons.append(f"{result['sample_id']}: {result['reason']}")
-
-    from tqdm.auto import tqdm
 
     bar = tqdm(total=len(todo), desc="make-ego", unit="window", disable=not cfg.progress)
     if cfg.workers <= 1 or len(todo) <= 1:

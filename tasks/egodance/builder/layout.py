@@ -49,6 +49,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import imageio.v3 as iio
+import imageio_ffmpeg
 import numpy as np
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
@@ -140,7 +142,6 @@ def _npz_shapes(path: Path) -> dict[str, tuple[int, ...]]:
 
 
 def _count_video_frames(path: Path) -> int:
-    import imageio_ffmpeg
 
     return imageio_ffmpeg.count_frames_and_secs(str(path))[0]
 
@@ -186,7 +187,6 @@ def sample_problem(folder: str | Path) -> str | None:
 
 
 def _write_frames(folder: Path, rgb: np.ndarray, fps: float, fmt: str) -> None:
-    import imageio.v3 as iio
 
     if fmt == "png":
         (folder / "rgb").mkdir()
@@ -253,7 +253,6 @@ def write_sample(root: str | Path, sample: EgoSample, frame_format: str = "mp4")
 
 def read_frames(folder: str | Path) -> np.ndarray:
     """The (T, H, W, 3) uint8 RGB frames of a sample folder (``rgb.mp4`` or ``rgb/*.png``)."""
-    import imageio.v3 as iio
 
     folder = Path(folder)
     if (folder / "rgb.mp4").is_file():

@@ -24,6 +24,8 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+from trimesh.ray.ray_triangle import RayMeshIntersector
 
 __all__ = ["FirstHits", "RayCaster", "HAS_EMBREE", "RAY_CASTER_ENV", "resolve_backend"]
 
@@ -101,11 +103,8 @@ class RayCaster:
                 indices=np.ascontiguousarray(self.faces, dtype=np.int32),
             )
         else:
-            import trimesh
-            from trimesh.ray.ray_triangle import RayMeshIntersector
-
             try:
-                import rtree  # noqa: F401 - trimesh's numpy ray caster needs it
+                import rtree  # noqa: F401  # lazy: the fallback caster needs rtree
             except ImportError as err:
                 raise ImportError(
                     "trimesh's ray caster (used without embreex) needs rtree: pip install rtree"
@@ -127,7 +126,6 @@ class RayCaster:
 
     def _first_hits_trimesh(self, origins: np.ndarray, directions: np.ndarray) -> FirstHits:
         """trimesh's caster, called on chunks of ``chunk_rays`` rays (module docstring)."""
-        import trimesh
 
         n = len(directions)
         tri = np.full(n, -1, dtype=np.int64)

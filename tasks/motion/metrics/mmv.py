@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import imageio.v2 as imageio
 import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter
@@ -51,7 +52,6 @@ def load_video_frames(video: Video) -> np.ndarray:
         if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
             raise ValueError(f"video array must be (T, H, W, 3) uint8, got {frames.shape} {frames.dtype}")
         return frames
-    import imageio.v2 as imageio
 
     path = Path(video)
     if path.is_dir():
@@ -75,7 +75,7 @@ def load_video_frames(video: Video) -> np.ndarray:
 
 def flow_magnitudes(video: Video) -> np.ndarray:
     """``(T - 1,)`` mean Farneback optical-flow magnitude between frames ``t`` and ``t + 1``."""
-    import cv2
+    import cv2  # lazy: OpenCV only for the MMV metric
 
     frames = load_video_frames(video)
     if len(frames) < 2:

@@ -35,6 +35,13 @@ import torch
 from skeleton_mamba.tasks.motion.metrics.beat_align import Variant, sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.common import as_sequences
 from skeleton_mamba.tasks.motion.metrics.pfc import pfc_sequence_score
+from skeleton_mamba.tasks.motion.protocol_music import (
+    bailando_beats,
+    edge_slice_beats,
+    edge_slice_features,
+    edge_slice_starts,
+    fact_beats,
+)
 from skeleton_mamba.tasks.motion.resample import resample_linear
 
 __all__ = [
@@ -121,7 +128,6 @@ class FACTProtocol(DanceProtocol):
         self.seed_frames = seed_frames
 
     def _track_beats(self, path, cache_dir):
-        from skeleton_mamba.tasks.motion.protocol_music import fact_beats
 
         return fact_beats(path, cache_dir)
 
@@ -153,7 +159,6 @@ class BailandoProtocol(DanceProtocol):
         self.max_frames = max_frames
 
     def _track_beats(self, path, cache_dir):
-        from skeleton_mamba.tasks.motion.protocol_music import bailando_beats
 
         return bailando_beats(path, cache_dir)
 
@@ -188,13 +193,11 @@ class EDGEProtocol(DanceProtocol):
     stride_frames = 75
 
     def music_beats(self, path, start_s=0.0, duration_s=None, cache_dir=None):
-        from skeleton_mamba.tasks.motion.protocol_music import edge_slice_beats, edge_slice_features
 
         return edge_slice_beats(edge_slice_features(path, start_s, duration_s, cache_dir))
 
     def score(self, joints, fps, beats=None, generated=True):
         """Clips of one ``(T, 24, 3)`` y-up sequence at ``fps``: as many as EDGE slices at that rate."""
-        from skeleton_mamba.tasks.motion.protocol_music import edge_slice_starts
 
         (seq,) = as_sequences([joints], min_frames=3, joints=24)
         count = len(edge_slice_starts(len(seq), fps))

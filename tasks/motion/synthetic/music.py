@@ -19,6 +19,7 @@ from os import PathLike
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 
@@ -107,7 +108,6 @@ def synthesize_music(bpm: float, duration_s: float, sr: int = 22050, seed: int =
 
 def write_music(path: str | PathLike[str], track: SyntheticTrack) -> Path:
     """Write a track as 16-bit PCM wav (atomically)."""
-    import soundfile as sf
 
     path = Path(path)
     with atomic_path(path) as tmp:
