@@ -56,9 +56,7 @@ class TextEncoder(nn.Module):
             raise FileNotFoundError(f"{config_file}: not a transformers model folder (no config.json)")
         model_type = json.loads(config_file.read_text()).get("model_type", "")
         if model_type in _CLIP_TYPES:
-            from transformers import (
-                CLIPTextModel,  # lazy: transformers' import is slow; imported only when needed: a slow import
-            )
+            from transformers import CLIPTextModel  # lazy: transformers' import is slow
 
             loader = CLIPTextModel
         else:
