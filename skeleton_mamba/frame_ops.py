@@ -36,6 +36,7 @@ from torch import nn
 
 from skeleton_mamba.causal_conv import causal_conv_taps
 from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
+from skeleton_mamba.ssd.precision import full_precision
 
 # Weights of at least this many entries go through oneDNN (fp32 on CPU): the Group Scan's in_proj
 # and out_proj and the Joint Scan's split at the paper width; below it F.linear was as fast or faster.
@@ -56,6 +57,7 @@ def linear(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
     return F.linear(x, w, layer.bias)
 
 
+@full_precision  # the SSD's decays and products in fp32 under autocast, as in Mamba2Mixer.mix
 def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
     """``mixer.mix(zxbcdt)`` (a :class:`~skeleton_mamba.mixer.Mamba2Mixer`) from a zero state, inference only.
 

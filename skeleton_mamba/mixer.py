@@ -31,6 +31,7 @@ from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.norm import RMSNormGated, upcast
 from skeleton_mamba.ssd import ssd
 from skeleton_mamba.ssd.discretize import apply_skip, compute_dtype, discretize_dt
+from skeleton_mamba.ssd.precision import outside_autocast
 
 
 class Mamba2Mixer(nn.Module):
@@ -192,19 +193,20 @@ class Mamba2Mixer(nn.Module):
             xbc = xbc + self.conv1d.bias
         x, B, C = self.split_xbc(F.silu(xbc))
         ct = ssm_state.dtype
-        delta = discretize_dt(dt, self.dt_bias, True, self.dt_limit, ct)  # (B, H)
-        xh = x.to(ct).view(b, h, p)
-        decay = torch.exp(delta * -torch.exp(self.A_log.to(ct)))  # exp(Δ A), (B, H)
-        xd = xh * delta[:, :, None]  # Δ x, (B, H, P)
-        if torch.compiler.is_compiling():
-            y = _state_update_pointwise(ssm_state, decay, xd, B.to(ct), C.to(ct), g)
-        else:
-            ssm_state.mul_(decay[:, :, None, None])
-            # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
-            state = ssm_state.view(b * g, (h // g) * p, n)
-            state.baddbmm_(xd.view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
-            y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
-        y = self.skip(y, xh)
+        with outside_autocast(ssm_state):  # Δ, the decay, the state and y = h C in ct (fp32) under autocast
+            delta = discretize_dt(dt, self.dt_bias, True, self.dt_limit, ct)  # (B, H)
+            xh = x.to(ct).view(b, h, p)
+            decay = torch.exp(delta * -torch.exp(self.A_log.to(ct)))  # exp(Δ A), (B, H)
+            xd = xh * delta[:, :, None]  # Δ x, (B, H, P)
+            if torch.compiler.is_compiling():
+                y = _state_update_pointwise(ssm_state, decay, xd, B.to(ct), C.to(ct), g)
+            else:
+                ssm_state.mul_(decay[:, :, None, None])
+                # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
+                state = ssm_state.view(b * g, (h // g) * p, n)
+                state.baddbmm_(xd.view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
+                y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
+            y = self.skip(y, xh)
         return self.out_proj(self.output(y.to(u.dtype).view(b, self.d_ssm), z, z0, x0))
 
 

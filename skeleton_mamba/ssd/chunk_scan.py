@@ -50,6 +50,7 @@ import torch
 
 from skeleton_mamba.ssd.discretize import sum_over_positions
 from skeleton_mamba.ssd.intra_chunk import column_weights, compute_inputs, split_cumsum
+from skeleton_mamba.ssd.precision import full_precision
 from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
 from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
 
@@ -104,6 +105,7 @@ class ChunkScan(torch.autograd.Function):
         return y, final
 
     @staticmethod
+    @full_precision  # backward() may be called inside an autocast region
     def backward(ctx, dy, dfinal):
         x, delta, row, col, B, C, D, xd, E, CB, W, Be, Ce, e, f, d, S_in, y_state = ctx.saved_tensors
         n, Q, H, P = x.shape

@@ -22,8 +22,10 @@ from skeleton_mamba.ssd.chunk_scan import chunk_scan
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dtype, padded_inputs, skip_matrix
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.non_finite import confine_non_finite
+from skeleton_mamba.ssd.precision import full_precision
 
 
+@full_precision
 @confine_non_finite
 def ssd_chunked(
     x: torch.Tensor,

@@ -17,6 +17,7 @@ import torch
 from skeleton_mamba.ssd.chunked import ssd_chunked
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
 from skeleton_mamba.ssd.kernel import kernel_available, ssd_kernel
+from skeleton_mamba.ssd.precision import full_precision
 from skeleton_mamba.ssd.quadratic import ssd_quadratic
 from skeleton_mamba.ssd.recurrence import ssd_recurrence
 
@@ -36,6 +37,7 @@ def choose_impl(x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "a
     return impl
 
 
+@full_precision
 def ssd(
     x: torch.Tensor,
     dt: torch.Tensor,

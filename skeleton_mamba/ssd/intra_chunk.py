@@ -41,6 +41,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.ssd.discretize import sum_over_positions
+from skeleton_mamba.ssd.precision import full_precision
 from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
 
 # Most Q×Q entries (chunks · heads · Q²) per tile: 64 MB per buffer in fp32.
@@ -127,6 +128,7 @@ class IntraChunk(torch.autograd.Function):
         return y
 
     @staticmethod
+    @full_precision  # backward() may be called inside an autocast region
     def backward(ctx, dy):
         x, delta, hi, row, col, B, C, D, xd, *kept = ctx.saved_tensors
         n, Q, H, P = x.shape

@@ -26,6 +26,7 @@ from skeleton_mamba.ssd.chunked import ssd_chunked
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dtype, padded_inputs, skip_matrix
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
 from skeleton_mamba.ssd.non_finite import confine_non_finite
+from skeleton_mamba.ssd.precision import full_precision
 
 # Target block length q, the fastest at L = 150 (4 heads, P = N = 64, fp32, 2 CPU threads).
 BLOCK_SIZE = 64
@@ -60,6 +61,7 @@ def below_diagonal(
     return torch.cat(parts, dim=1)
 
 
+@full_precision
 @confine_non_finite
 def ssd_quadratic(
     x: torch.Tensor,

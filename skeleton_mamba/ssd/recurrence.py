@@ -11,8 +11,10 @@ import torch
 from einops import repeat
 
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, apply_skip, check_inputs, compute_dtype, discretize_dt
+from skeleton_mamba.ssd.precision import full_precision
 
 
+@full_precision
 def ssd_recurrence(
     x: torch.Tensor,
     dt: torch.Tensor,
