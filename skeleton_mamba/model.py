@@ -11,12 +11,13 @@ from skeleton_mamba.block import SkeletonMambaBlock
 from skeleton_mamba.compiling import CompiledStep
 from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.padding import zero_padding
+from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.temporal_scan import check_prefix_mask
 
 
-class SkeletonMamba(nn.Module):
+class SkeletonMamba(PretrainedMixin, nn.Module):
     """(B, T, J, C_in) -> (B, T, J, D or C_out).
 
     Example::
@@ -26,7 +27,12 @@ class SkeletonMamba(nn.Module):
 
     Args:
         config: a :class:`SkeletonMambaConfig` (defaults: [EgoMusic] supp. Table 2, D 128, G 5, P 6, N 8).
+
+    ``save_pretrained`` / ``from_pretrained`` / ``push_to_hub``: :mod:`skeleton_mamba.pretrained`.
     """
+
+    pretrained_task = "Skeleton Mamba backbone: (B, T, J, C) joint features to (B, T, J, D) tokens."
+    pretrained_citations = ("EgoMusic", "Mamba-2")
 
     def __init__(self, config: SkeletonMambaConfig | None = None, **overrides):
         super().__init__()
@@ -67,6 +73,10 @@ class SkeletonMamba(nn.Module):
         self.output_proj = (
             nn.Linear(d, config.out_channels) if config.out_channels is not None else nn.Identity()
         )
+
+    def pretrained_init_args(self) -> dict:
+        """The config (keyword overrides folded in) rebuilds this backbone."""
+        return {"config": self.config}
 
     @property
     def out_channels(self) -> int:

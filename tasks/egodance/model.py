@@ -25,8 +25,10 @@ from torch import nn
 from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
+from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
@@ -72,7 +74,7 @@ class EMMConfig:
     frame_condition: bool = False
 
 
-class EMM(nn.Module):
+class EMM(PretrainedMixin, nn.Module):
     """The EgoMusic Motion network.
 
     Args:
@@ -83,7 +85,16 @@ class EMM(nn.Module):
             ``config.resnet_layers`` (an explicit choice, warned).
         image_size: square size the frames are resized to (the ResNet input).
         diffusion_steps: T of the noise schedule (of the preconditioning's scalings).
+
+    ``save_pretrained`` / ``from_pretrained``: :mod:`skeleton_mamba.pretrained` (the ResNet's weights are in
+    the folder, its architecture in ``config.resnet_layers``).
     """
+
+    pretrained_task = (
+        "EgoMusic Motion network (EMM): x0 denoiser of SMPL-24 dance from music and egocentric video."
+    )
+    pretrained_citations = ("EgoMusic", "Mamba-2", "EDGE")
+    pretrained_ignored_warnings = (RandomWeightsWarning,)
 
     def __init__(
         self,
@@ -126,6 +137,20 @@ class EMM(nn.Module):
         self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
         self.frame_condition = nn.Linear(context_dim, d) if c.frame_condition else None
         self.skip_x0 = SkipX0(diffusion_steps, channels=(NUM_JOINTS, NUM_CHANNELS))
+
+    def pretrained_init_args(self) -> dict:
+        """As built, but the ResNet from its architecture (``resnet_layers``) instead of ``resnet_path``: the
+        folder's weights replace it, so loading reads no other file."""
+        args = super().pretrained_init_args()
+        if self.vision_encoder is not None:
+            resnet = self.vision_encoder.resnet.config
+            layers = ("num_channels", "embedding_size", "hidden_sizes", "depths", "layer_type", "hidden_act")
+            layers += ("downsample_in_first_stage", "downsample_in_bottleneck")
+            resnet_layers = {k: getattr(resnet, k) for k in layers if hasattr(resnet, k)}
+            args.update(
+                config=dataclasses.replace(self.config, resnet_layers=resnet_layers), resnet_path=None
+            )
+        return args
 
     def set_data_statistics(self, motion: torch.Tensor, music: torch.Tensor | None = None) -> None:
         """Per-channel mean and standard deviation of training motion tokens (N, T, 24, 10) (the

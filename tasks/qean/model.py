@@ -25,6 +25,7 @@ from einops import rearrange
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
 
@@ -174,13 +175,16 @@ class SkeletonMambaMotionEncoder(nn.Module):
         return self.norm(self.project(rearrange(self.backbone(tokens), "b t j d -> b t (j d)")))
 
 
-class QEAN(nn.Module):
+class QEAN(PretrainedMixin, nn.Module):
     """Music + seed motion -> the next ``predict_frames`` motion frames.
 
     Args:
         config: sizes (:class:`QEANConfig`).
         backbone: a SkeletonMamba config to use as the motion encoder (``None``: [QEAN]'s transformer).
     """
+
+    pretrained_task = "QEAN: music and seed motion (FACT 219-d) to the next motion frames."
+    pretrained_citations = ("QEAN", "EgoMusic", "Mamba-2")
 
     def __init__(self, config: QEANConfig | None = None, backbone: SkeletonMambaConfig | None = None) -> None:
         super().__init__()

@@ -20,6 +20,7 @@ from einops import rearrange
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedMixin
 
 __all__ = ["ActionRecognizer", "body_presence", "pool_bodies"]
 
@@ -46,7 +47,7 @@ def pool_bodies(pooled: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
     return (pooled * weights).sum(dim=1) / weights.sum(dim=1)
 
 
-class ActionRecognizer(nn.Module):
+class ActionRecognizer(PretrainedMixin, nn.Module):
     """Skeleton Mamba backbone, global average pooling and a linear classifier.
 
     Args:
@@ -54,6 +55,9 @@ class ActionRecognizer(nn.Module):
         num_classes: K, the number of action classes.
         dropout: dropout on the pooled embedding before the linear layer.
     """
+
+    pretrained_task = "Skeleton action recognition: (B, M, T, J, C) keypoints to class logits."
+    pretrained_citations = ("EgoMusic", "Mamba-2", "PYSKL")
 
     def __init__(self, backbone: SkeletonMambaConfig, num_classes: int, dropout: float = 0.0) -> None:
         super().__init__()

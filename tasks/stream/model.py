@@ -25,6 +25,7 @@ from einops import rearrange, repeat
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints, features_to_smpl, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import MotionData
@@ -75,7 +76,7 @@ def teacher_forcing_inputs(motion: torch.Tensor) -> torch.Tensor:
     return torch.cat([torch.zeros_like(motion[:, :1]), motion[:, :-1]], dim=1)
 
 
-class StreamDancer(nn.Module):
+class StreamDancer(PretrainedMixin, nn.Module):
     """Causal Skeleton Mamba from previous pose and music to the next pose.
 
     Args:
@@ -83,6 +84,11 @@ class StreamDancer(nn.Module):
             ``context_dim`` are set here).
         music_dim: music features per frame (:data:`~skeleton_mamba.tasks.stream.features.NUM_FEATURES`).
     """
+
+    pretrained_task = (
+        "Live music-to-dance: a causal Skeleton Mamba from previous pose and music to the next pose."
+    )
+    pretrained_citations = ("EgoMusic", "Mamba-2")
 
     def __init__(self, backbone: SkeletonMambaConfig | None = None, music_dim: int = NUM_FEATURES) -> None:
         super().__init__()

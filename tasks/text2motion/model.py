@@ -32,6 +32,7 @@ import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
@@ -133,7 +134,7 @@ class LengthMaskedDenoiser:
         return cond.null()
 
 
-class TextToMotionDenoiser(nn.Module):
+class TextToMotionDenoiser(PretrainedMixin, nn.Module):
     """x0 prediction ``(x_t (B, T, 263), t (B,), cond, mask (B, T)) -> x0_hat (B, T, 263)``.
 
     Args:
@@ -145,6 +146,9 @@ class TextToMotionDenoiser(nn.Module):
         diffusion_steps: T of the noise schedule (scales the skip connection from x_t,
             :mod:`skeleton_mamba.tasks.training.diffusion.parameterisation`).
     """
+
+    pretrained_task = "Text-to-motion x0 denoiser: HumanML3D 263-d features from caption token embeddings."
+    pretrained_citations = ("EgoMusic", "Mamba-2", "MDM")
 
     def __init__(
         self,
