@@ -41,8 +41,8 @@ from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.render import RenderStyle
-from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
+from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
 __all__ = ["main", "build_parser"]
 
@@ -57,7 +57,11 @@ def _size(text: str) -> tuple[int, int]:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm dance", description=__doc__.split("\n\n")[0])
-    p.add_argument("--ckpt", required=True, help="an EgoDanceModule checkpoint (.ckpt)")
+    p.add_argument(
+        "--ckpt",
+        required=True,
+        help="an EgoDanceModule checkpoint (.ckpt), its sm export-pretrained folder or Hub id",
+    )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sample", help="an EgoAIST++ sample folder (sm make-ego)")
     src.add_argument("--music", help="an audio file")
@@ -183,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
 
     # checked: local, weights_only, project classes; read once
-    module, checkpoint = load_module_and_checkpoint(EgoDanceModule, args.ckpt)
+    module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
     module.eval()
     hp = module.hparams
     fps = hp.get("fps", 30)

@@ -27,13 +27,13 @@ import torch
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
-from skeleton_mamba.tasks.training.checkpoints import load_module
 from skeleton_mamba.tasks.training.frame_timing import (
     announce_compile,
     latency_summary,
     prepare_live,
     report_compile,
 )
+from skeleton_mamba.tasks.training.pretrained import load_module_from
 
 __all__ = ["OnlineRecognizer", "build_parser", "main", "stream_recognition"]
 
@@ -141,7 +141,7 @@ def stream_recognition(args: argparse.Namespace) -> int:
     """Feed ``args.skeleton`` frame by frame to the checkpoint's recognizer; write the table and the plot."""
     path = Path(args.skeleton)
     keypoints = _load_keypoints(path)
-    module = load_module(ActionRecognitionModule, args.ckpt)
+    module = load_module_from(ActionRecognitionModule, args.ckpt)
     model = module.model
     m, t, j, c = keypoints.shape
     expected = (model.backbone.skeleton.num_joints, model.backbone.config.in_channels)

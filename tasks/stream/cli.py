@@ -39,13 +39,13 @@ from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.live import LiveDancer
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
-from skeleton_mamba.tasks.training.checkpoints import load_module
 from skeleton_mamba.tasks.training.frame_timing import (
     announce_compile,
     latency_summary,
     prepare_live,
     report_compile,
 )
+from skeleton_mamba.tasks.training.pretrained import load_module_from
 
 __all__ = ["build_parser", "main"]
 
@@ -98,7 +98,7 @@ def realtime_hint(latency: dict[str, float], compiled: bool, fps: int) -> str | 
 
 
 def _load_dancer(ckpt: str):
-    return load_module(StreamDanceModule, ckpt).model.eval()
+    return load_module_from(StreamDanceModule, ckpt).model.eval()
 
 
 def stream_dance(args: argparse.Namespace) -> int:

@@ -30,8 +30,8 @@ from skeleton_mamba.tasks.motion.errors import one_line_message
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
-from skeleton_mamba.tasks.training.checkpoints import check_checkpoint_path, load_module
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
+from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from
 
 __all__ = ["parse_length", "slug", "save_generated", "main"]
 
@@ -91,7 +91,11 @@ def save_generated(
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm generate", description="Generate motion from text.")
-    p.add_argument("--checkpoint", required=True, help="TextToMotionModule checkpoint (.ckpt)")
+    p.add_argument(
+        "--checkpoint",
+        required=True,
+        help="TextToMotionModule checkpoint (.ckpt), its export-pretrained folder or Hub id",
+    )
     p.add_argument("--text", action="append", required=True, help="caption (repeat for several)")
     p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default 6s)")
     p.add_argument("--out", required=True, help="output folder")
@@ -107,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
         frames = parse_length(args.length)
-        checkpoint = check_checkpoint_path(args.checkpoint)  # the text as given: a URL is refused as one
+        check_model_source(args.checkpoint)  # the text as given: a URL is refused as one
     except FileNotFoundError:
         print(f"sm generate: error: {args.checkpoint}: no such checkpoint", file=sys.stderr)
         return 2
@@ -115,7 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"sm generate: error: {one_line_message(e)}", file=sys.stderr)
         return 2
 
-    module = load_module(TextToMotionModule, checkpoint).eval()
+    module = load_module_from(TextToMotionModule, args.checkpoint).eval()
     captions = [c for c in args.text for _ in range(args.num)]
     features, _ = module.generate(
         captions,

@@ -39,6 +39,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),
     "generate": ("skeleton_mamba.tasks.text2motion.generate_cli:main", "generate motion from text"),
     "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
+    "export-pretrained": (
+        "skeleton_mamba.tasks.training.export_pretrained:main",
+        "a checkpoint as a Hugging Face from_pretrained folder",
+    ),
 }
 # command -> {value of its --task option: "module:function"}: a task's own variant of a shared command
 TASK_VARIANTS: dict[str, dict[str, str]] = {

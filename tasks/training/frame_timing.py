@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.streaming import keep_freed_memory
-from skeleton_mamba.tasks.training.checkpoints import check_checkpoint_path
+from skeleton_mamba.tasks.training.pretrained import check_model_source
 
 __all__ = ["announce_compile", "latency_summary", "prepare_live", "report_compile"]
 
@@ -22,7 +22,7 @@ def prepare_live(ckpt: str, threads: int | None, prog: str = "sm stream") -> int
     ``torch.set_num_threads``; the allocator keeps freed memory so that the per-frame path has no page faults.
     """
     try:
-        check_checkpoint_path(ckpt)
+        check_model_source(ckpt)  # a checkpoint file, a from_pretrained folder or a Hub id
     except FileNotFoundError:
         print(f"{prog}: checkpoint {ckpt} not found", file=sys.stderr)
         return 2

@@ -1,0 +1,148 @@
+"""``sm export-pretrained --ckpt CKPT --out DIR``: a Lightning checkpoint as a Hugging Face folder.
+
+The folder is the task network's ``from_pretrained`` folder (:mod:`skeleton_mamba.pretrained`):
+``config.json``, ``model.safetensors`` (the network the module infers with: the EMA copy when it keeps one,
+with its data statistics), ``README.md`` (the model card: task, skeleton, sizes, the module's
+hyper-parameters, the data module's, test metrics from the run's ``metrics.csv`` when a test ran,
+citations), and ``module.safetensors`` with the module's other tensors, so that ``sm dance`` /
+``sm generate`` / ``sm stream`` / ``sm predict`` rebuild the module from the folder
+(:mod:`.pretrained`). The checkpoint is read through the one checker
+(:mod:`~skeleton_mamba.tasks.training.checkpoints`); its hyper-parameters name the module class
+(``_class_path``, as LightningCLI stores it; ``--module`` for a checkpoint without one).
+
+Example::
+
+    sm export-pretrained --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt --out emm-demo/
+    sm export-pretrained --ckpt last.ckpt --out emm-demo/ --push-to-hub my-org/emm-demo
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+from safetensors.torch import save
+
+from skeleton_mamba.pretrained import PretrainedMixin, push_folder_to_hub
+from skeleton_mamba.tasks.motion.atomic import atomic_path
+from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
+from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
+from skeleton_mamba.tasks.training.pretrained import MODULE_WEIGHTS_NAME, import_project_class, module_record
+
+__all__ = ["export_pretrained", "main", "network_attribute", "test_metrics"]
+
+# where task modules keep their network, in the order preferred (the EMA copy is what they sample with)
+NETWORK_ATTRIBUTES = ("ema.module", "model", "denoiser")
+
+
+def network_attribute(module) -> str:
+    """The attribute path of ``module``'s pretrained network (:data:`NETWORK_ATTRIBUTES`, first found)."""
+    for path in NETWORK_ATTRIBUTES:
+        obj = module
+        for name in path.split("."):
+            obj = getattr(obj, name, None)
+        if isinstance(obj, PretrainedMixin):
+            return path
+    raise CheckpointError(
+        f"{type(module).__name__}: holds no network with save_pretrained ({NETWORK_ATTRIBUTES})"
+    )
+
+
+def test_metrics(checkpoint_path: Path) -> dict[str, float]:
+    """The last logged value of each ``test*`` column of the run's ``metrics.csv`` (``RUN/checkpoints/x.ckpt``
+    -> ``RUN/metrics.csv``); empty when there is none (no test ran)."""
+    path = checkpoint_path.parent.parent / "metrics.csv"
+    if not path.is_file():
+        return {}
+    metrics: dict[str, float] = {}
+    with path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            for key, value in row.items():
+                if key and key.startswith("test") and value not in (None, ""):
+                    try:
+                        number = float(value)
+                    except ValueError:
+                        continue
+                    if math.isfinite(number):
+                        metrics[key] = number
+    return metrics
+
+
+def export_pretrained(
+    ckpt: str | Path,
+    out: str | Path,
+    module_class: str | None = None,
+    recipe: str | None = None,
+) -> Path:
+    """Write the folder of the checkpoint ``ckpt`` into ``out``; returns ``out``.
+
+    Raises:
+        CheckpointError: as the checker, or a checkpoint that does not name its module class.
+    """
+    checkpoint = load_checkpoint(ckpt)
+    hparams = checkpoint.get("hyper_parameters") or {}
+    class_path = module_class or (hparams.get("_class_path") if isinstance(hparams, dict) else None)
+    if not isinstance(class_path, str):
+        raise CheckpointError(
+            f"{ckpt}: its hyper-parameters name no module class (_class_path); pass --module"
+        )
+    cls = import_project_class(class_path, str(ckpt))
+    module, checkpoint = load_module_and_checkpoint(cls, ckpt)
+    attribute = network_attribute(module)
+    record = module_record(module, checkpoint, attribute)
+    state = module.state_dict()
+    prefix = f"{attribute}."
+    rest = {k: v.detach().cpu().contiguous() for k, v in state.items() if not k.startswith(prefix)}
+    network = module.get_submodule(attribute)
+    data = record["datamodule_hyper_parameters"]
+    card = {
+        "recipe": recipe,
+        "module": record["class_path"],
+        "hparams": record["hparams"],
+        "data": data.get("_class_path") if isinstance(data, dict) else None,
+        "data_hparams": data,
+        "metrics": test_metrics(Path(ckpt)),
+        "trained": {k: record[k] for k in ("epoch", "global_step") if k in record},
+    }
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    with atomic_path(folder / MODULE_WEIGHTS_NAME) as tmp:
+        tmp.write_bytes(save(rest, metadata={"format": "pt", "module": record["class_path"]}))
+    network.save_pretrained(folder, card_info=card, extra_config={"module": record})
+    return folder
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm export-pretrained", description=__doc__.split("\n\n")[0])
+    p.add_argument("--ckpt", required=True, help="a Lightning checkpoint (.ckpt) of a task recipe")
+    p.add_argument("--out", required=True, help="the folder to write (created)")
+    p.add_argument(
+        "--module", default=None, help="the LightningModule class path, when the checkpoint names none"
+    )
+    p.add_argument(
+        "--recipe", default=None, help="the recipe the model was trained with (for the model card)"
+    )
+    p.add_argument(
+        "--push-to-hub", default=None, metavar="ORG/NAME", help="also upload the folder to the Hub"
+    )
+    p.add_argument("--private", action="store_true", help="create the Hub repository private")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm export-pretrained``; returns the exit code."""
+    args = _parser().parse_args(list(argv) if argv is not None else None)
+    folder = export_pretrained(args.ckpt, args.out, args.module, args.recipe)
+    config = json.loads((folder / "config.json").read_text())
+    print(f"wrote {folder}/ ({config['class'].rsplit('.', 1)[-1]} of {config['module']['class_path']})")
+    if args.push_to_hub:
+        try:
+            info = push_folder_to_hub(folder, args.push_to_hub, private=args.private or None)
+        except OSError as err:  # no network, refused credentials
+            raise InputError(f"{args.push_to_hub}: upload failed ({type(err).__name__}: {err})") from err
+        print(f"uploaded to {getattr(info, 'commit_url', args.push_to_hub)}")
+    return 0

@@ -1,0 +1,238 @@
+"""Commands' models from a Lightning checkpoint, a ``from_pretrained`` folder or a Hub id.
+
+A folder written by ``sm export-pretrained`` (:mod:`.export_pretrained`) is a network's ``from_pretrained``
+folder (:mod:`skeleton_mamba.pretrained`: ``config.json``, ``model.safetensors``, ``README.md``) whose
+``config.json`` also records the Lightning module it came from (``"module"``: class path, hyper-parameters,
+the data module's hyper-parameters, where the network sits in the module), and a fourth file,
+``module.safetensors``, with the module's other tensors (a head estimator, the EMA's counter). From those
+:func:`load_module_and_checkpoint_from` rebuilds the module, through the project's one checkpoint loader
+(:func:`~skeleton_mamba.tasks.training.checkpoints.load_module_and_checkpoint`: class paths checked, weights
+only, finite weights), so ``sm dance`` / ``sm generate`` / ``sm stream`` / ``sm predict`` give the same
+output from the folder as from the checkpoint. Every tensor comes from safetensors: nothing is unpickled.
+
+Sources: a path to a file is a checkpoint; a folder or a Hub id (``org/name``, resolved through the Hugging
+Face cache, offline with ``HF_HUB_OFFLINE=1``) is a pretrained folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+import re
+import tempfile
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+import torch
+from lightning.pytorch import LightningModule
+from safetensors import SafetensorError
+from safetensors.torch import load_file
+
+from skeleton_mamba.pretrained import (
+    CONFIG_NAME,
+    WEIGHTS_NAME,
+    PretrainedError,
+    decode_value,
+    encode_value,
+    read_pretrained_config,
+    resolve_pretrained,
+)
+from skeleton_mamba.tasks.motion.errors import CheckpointError
+from skeleton_mamba.tasks.training.checkpoints import (
+    check_checkpoint_path,
+    check_class_paths,
+    load_module_and_checkpoint,
+)
+
+__all__ = [
+    "MODULE_WEIGHTS_NAME",
+    "check_model_source",
+    "import_project_class",
+    "is_checkpoint_source",
+    "load_module_and_checkpoint_from",
+    "load_module_from",
+    "load_network",
+    "module_record",
+    "plain_hparams",
+]
+
+MODULE_WEIGHTS_NAME = "module.safetensors"
+_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
+_CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth")
+
+ModuleT = TypeVar("ModuleT", bound=LightningModule)
+
+
+def is_checkpoint_source(source: str | os.PathLike[str]) -> bool:
+    """True when ``source`` names a checkpoint file (a URL, a file, a ``.ckpt`` / ``.pt`` name), False for a
+    folder or a Hub id."""
+    text = os.fspath(source)
+    path = Path(text).expanduser()
+    if _URL.match(text) or path.is_file() or text.endswith(_CHECKPOINT_SUFFIXES):
+        return True
+    return not path.is_dir() and not re.match(
+        r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$", text
+    )
+
+
+def check_model_source(source: str | os.PathLike[str]) -> None:
+    """Refuse before any work a URL, a missing checkpoint, or a folder without ``config.json``.
+
+    A Hub id is checked when it is resolved (:func:`load_module_and_checkpoint_from`).
+    """
+    if is_checkpoint_source(source):
+        check_checkpoint_path(source)
+        return
+    path = Path(os.fspath(source)).expanduser()
+    if path.is_dir() and not (path / CONFIG_NAME).is_file():
+        raise CheckpointError(f"{source}: a folder without {CONFIG_NAME} (not a from_pretrained folder)")
+
+
+def _resolve(source: str | os.PathLike[str]) -> tuple[Path, dict]:
+    try:
+        folder = resolve_pretrained(source)
+        return folder, read_pretrained_config(folder)
+    except PretrainedError as err:
+        raise CheckpointError(str(err)) from err
+
+
+def import_project_class(path: str, source: str) -> type:
+    """The class a config names: checked as text (project modules only) before its module is imported."""
+    check_class_paths({"class_path": path}, source)
+    if not path.startswith("skeleton_mamba.") or "." not in path:
+        raise CheckpointError(f"{source}: names {path!r}, not a class of the project")
+    module_name, _, name = path.rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module_name), name)
+    except (ImportError, AttributeError):
+        raise CheckpointError(f"{source}: names an unknown class {path!r}") from None
+    return cls
+
+
+def load_network(source: str | os.PathLike[str], device: str | torch.device = "cpu") -> torch.nn.Module:
+    """The network in a ``from_pretrained`` folder or Hub id, whatever its class (the backbone or a task's).
+
+    Raises:
+        CheckpointError: not such a folder, an unknown class, config or tensors that do not fit.
+    """
+    folder, config = _resolve(source)
+    where = str(folder / CONFIG_NAME)
+    cls = import_project_class(config["class"], where)
+    if not hasattr(cls, "from_config") or not hasattr(cls, "load_pretrained_weights"):
+        raise CheckpointError(f"{where}: names {config['class']!r}, not a network with from_pretrained")
+    try:
+        model = cls.from_config(config, where)
+        model.load_pretrained_weights(folder / WEIGHTS_NAME, device)
+    except PretrainedError as err:
+        raise CheckpointError(str(err)) from err
+    return model.to(device).eval()
+
+
+def _plain(value: Any) -> Any:
+    """Config dataclasses as dicts: checkpoint hyper-parameters hold plain data only (``weights_only``)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    if isinstance(value, tuple):
+        return tuple(_plain(v) for v in value)
+    return value
+
+
+def plain_hparams(cls: type, stored: dict, where: str) -> dict:
+    """Hyper-parameters read from JSON with their types back (tuples, non-finite floats), from the
+    annotations of ``cls.__init__``; a value that fits no annotation stays as stored."""
+    try:
+        hints = typing.get_type_hints(cls.__init__)
+    except (NameError, TypeError):
+        hints = {}
+    out = {}
+    for name, value in stored.items():
+        try:
+            out[name] = _plain(decode_value(value, hints.get(name, Any), f"{where}: {name}"))
+        except PretrainedError:
+            out[name] = value
+    return out
+
+
+def module_record(module: LightningModule, checkpoint: dict, network: str) -> dict:
+    """The ``"module"`` entry of an exported ``config.json``: class path, hyper-parameters (JSON), the data
+    module's hyper-parameters, and the module attribute path of the exported network."""
+    hparams = dict(checkpoint.get("hyper_parameters") or {})
+    cls = type(module)
+    hparams.setdefault("_class_path", f"{cls.__module__}.{cls.__qualname__}")
+    record = {
+        "class_path": f"{cls.__module__}.{cls.__qualname__}",
+        "network": network,
+        "hparams": encode_value(hparams, "hyper_parameters"),
+        "datamodule_hyper_parameters": encode_value(
+            dict(checkpoint.get("datamodule_hyper_parameters") or {}), "datamodule_hyper_parameters"
+        ),
+    }
+    for key in ("epoch", "global_step"):
+        if isinstance(checkpoint.get(key), int):
+            record[key] = checkpoint[key]
+    if isinstance(checkpoint.get("pytorch-lightning_version"), str):
+        record["lightning_version"] = checkpoint["pytorch-lightning_version"]
+    return record
+
+
+def load_module_and_checkpoint_from(
+    cls: type[ModuleT], source: str | os.PathLike[str], map_location: Any = "cpu"
+) -> tuple[ModuleT, dict]:
+    """``cls`` and its checkpoint dict from a checkpoint file, or from an exported folder / Hub id.
+
+    Raises:
+        CheckpointError: as :func:`~skeleton_mamba.tasks.training.checkpoints.load_module_and_checkpoint`;
+            for a folder also: not exported from a Lightning module, another module class, tensors that
+            do not fit.
+    """
+    if is_checkpoint_source(source):
+        return load_module_and_checkpoint(cls, source, map_location)
+    folder, config = _resolve(source)
+    where = str(folder / CONFIG_NAME)
+    record = config.get("module")
+    if not isinstance(record, dict) or not isinstance(record.get("network"), str):
+        raise CheckpointError(
+            f"{where}: a bare {config['class'].rsplit('.', 1)[-1]} with no Lightning module recorded "
+            f"(load it with from_pretrained; sm export-pretrained writes folders the commands read)"
+        )
+    stored = str(record.get("class_path", ""))
+    if stored.rsplit(".", 1)[-1] != cls.__name__:
+        raise CheckpointError(f"{where}: holds a {stored}, not a {cls.__name__}")
+    try:
+        network = {f"{record['network']}.{k}": v for k, v in load_file(str(folder / WEIGHTS_NAME)).items()}
+        extra = (
+            load_file(str(folder / MODULE_WEIGHTS_NAME)) if (folder / MODULE_WEIGHTS_NAME).exists() else {}
+        )
+    except (SafetensorError, OSError) as err:
+        raise CheckpointError(f"{folder}: unreadable weights ({err})") from None
+    checkpoint = {
+        "state_dict": {**extra, **network},
+        "hyper_parameters": plain_hparams(cls, dict(record.get("hparams") or {}), where),
+        "datamodule_hyper_parameters": dict(record.get("datamodule_hyper_parameters") or {}),
+        "pytorch-lightning_version": str(record.get("lightning_version", "2.5.2")),
+    }
+    for key in ("epoch", "global_step"):
+        if key in record:
+            checkpoint[key] = record[key]
+    # the one loader (class paths, weights_only, finite weights), on the checkpoint the folder describes
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "from_pretrained.ckpt"
+        torch.save(checkpoint, path)
+        try:
+            module, loaded = load_module_and_checkpoint(cls, path, map_location)
+        except CheckpointError as err:
+            raise CheckpointError(str(err).replace(str(path), str(folder))) from err
+    return module, loaded
+
+
+def load_module_from(
+    cls: type[ModuleT], source: str | os.PathLike[str], map_location: Any = "cpu"
+) -> ModuleT:
+    """:func:`load_module_and_checkpoint_from`, the module only."""
+    return load_module_and_checkpoint_from(cls, source, map_location)[0]
