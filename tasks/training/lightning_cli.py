@@ -36,6 +36,7 @@ from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.training.lightning_compat import install_accepted_links
+from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_checkpoint_source
 from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
@@ -156,6 +157,8 @@ class SkeletonMambaCLI(LightningCLI):
             if str(ckpt_path) == "last":
                 ckpt_path = str(find_last_checkpoint(config.trainer))
                 config.ckpt_path = ckpt_path
+            if subcommand != "fit" and not is_checkpoint_source(ckpt_path):  # an exported folder, a Hub id
+                ckpt_path = config.ckpt_path = str(checkpoint_file_from(ckpt_path))
             load_checkpoint(ckpt_path)
             if subcommand == "fit":
                 resume_in_run_folder(config.trainer, Path(ckpt_path))
