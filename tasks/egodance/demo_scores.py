@@ -13,7 +13,10 @@ Scores (joint positions from FK, metres, y-up, floor at y = 0, 30 fps), means ov
 - ``mpjpe_m``: MPJPE to the held-out ground truth, in the canonical frame as the module's test;
 - ``beat_align``: BeatAlign with the window's music beats ([Bailando] variant, as the module's test);
 - ``foot_skating``: [GMD] foot skating ratio; ``penetration_m``: [PhysDiff] ground penetration, on joints
-  (:mod:`~skeleton_mamba.tasks.motion.metrics.ground`).
+  (:mod:`~skeleton_mamba.tasks.motion.metrics.ground`);
+- ``amplitude_ratio`` / ``jitter_ratio``: root-relative motion amplitude and mean joint acceleration as ratios
+  to the ground truth's (:mod:`~skeleton_mamba.tasks.motion.metrics.dynamics`): a timid dance has a low
+  amplitude ratio, a trembling one a high jitter ratio (the mean pose scores 0 and 0).
 
 :data:`TARGETS` are what the demo should reach (``checks`` in ``demo.json``).
 """
@@ -23,6 +26,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
+from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_checks, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.ground import foot_skating_ratio, ground_penetration
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe, nearest_pose_distance
 
@@ -44,6 +48,7 @@ METRICS = {  # key -> printed name
     "beat_align": "BeatAlign with the music",
     "foot_skating": "foot skating ratio",
     "penetration_m": "ground penetration (m)",
+    **DYNAMICS_METRICS,
 }
 
 
@@ -65,6 +70,7 @@ def motion_scores(
         "beat_align": sequence_beat_align(joints, beats, "bailando", fps),
         "foot_skating": float(foot_skating_ratio(joints, fps)),
         "penetration_m": float(ground_penetration(joints)),
+        **dynamics_ratios(joints, truth, fps),
     }
 
 
@@ -112,6 +118,7 @@ def target_checks(scores: dict[str, dict[str, float]]) -> dict[str, bool]:
         "MPJPE below the mean-pose baseline": dance["mpjpe_m"] < scores["mean_pose"]["mpjpe_m"],
         "MPJPE below the random-clip baseline": dance["mpjpe_m"] < scores["random_clip"]["mpjpe_m"],
         "BeatAlign above the random-clip baseline": dance["beat_align"] > scores["random_clip"]["beat_align"],
+        **dynamics_checks(dance),
     }
 
 
