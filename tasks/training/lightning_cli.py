@@ -45,6 +45,7 @@ from skeleton_mamba.tasks.training.recipe_resolution import (
 )
 from skeleton_mamba.tasks.training.run_folders import (
     find_last_checkpoint,
+    open_csv_logs,
     remove_if_empty,
     resume_in_run_folder,
 )
@@ -196,6 +197,7 @@ class SkeletonMambaCLI(LightningCLI):
                 for logger in trainer.loggers
                 if logger.log_dir and not Path(logger.log_dir).exists()
             ]
+        open_csv_logs(trainer.loggers)
         return trainer
 
 

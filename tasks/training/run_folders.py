@@ -9,18 +9,33 @@
   ``metrics.before_resume_<k>.csv``.
 - A run that fails before writing anything but logger bookkeeping (``config.yaml``, ``hparams.yaml``,
   an event file, ``metrics.csv``) leaves no ``version_N`` folder behind (:func:`remove_if_empty`).
+- The CSV loggers open their folder first (:func:`open_csv_logs`): Lightning's CSV logger warns "Experiment
+  logs directory ... exists and is not empty ... will be deleted" whenever the folder holds any file, which
+  in a fresh run was the TensorBoard logger's event file in the same folder; it now warns only when there
+  is a ``metrics.csv`` it would really delete.
 """
 
 from __future__ import annotations
 
 import re
 import shutil
+import warnings
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from lightning.pytorch.loggers import CSVLogger, Logger
+
 from skeleton_mamba.tasks.motion.errors import CheckpointError
 
-__all__ = ["BOOKKEEPING", "find_last_checkpoint", "logger_folders", "remove_if_empty", "resume_in_run_folder"]
+__all__ = [
+    "BOOKKEEPING",
+    "find_last_checkpoint",
+    "logger_folders",
+    "open_csv_logs",
+    "remove_if_empty",
+    "resume_in_run_folder",
+]
 
 _VERSION = re.compile(r"^version_(\d+)$")
 BOOKKEEPING = re.compile(r"^(config\.yaml|hparams\.yaml|metrics\.csv|events\.out\.tfevents\..*)$")
@@ -117,3 +132,20 @@ def remove_if_empty(folder: Path) -> bool:
             return False
     shutil.rmtree(folder)
     return True
+
+
+def open_csv_logs(loggers: Iterable[Logger]) -> None:
+    """Create every CSV logger's writer now (its versions already fixed), before any other logger writes.
+
+    Its "exists and is not empty ... will be deleted" warning is kept only when the folder holds a
+    ``metrics.csv`` (the one file it deletes): a resumed run's was renamed by :func:`resume_in_run_folder`.
+    """
+    for logger in loggers:
+        if not isinstance(logger, CSVLogger):
+            continue
+        with warnings.catch_warnings():
+            if not (Path(logger.log_dir) / "metrics.csv").is_file():
+                warnings.filterwarnings(
+                    "ignore", message="Experiment logs directory .* exists and is not empty"
+                )
+            _ = logger.experiment
