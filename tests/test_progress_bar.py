@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import re
 import sys
+from types import SimpleNamespace
 
 import lightning.pytorch as pl
 import pytest
@@ -11,11 +13,14 @@ from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.callbacks import Callback, TQDMProgressBar
 from torch.utils.data import DataLoader, TensorDataset
 
+from skeleton_mamba.tasks.training import progress_bar
 from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 from skeleton_mamba.tasks.training.progress_bar import (
     EpochTotalRichProgressBar,
     EpochTotalTQDMProgressBar,
+    StepClock,
     default_progress_bar,
+    planned_steps,
     train_description,
 )
 
@@ -39,22 +44,30 @@ class TinyRegression(LightningModule):
 
 
 class ShownDescriptions(Callback):
-    """Records the training bar's description at the first batch of every epoch."""
+    """Records the training bar's description at the first batch of every epoch (without the time left),
+    and every description shown after a batch."""
 
     def __init__(self) -> None:
         self.shown: list[str] = []
+        self.after_batches: list[str] = []
+
+    @staticmethod
+    def _description(trainer) -> str:
+        bar = trainer.progress_bar_callback
+        if isinstance(bar, TQDMProgressBar):
+            return bar.train_progress_bar.desc.removesuffix(": ")
+        return bar.progress.tasks[bar.train_progress_bar_id].description.strip()
 
     def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:
         if batch_idx == 0:
-            bar = trainer.progress_bar_callback
-            if isinstance(bar, TQDMProgressBar):
-                self.shown.append(bar.train_progress_bar.desc.removesuffix(": "))
-            else:
-                self.shown.append(bar.progress.tasks[bar.train_progress_bar_id].description.strip())
+            self.shown.append(re.sub(r" \(\d+:\d\d:\d\d left\)$", "", self._description(trainer)))
+
+    def on_train_batch_end(self, trainer, *args) -> None:
+        self.after_batches.append(self._description(trainer))
 
 
-def fit(bar, **trainer_args) -> tuple[pl.Trainer, list[str]]:
-    shown = ShownDescriptions()
+def fit(bar, shown=None, **trainer_args) -> tuple[pl.Trainer, list[str]]:
+    shown = shown or ShownDescriptions()
     trainer = pl.Trainer(
         accelerator="cpu",
         callbacks=[bar, shown],
@@ -82,6 +95,35 @@ def test_the_bar_shows_the_number_of_epochs_the_run_takes(bar_class, trainer_arg
     _, shown = fit(bar_class(), **trainer_args)
     # every epoch that ran was announced as "Epoch e/last" with last the index of the last epoch run
     assert shown == [f"Epoch {e}/{epochs_run - 1}" for e in range(epochs_run)]
+
+
+@pytest.mark.parametrize("bar_class", [EpochTotalTQDMProgressBar, EpochTotalRichProgressBar])
+def test_the_bar_shows_the_time_the_whole_run_has_left(bar_class):
+    if bar_class is EpochTotalRichProgressBar:
+        pytest.importorskip("rich")
+    shown = ShownDescriptions()
+    fit(bar_class(), shown, max_steps=10)
+    # after each batch: the epoch and the run's time left (a tiny model: 0:00:00)
+    assert len(shown.after_batches) == 10
+    assert all(re.fullmatch(r"Epoch [0-3]/3 \(0:00:0\d left\)", d) for d in shown.after_batches), shown
+
+
+def test_step_clock_extrapolates_the_mean_step_time(monkeypatch):
+    now = [100.0]
+    monkeypatch.setattr(progress_bar.time, "monotonic", lambda: now[0])
+    trainer = SimpleNamespace(
+        num_training_batches=11, accumulate_grad_batches=1, max_steps=400, max_epochs=None, global_step=0
+    )
+    assert planned_steps(trainer) == 400
+    clock = StepClock()
+    assert clock.left(trainer) is None  # not started
+    clock.start(trainer)
+    assert clock.left(trainer) is None  # no step timed yet
+    now[0], trainer.global_step = 130.0, 20  # 20 steps in 30 s: 380 left at 1.5 s
+    assert clock.left(trainer).total_seconds() == 570
+    assert train_description(trainer, 1, clock) == "Epoch 1/36 (0:09:30 left)"
+    epochs = SimpleNamespace(num_training_batches=3, accumulate_grad_batches=1, max_steps=-1, max_epochs=20)
+    assert planned_steps(epochs) == 60  # humanml3d_demo: 20 epochs of 3 steps
 
 
 def test_a_time_bounded_run_shows_the_time_left():
@@ -146,4 +188,22 @@ def test_the_rich_bar_keeps_its_theme_and_describes_a_task_created_mid_epoch():
         enable_checkpointing=False, enable_model_summary=False, max_steps=4,
     )  # fmt: skip
     trainer.fit(TinyRegression())
-    assert recreated.shown == ["Epoch 0/1"]
+    assert recreated.shown == ["Epoch 0/1 (0:00:00 left)"]  # a tiny model: no time left
+
+
+class LiveAtFitEnd(Callback):
+    """Records whether the rich bar's live display still runs when ``on_fit_end`` callbacks print."""
+
+    def on_fit_end(self, trainer, pl_module) -> None:
+        self.live = trainer.progress_bar_callback.progress.live.is_started
+
+
+def test_the_rich_bar_is_stopped_before_fit_end_callbacks_print():
+    pytest.importorskip("rich")
+    probe = LiveAtFitEnd()
+    trainer = pl.Trainer(
+        accelerator="cpu", callbacks=[EpochTotalRichProgressBar(), probe], logger=False,
+        enable_checkpointing=False, enable_model_summary=False, max_steps=2,
+    )  # fmt: skip
+    trainer.fit(TinyRegression())
+    assert probe.live is False

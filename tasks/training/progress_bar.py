@@ -3,14 +3,18 @@
 Lightning's bars write the epoch as ``Epoch e/{max_epochs - 1}`` (rich) or ``Epoch e`` (tqdm). A recipe
 bounded by ``max_steps`` (or ``max_time``) leaves ``max_epochs`` unset, which Lightning turns into -1, so
 the rich bar read ``Epoch 14/-2``. Here the last epoch is ``max_epochs - 1`` when set, else derived from
-``max_steps`` and the optimizer steps per epoch (``ceil(num_training_batches / accumulate_grad_batches)``);
-a run bounded only by time shows the time left. ``sm fit`` installs :func:`default_progress_bar` unless
-the recipe configures a progress bar or turns it off (``tasks/training/lightning_cli.py``).
+``max_steps`` and the optimizer steps per epoch (``ceil(num_training_batches / accumulate_grad_batches)``).
+The description also says how long the whole run has left (Lightning's own bars time one epoch): the
+optimizer steps still to go times the mean time of those done so far (:class:`StepClock`), so a slow or
+busy machine shows a longer wait instead of a shorter run. A run bounded only by time shows the time
+left under ``max_time``. ``sm fit`` installs :func:`default_progress_bar` unless the recipe configures a
+progress bar or turns it off (``tasks/training/lightning_cli.py``).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from datetime import timedelta
 
@@ -21,7 +25,9 @@ from lightning.pytorch.callbacks.timer import Timer
 __all__ = [
     "EpochTotalRichProgressBar",
     "EpochTotalTQDMProgressBar",
+    "StepClock",
     "default_progress_bar",
+    "planned_steps",
     "planned_epochs",
     "train_description",
     "with_default_progress_bar",
@@ -42,6 +48,39 @@ def planned_epochs(trainer: pl.Trainer) -> int | None:
     return math.ceil(trainer.max_steps / steps_per_epoch)
 
 
+def planned_steps(trainer: pl.Trainer) -> int | None:
+    """The optimizer steps the run takes: ``max_steps``, else ``max_epochs`` times the steps per epoch."""
+    batches = trainer.num_training_batches
+    if not 0 < batches < math.inf:
+        return None
+    per_epoch = math.ceil(batches / trainer.accumulate_grad_batches)
+    bounds = []
+    if trainer.max_steps is not None and trainer.max_steps > 0:
+        bounds.append(trainer.max_steps)
+    if trainer.max_epochs is not None and trainer.max_epochs > 0:
+        bounds.append(trainer.max_epochs * per_epoch)
+    return min(bounds) if bounds else None
+
+
+class StepClock:
+    """Estimates the run's time left from the optimizer steps done since :meth:`start`."""
+
+    def __init__(self) -> None:
+        self.started: float | None = None
+        self.first_step = 0
+
+    def start(self, trainer: pl.Trainer) -> None:
+        self.started, self.first_step = time.monotonic(), trainer.global_step
+
+    def left(self, trainer: pl.Trainer) -> timedelta | None:
+        """(steps to go) x (mean seconds per step so far); None before the first step or without a bound."""
+        total, done = planned_steps(trainer), trainer.global_step - self.first_step
+        if self.started is None or total is None or done < 1:
+            return None
+        per_step = (time.monotonic() - self.started) / done
+        return timedelta(seconds=round(max(total - trainer.global_step, 0) * per_step))
+
+
 def _time_left(trainer: pl.Trainer) -> timedelta | None:
     """The training time left under ``max_time`` (its :class:`Timer`), None without a time limit."""
     for callback in trainer.callbacks:
@@ -51,50 +90,83 @@ def _time_left(trainer: pl.Trainer) -> timedelta | None:
     return None
 
 
-def train_description(trainer: pl.Trainer, epoch: int) -> str:
-    """``Epoch e/last`` (0-based, as Lightning writes it), ``Epoch e (h:mm:ss left)`` or ``Epoch e``."""
+def train_description(trainer: pl.Trainer, epoch: int, clock: StepClock | None = None) -> str:
+    """``Epoch e/last`` (0-based, as Lightning writes it), ``Epoch e (h:mm:ss left)`` or ``Epoch e``;
+    ``Epoch e/last (h:mm:ss left)`` once ``clock`` has timed a step."""
     total = planned_epochs(trainer)
-    if total is not None:
-        return f"Epoch {epoch}/{total - 1}"
-    left = _time_left(trainer)
-    return f"Epoch {epoch} ({left} left)" if left is not None else f"Epoch {epoch}"
+    left = clock.left(trainer) if clock is not None else None
+    if total is None:
+        left = _time_left(trainer)
+    text = f"Epoch {epoch}/{total - 1}" if total is not None else f"Epoch {epoch}"
+    return f"{text} ({left} left)" if left is not None else text
 
 
 class EpochTotalRichProgressBar(RichProgressBar):
     """Lightning's rich progress bar with :func:`train_description`.
 
     The training task's description is replaced once Lightning has created or reset it (at every epoch
-    start, and at the first batch when training resumes mid-epoch), through the bar's public ``progress``
-    (a rich ``Progress``) and ``train_progress_bar_id``.
+    start, and at the first batch when training resumes mid-epoch), and after every batch (the time
+    left), through the bar's public ``progress`` (a rich ``Progress``) and ``train_progress_bar_id``.
     """
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.clock = StepClock()
+
+    def on_train_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        super().on_train_start(trainer, pl_module)
+        self.clock.start(trainer)
 
     def on_train_epoch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
         super().on_train_epoch_start(trainer, pl_module)
         self._describe_train_task(trainer)
 
+    def on_train_end(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        """Stop the live display when training ends: Lightning stops it at ``teardown``, after
+        ``on_fit_end``, so whatever a callback printed there (the demos' score tables) was followed by
+        the bar redrawn half-way. ``teardown`` is idempotent (rich's ``Live.stop`` returns once stopped)."""
+        super().on_train_end(trainer, pl_module)
+        self.teardown(trainer, pl_module, "fit")
+
     def on_train_batch_end(self, trainer: pl.Trainer, pl_module: pl.LightningModule, *args, **kwargs) -> None:
         created = self.train_progress_bar_id is None  # Lightning adds the task here after a mid-epoch resume
+        if not created:
+            self._describe_train_task(trainer, refresh=False)  # drawn by Lightning's refresh below
         super().on_train_batch_end(trainer, pl_module, *args, **kwargs)
         if created:
             self._describe_train_task(trainer)
 
-    def _describe_train_task(self, trainer: pl.Trainer) -> None:
+    def _describe_train_task(self, trainer: pl.Trainer, refresh: bool = True) -> None:
         if self.is_disabled or self.progress is None or self.train_progress_bar_id is None:
             return
-        text = train_description(trainer, trainer.current_epoch)
+        text = train_description(trainer, trainer.current_epoch, self.clock)
         text = f"{text:{len(self.validation_description)}}"  # padded as Lightning pads it (no flicker)
         if self.theme.description:  # styled as Lightning styles the descriptions of the tasks it adds
             text = f"[{self.theme.description}]{text}"
         self.progress.update(self.train_progress_bar_id, description=text)
-        self.refresh()
+        if refresh:
+            self.refresh()
 
 
 class EpochTotalTQDMProgressBar(TQDMProgressBar):
-    """Lightning's tqdm progress bar with :func:`train_description`."""
+    """Lightning's tqdm progress bar with :func:`train_description` (updated after every batch)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.clock = StepClock()
+
+    def on_train_start(self, trainer: pl.Trainer, *args) -> None:
+        super().on_train_start(trainer, *args)
+        self.clock.start(trainer)
 
     def on_train_epoch_start(self, trainer: pl.Trainer, *args) -> None:
         super().on_train_epoch_start(trainer, *args)
-        self.train_progress_bar.set_description(train_description(trainer, trainer.current_epoch))
+        self.train_progress_bar.set_description(train_description(trainer, trainer.current_epoch, self.clock))
+
+    def on_train_batch_end(self, trainer: pl.Trainer, *args, **kwargs) -> None:
+        description = train_description(trainer, trainer.current_epoch, self.clock)
+        self.train_progress_bar.set_description(description, refresh=False)  # drawn by the update below
+        super().on_train_batch_end(trainer, *args, **kwargs)
 
 
 def default_progress_bar() -> ProgressBar:
