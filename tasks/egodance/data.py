@@ -288,6 +288,17 @@ class EgoDanceDataModule(SplitDataModule):
         if len(self.datasets["train"]) == 0 and stage == "fit":
             raise DatasetNotFoundError(f"{self.root}: every sample fell into val/test; no training windows")
 
+    def training_statistics(self) -> dict[str, torch.Tensor]:
+        """The training windows' ``motion`` (N, T, 24, 10) and ``music`` (N, T, 35), from which the EMM takes
+        its preconditioning and music-normalisation statistics (:meth:`.model.EMM.set_data_statistics`)."""
+        train = self.datasets.get("train")
+        if train is None or len(train) == 0:
+            return {}
+        return {
+            "motion": torch.stack([item["motion"] for item in train.items]),
+            "music": torch.stack([item["music"] for item in train.items]),
+        }
+
 
 class SyntheticEgoDanceDataModule(EgoDanceDataModule):
     """A small EgoAIST++-style set generated on first use (no download): the procedural dances and

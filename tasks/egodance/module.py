@@ -183,16 +183,11 @@ class EgoDanceModule(BackboneModule):
         )
 
     # ------------------------------------------------------------------ training
-    def setup(self, stage: str) -> None:
-        """Fit: the denoiser's preconditioning statistics from the training windows' motion, and the music
-        encoder's from their music."""
-        datamodule = getattr(attached_trainer(self), "datamodule", None)
-        train = (getattr(datamodule, "datasets", None) or {}).get("train")
-        if stage == "fit" and train is not None and len(train) > 0:
-            motion = torch.stack([item["motion"] for item in train.items])
-            music = torch.stack([item["music"] for item in train.items])
-            for model in (self.model, self.ema.module):
-                model.set_data_statistics(motion, music)
+    def set_data_statistics(self, statistics) -> None:
+        """The denoiser's preconditioning statistics from the training windows' ``motion``, and the music
+        encoder's from their ``music`` (:meth:`.data.EgoDanceDataModule.training_statistics`)."""
+        for model in (self.model, self.ema.module):
+            model.set_data_statistics(statistics["motion"], statistics["music"])
 
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]

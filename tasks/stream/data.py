@@ -219,6 +219,11 @@ class StreamDanceDataModule(LightningDataModule):
         """Every training music frame (N, 34), for the model's feature normalisation."""
         return torch.cat([music for _, music in self.datasets["train"].sequences.values()])
 
+    def training_statistics(self) -> dict[str, torch.Tensor]:
+        """``music``: every training music frame (N, 34) once the split is set up (the contract's statistics,
+        :class:`~skeleton_mamba.tasks.training.base_data.DataContract`)."""
+        return {"music": self.train_music()} if "train" in self.datasets else {}
+
     def train_dataloader(self) -> DataLoader:
         data = self.datasets["train"]
         return DataLoader(

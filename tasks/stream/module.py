@@ -42,10 +42,10 @@ class StreamDanceModule(BackboneModule):
         config = self.save_backbone_hyperparameters(backbone)
         self.model = StreamDancer(config, music_dim)
 
-    def on_fit_start(self) -> None:
-        datamodule = getattr(self.trainer, "datamodule", None)
-        if self.global_step == 0 and hasattr(datamodule, "train_music"):
-            self.model.set_music_statistics(datamodule.train_music().to(self.device))
+    def set_data_statistics(self, statistics) -> None:
+        """The music normalisation from every training music frame (``music`` (N, 34),
+        :meth:`.data.StreamDanceDataModule.training_statistics`)."""
+        self.model.set_music_statistics(statistics["music"].to(self.device))
 
     def _loss(self, batch: dict[str, torch.Tensor], noise: float) -> torch.Tensor:
         motion = batch["motion"]

@@ -35,7 +35,10 @@ __all__ = [
     "collate_text_motion",
     "HumanML3DDataModule",
     "SyntheticTextMotionDataModule",
+    "STATISTICS_FRAMES",
 ]
+
+STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
 
 
 class TextMotionDataset(Dataset):
@@ -88,6 +91,20 @@ class _TextMotionDataModule(SplitDataModule):
 
     def _statistics(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
+
+    def training_statistics(self) -> dict[str, torch.Tensor]:
+        """``feature_mean`` and ``feature_std`` (263,) of the normalisation and, once the training split is
+        set up, ``features`` (N, 263): its first :data:`STATISTICS_FRAMES` frames, normalised (the
+        denoiser's preconditioning statistics)."""
+        mean, std = self.statistics()
+        statistics = {"feature_mean": mean, "feature_std": std}
+        train = self.datasets.get("train")
+        if train is not None and len(train) > 0:
+            frames = np.concatenate([clip.features for clip in train.clips])[:STATISTICS_FRAMES]
+            statistics["features"] = (
+                torch.from_numpy(frames.astype(np.float32)) - mean.float()
+            ) / std.float()
+        return statistics
 
     def evaluation_clips(self, split: str = "test") -> list[MotionClip]:
         """The clips of a set-up split (the T2M evaluation draws its own captions and crops)."""

@@ -28,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from skeleton_mamba import SkeletonMambaConfig
@@ -47,13 +46,12 @@ from skeleton_mamba.tasks.text2motion.humanml3d import read_feature_vector
 from skeleton_mamba.tasks.text2motion.model import LengthMaskedDenoiser, TextCondition, TextToMotionDenoiser
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 from skeleton_mamba.tasks.training.backbone_config import config_from
-from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
+from skeleton_mamba.tasks.training.base_module import BackboneModule
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, SamplingOptions, sample
 
 __all__ = ["TextToMotionModule"]
 
 DEFAULT_SAMPLING_STEPS = 50  # DDIM steps when none is given
-STATISTICS_FRAMES = 200_000  # frames of training features for the preconditioning statistics
 
 
 class _Unregistered:
@@ -129,17 +127,14 @@ class TextToMotionModule(BackboneModule):
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
         self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
 
-    def setup(self, stage: str) -> None:
-        datamodule = getattr(attached_trainer(self), "datamodule", None)
-        if stage == "fit" and datamodule is not None and hasattr(datamodule, "statistics"):
-            mean, std = datamodule.statistics()
-            self.feature_mean.copy_(mean)
-            self.feature_std.copy_(std)
-            train = (getattr(datamodule, "datasets", None) or {}).get("train")
-            if train is not None and len(train) > 0:  # the preconditioning: at most STATISTICS_FRAMES frames
-                frames = np.concatenate([clip.features for clip in train.clips])[:STATISTICS_FRAMES]
-                features = torch.from_numpy(frames.astype(np.float32))
-                self.denoiser.set_data_statistics((features - mean.float()) / std.float())
+    def set_data_statistics(self, statistics) -> None:
+        """The data's normalisation (``feature_mean``, ``feature_std``) into the module's buffers and the
+        denoiser's preconditioning from the normalised training ``features``
+        (:meth:`.data._TextMotionDataModule.training_statistics`)."""
+        self.feature_mean.copy_(statistics["feature_mean"])
+        self.feature_std.copy_(statistics["feature_std"])
+        if "features" in statistics:
+            self.denoiser.set_data_statistics(statistics["features"])
 
     @property
     def text_encoder(self) -> TextEncoder:

@@ -3,17 +3,26 @@
 Task modules take a :class:`~skeleton_mamba.SkeletonMambaConfig` (``backbone``) and, where their network
 has its own settings, a config dataclass (``EMMConfig``); checkpoints store them as plain dicts and lists
 so that they load with ``weights_only=True`` (:mod:`skeleton_mamba.tasks.training.backbone_config`).
+
+What follows from the data reaches a task module in two ways only, both from the data module's
+:class:`~skeleton_mamba.tasks.training.base_data.DataContract`: its sizes and rates as ``__init__`` arguments
+(LightningCLI links them), and its training statistics through :meth:`BackboneModule.setup`, which hands them
+to the module's :meth:`~BackboneModule.set_data_statistics` once, at ``fit`` (a resumed run then restores the
+checkpoint's copy over them).
 """
 
 from __future__ import annotations
 
 import inspect
+from collections.abc import Mapping
 
 import lightning.pytorch as pl
+import torch
 from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.training.backbone_config import backbone_config, plain_backbone_config
+from skeleton_mamba.tasks.training.base_data import DataContract, data_contract
 
 __all__ = ["BackboneModule", "attached_trainer"]
 
@@ -50,3 +59,18 @@ class BackboneModule(LightningModule):
         self.save_hyperparameters(ignore=["backbone", *ignore], frame=inspect.currentframe().f_back)
         self.hparams["backbone"] = None if config is None else plain_backbone_config(config)
         return config
+
+    def data_contract(self) -> DataContract | None:
+        """The :class:`DataContract` of the Trainer's data module (None outside a Trainer or without one)."""
+        datamodule = getattr(attached_trainer(self), "datamodule", None)
+        return None if datamodule is None else data_contract(datamodule)
+
+    def setup(self, stage: str) -> None:
+        """Fit: the data module's training statistics to :meth:`set_data_statistics` (when it has any)."""
+        contract = self.data_contract() if stage == "fit" else None
+        if contract is not None and contract.statistics:
+            self.set_data_statistics(contract.statistics)
+
+    def set_data_statistics(self, statistics: Mapping[str, torch.Tensor]) -> None:
+        """Take the training split's statistics (:attr:`DataContract.statistics`); a task with
+        data-dependent normalisation overrides this."""
