@@ -1,4 +1,5 @@
-"""Write an SMPL-24 motion as files: our motion ``.npz``, a BVH and an mp4 rendering with the music muxed in.
+"""Write an SMPL-24 motion as files: our motion ``.npz``, a BVH, a glTF ``.glb`` and an mp4 rendering with the
+music muxed in.
 
 Used by every task that writes dances (``sm dance``, the EgoMusic demo, ``sm stream``). The music of the
 rendering is the slice of the track the motion was made for (``music_start_s``), cut to the motion's length
@@ -16,6 +17,7 @@ import soundfile as sf
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
+from skeleton_mamba.tasks.motion.gltf import from_motion_data, write_glb
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 
@@ -28,6 +30,7 @@ class DanceFiles:
 
     npz: Path
     bvh: Path
+    glb: Path | None = None
     mp4: Path | None = None
     wav: Path | None = None
 
@@ -62,7 +65,7 @@ def write_motion(
     title: str | None = None,
     progress: bool = False,
 ) -> DanceFiles:
-    """An SMPL-24 :class:`MotionData` (with joints) -> ``<name>.npz``, ``.bvh`` and ``.mp4`` in ``out_dir``.
+    """An SMPL-24 :class:`MotionData` (with joints) -> ``<name>.npz / .bvh / .glb / .mp4`` in ``out_dir``.
 
     Args:
         motion: the motion, with its joints (T, 24, 3).
@@ -81,6 +84,7 @@ def write_motion(
     files = DanceFiles(
         npz=save_motion(out_dir / f"{name}.npz", motion),
         bvh=save_bvh(out_dir / f"{name}.bvh", smpl_to_bvh(motion.poses, motion.trans, fps)),
+        glb=write_glb(from_motion_data(motion), out_dir / f"{name}.glb", name=name),
     )
     if render:
         if music is not None:

@@ -1,0 +1,48 @@
+"""``sm export MOTION --out dance.glb [--music FILE] [--skeleton NAME] [--motion-fps N]``.
+
+Writes any motion file the toolkit reads (``.npz``, AIST++ ``.pkl``, ``.bvh``, joints ``.npy``, NTU
+``.skeleton``) as a glTF 2.0 binary (:mod:`.gltf`): a skinned skeleton and one animation. ``--music`` writes
+the track's slice of the motion's length beside it (``dance.wav``), as glTF has no audio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.export import write_music_slice
+from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion, write_glb
+
+__all__ = ["main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm export", description="Write a motion file as glTF 2.0 (.glb).")
+    p.add_argument("motion", help="motion file: .npz (ours), .pkl (AIST++), .npy (T,J,3), .bvh, .skeleton")
+    p.add_argument("--out", required=True, help="output .glb")
+    p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
+    p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
+    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm export``; returns 0 on success, 2 on a bad file or argument."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    out = Path(args.out)
+    try:
+        if out.suffix.lower() != ".glb":
+            raise ValueError(f"{out}: the output must be a .glb file")
+        motion = load_skeleton_motion(args.motion, skeleton=args.skeleton, motion_fps=args.motion_fps)
+        write_glb(motion, out, name=Path(args.motion).stem)
+        print(f"wrote {out} ({len(motion.names)} joints, {motion.num_frames} frames at {motion.fps:g} fps)")
+        if args.music is not None:
+            wav = write_music_slice(args.music, 0.0, motion.num_frames / motion.fps, out.with_suffix(".wav"))
+            print(f"wrote {wav}")
+    except (OSError, ValueError, KeyError) as e:
+        print(f"sm export: error: {one_line_message(e)}", file=sys.stderr)
+        return 2
+    return 0
