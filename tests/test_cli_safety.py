@@ -157,7 +157,7 @@ def test_missing_and_directory_checkpoints_are_one_line_errors(tmp_path, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         f"sm test: {tmp_path / 'none.ckpt'}: No such checkpoint file",
-        f"sm dance: {tmp_path}: is a directory (a file path is expected)",
+        f"sm dance: {tmp_path / 'config.json'}: missing (not a from_pretrained folder)",
     ]
 
 

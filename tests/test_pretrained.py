@@ -411,3 +411,24 @@ def test_export_refuses_a_checkpoint_naming_no_module(tmp_path, capsys, tiny_ego
         == f"sm export-pretrained: {path}: its hyper-parameters name no module class (_class_path); "
         + ("pass --module")
     )
+
+
+def test_sm_validate_takes_an_exported_folder_as_ckpt_path(tmp_path, monkeypatch, capsys):
+    """``--ckpt_path FOLDER`` (test / validate / predict): the same metrics as from the checkpoint."""
+    monkeypatch.chdir(tmp_path)
+    recipe = [
+        "--recipe", "stream_dance_demo.yaml", "--trainer.logger=false", "--trainer.enable_progress_bar=false",
+        f"--trainer.default_root_dir={tmp_path}", f"--data.init_args.root={tmp_path / 'data'}",
+        "--data.init_args.synthetic_count=3", "--data.init_args.synthetic_duration_s=3.0",
+        "--data.init_args.window_frames=30", "--data.init_args.batch_size=2",
+    ]  # fmt: skip
+    assert sm(["fit", *recipe, "--trainer.max_steps=2"]) == 0
+    ckpt = sorted(tmp_path.rglob("*.ckpt"))[0]
+    assert sm(["export-pretrained", "--ckpt", str(ckpt), "--out", str(tmp_path / "dancer")]) == 0
+    tables = []
+    for source in (ckpt, tmp_path / "dancer"):
+        capsys.readouterr()
+        assert sm(["validate", *recipe, "--ckpt_path", str(source)]) == 0
+        out = capsys.readouterr().out
+        tables.append([line for line in out.splitlines() if "val" in line and "│" in line])
+    assert tables[0] and tables[0] == tables[1]

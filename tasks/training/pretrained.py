@@ -16,10 +16,12 @@ Face cache, offline with ``HF_HUB_OFFLINE=1``) is a pretrained folder.
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import importlib
 import os
 import re
+import shutil
 import tempfile
 import typing
 from pathlib import Path
@@ -49,6 +51,7 @@ from skeleton_mamba.tasks.training.checkpoints import (
 __all__ = [
     "MODULE_WEIGHTS_NAME",
     "check_model_source",
+    "checkpoint_file_from",
     "import_project_class",
     "is_checkpoint_source",
     "load_module_and_checkpoint_from",
@@ -193,6 +196,13 @@ def load_module_and_checkpoint_from(
     """
     if is_checkpoint_source(source):
         return load_module_and_checkpoint(cls, source, map_location)
+    folder, checkpoint = _folder_checkpoint(source, cls)
+    return load_module_folder(cls, folder, checkpoint, map_location)
+
+
+def _folder_checkpoint(source: str | os.PathLike[str], cls: type | None = None) -> tuple[Path, dict]:
+    """The folder of ``source`` and the Lightning checkpoint dict its files describe (``cls``: the module
+    class it must hold)."""
     folder, config = _resolve(source)
     where = str(folder / CONFIG_NAME)
     record = config.get("module")
@@ -202,8 +212,9 @@ def load_module_and_checkpoint_from(
             f"(load it with from_pretrained; sm export-pretrained writes folders the commands read)"
         )
     stored = str(record.get("class_path", ""))
-    if stored.rsplit(".", 1)[-1] != cls.__name__:
+    if cls is not None and stored.rsplit(".", 1)[-1] != cls.__name__:
         raise CheckpointError(f"{where}: holds a {stored}, not a {cls.__name__}")
+    module_cls = cls or import_project_class(stored, where)
     try:
         network = {f"{record['network']}.{k}": v for k, v in load_file(str(folder / WEIGHTS_NAME)).items()}
         extra = (
@@ -213,13 +224,20 @@ def load_module_and_checkpoint_from(
         raise CheckpointError(f"{folder}: unreadable weights ({err})") from None
     checkpoint = {
         "state_dict": {**extra, **network},
-        "hyper_parameters": plain_hparams(cls, dict(record.get("hparams") or {}), where),
+        "hyper_parameters": plain_hparams(module_cls, dict(record.get("hparams") or {}), where),
         "datamodule_hyper_parameters": dict(record.get("datamodule_hyper_parameters") or {}),
         "pytorch-lightning_version": str(record.get("lightning_version", "2.5.2")),
     }
     for key in ("epoch", "global_step"):
         if key in record:
             checkpoint[key] = record[key]
+    return folder, checkpoint
+
+
+def load_module_folder(
+    cls: type[ModuleT], folder: Path, checkpoint: dict, map_location: Any = "cpu"
+) -> tuple[ModuleT, dict]:
+    """``cls`` from the checkpoint dict of an exported ``folder`` (:func:`_folder_checkpoint`)."""
     # the one loader (class paths, weights_only, finite weights), on the checkpoint the folder describes
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "from_pretrained.ckpt"
@@ -229,6 +247,21 @@ def load_module_and_checkpoint_from(
         except CheckpointError as err:
             raise CheckpointError(str(err).replace(str(path), str(folder))) from err
     return module, loaded
+
+
+def checkpoint_file_from(
+    source: str | os.PathLike[str], directory: str | os.PathLike[str] | None = None
+) -> Path:
+    """The Lightning checkpoint an exported folder / Hub id describes, written into ``directory`` (for
+    ``sm test|predict --ckpt_path FOLDER_OR_ID``, which Lightning reads as a file; ``None``: a temporary
+    folder removed when the process exits)."""
+    folder, checkpoint = _folder_checkpoint(source)
+    if directory is None:
+        directory = tempfile.mkdtemp(prefix="sm-pretrained-")
+        atexit.register(shutil.rmtree, directory, True)
+    path = Path(directory) / f"{folder.name or 'pretrained'}.ckpt"
+    torch.save(checkpoint, path)
+    return path
 
 
 def load_module_from(
