@@ -200,11 +200,13 @@ def test_data_module_errors_name_the_file_and_the_fix(tmp_path, ann_file):
 # --- end to end through the `sm` console script ---------------------------------------------------
 
 
-def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_path, ann_file):
+@pytest.mark.parametrize("precision", ["32-true", "bf16-mixed"])
+def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_path, ann_file, precision):
     recipe = {
         "seed_everything": 0,
         "trainer": {
             "max_epochs": 3,
+            "precision": precision,  # --trainer.precision: fit, test and predict
             "accelerator": "cpu",
             "enable_progress_bar": False,
             "log_every_n_steps": 1,

@@ -102,7 +102,8 @@ class ActionRecognitionModule(BackboneModule):
         """Class probabilities (B, K), averaged over clips, for keypoints (B, N, M, T, J, C)."""
         b, n = keypoint.shape[:2]
         logits = self.model(keypoint.flatten(0, 1))  # (B*N, K)
-        return logits.softmax(dim=-1).unflatten(0, (b, n)).mean(dim=1)
+        # fp32 probabilities also under bf16-mixed (bf16's 8-bit mantissa: sums off by 2e-3)
+        return logits.float().softmax(dim=-1).unflatten(0, (b, n)).mean(dim=1)
 
     def training_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> torch.Tensor:
         keypoint, label = batch
