@@ -16,61 +16,62 @@ the Temporal Scan on slices of joint sequences (``skeleton_mamba.slicing``; exac
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import torch
 from torch import nn
 
-from skeleton_mamba.config import MixerConfig
+from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.cross_attention import CrossAttention
 from skeleton_mamba.group_scan import GroupScan
 from skeleton_mamba.joint_scan import JointScan
+from skeleton_mamba.skeletons import Skeleton
 from skeleton_mamba.slicing import map_slices, slice_length
 from skeleton_mamba.temporal_scan import TemporalScan
 from skeleton_mamba.tokenizer import HumanTokenizer, InverseHumanTokenizer
 
 
 class SkeletonMambaBlock(nn.Module):
-    """(B, T, J, D) -> (B, T, J, D)."""
+    """(B, T, J, D) -> (B, T, J, D).
 
-    def __init__(
-        self,
-        dim: int,
-        groups: Sequence[Sequence[int]],
-        num_joints: int,
-        group_paths: Sequence[Sequence[int]],
-        group_scan_shared: bool = False,
-        heads: int = 4,
-        mlp_dim: int = 1024,
-        context_dim: int | None = None,
-        dropout: float = 0.0,
-        mixer: MixerConfig | None = None,
-        slice_elements: int | None = None,
-        causal: bool = False,
-    ):
+    Args:
+        config: the backbone's settings, passed whole (``dim``, ``group_paths``, ``group_scan_shared``,
+            ``heads``, ``mlp_dim``, ``context_dim``, ``dropout``, ``mixer``, ``cpu_slice_elements``,
+            ``causal``; the defaults are :class:`~skeleton_mamba.config.SkeletonMambaConfig`'s).
+        skeleton: the joints' groups (``config.group_paths`` ``None``: its group paths).
+    """
+
+    def __init__(self, config: SkeletonMambaConfig, skeleton: Skeleton):
         super().__init__()
-        self.slice_elements = slice_elements
+        dim, mixer, groups = config.dim, config.mixer, skeleton.groups
+        group_paths = skeleton.group_paths if config.group_paths is None else config.group_paths
+        self.slice_elements = config.cpu_slice_elements
+        self.mlp_dim = config.mlp_dim
         group_size = len(groups[0])
         width = group_size * dim  # E = P * D
         self.tokenizer = HumanTokenizer(groups)
-        self.inverse_tokenizer = InverseHumanTokenizer(groups, num_joints)
+        self.inverse_tokenizer = InverseHumanTokenizer(groups, skeleton.num_joints)
         self.norm_group = nn.LayerNorm(dim)
-        self.group_scan = GroupScan(width, group_paths, shared=group_scan_shared, mixer=mixer)
+        self.group_scan = GroupScan(
+            width, [tuple(p) for p in group_paths], shared=config.group_scan_shared, mixer=mixer
+        )
         self.norm_joint = nn.LayerNorm(width)
         self.joint_scan = JointScan(dim, group_size, mixer=mixer)
         self.norm_time = nn.LayerNorm(dim)
-        self.temporal_scan = TemporalScan(dim, mixer=mixer, slice_elements=slice_elements, causal=causal)
+        self.temporal_scan = TemporalScan(
+            dim, mixer=mixer, slice_elements=self.slice_elements, causal=config.causal
+        )
         self.cross_attention = None
-        if context_dim is not None:
+        if config.context_dim is not None:
             self.norm_context = nn.LayerNorm(dim)
-            self.cross_attention = CrossAttention(dim, context_dim, heads=heads, dropout=dropout)
+            self.cross_attention = CrossAttention(
+                dim, config.context_dim, heads=config.heads, dropout=config.dropout
+            )
         self.norm_mlp = nn.LayerNorm(dim)
         self.mlp = nn.Sequential(
-            nn.Linear(dim, mlp_dim),
+            nn.Linear(dim, config.mlp_dim),
             nn.GELU(),
-            nn.Dropout(dropout),
-            nn.Linear(mlp_dim, dim),
-            nn.Dropout(dropout),
+            nn.Dropout(config.dropout),
+            nn.Linear(config.mlp_dim, dim),
+            nn.Dropout(config.dropout),
         )
 
     def forward(
@@ -88,7 +89,7 @@ class SkeletonMambaBlock(nn.Module):
         x = map_slices(self.spatial, 1, slice_length(x, 1, per_frame, self.slice_elements), x)
         x = x + self.temporal_scan(self.norm_time(x), mask)
         # Per frame: the MLP's hidden layer, or the attention scores over the condition.
-        width = self.mlp[0].out_features
+        width = self.mlp_dim
         if self.cross_attention is not None:
             width = max(width, self.cross_attention.heads * context.shape[1])
         frames = slice_length(x, 1, b * j * width, self.slice_elements)

@@ -43,8 +43,6 @@ class SkeletonMamba(PretrainedMixin, nn.Module):
         self.config = config
         skeleton = get_skeleton(config.skeleton)
         self.skeleton = skeleton
-        group_paths = skeleton.group_paths if config.group_paths is None else config.group_paths
-        paths = [tuple(p) for p in group_paths]
         d = config.dim
         self.input_proj = (
             nn.Linear(config.in_channels, d) if config.in_channels is not None else nn.Identity()
@@ -52,23 +50,7 @@ class SkeletonMamba(PretrainedMixin, nn.Module):
         self.joint_embedding = (
             nn.Parameter(torch.randn(skeleton.num_joints, d) * 0.02) if config.joint_embedding else None
         )
-        self.blocks = nn.ModuleList(
-            SkeletonMambaBlock(
-                d,
-                skeleton.groups,
-                skeleton.num_joints,
-                paths,
-                group_scan_shared=config.group_scan_shared,
-                heads=config.heads,
-                mlp_dim=config.mlp_dim,
-                context_dim=config.context_dim,
-                dropout=config.dropout,
-                mixer=config.mixer,
-                slice_elements=config.cpu_slice_elements,
-                causal=config.causal,
-            )
-            for _ in range(config.depth)
-        )
+        self.blocks = nn.ModuleList(SkeletonMambaBlock(config, skeleton) for _ in range(config.depth))
         self.norm = nn.LayerNorm(d)
         self.output_proj = (
             nn.Linear(d, config.out_channels) if config.out_channels is not None else nn.Identity()
