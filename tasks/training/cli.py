@@ -35,6 +35,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate-dance": ("skeleton_mamba.tasks.motion.evaluate_dance:main", "dance metrics, paper protocols"),
     "render": ("skeleton_mamba.tasks.motion.render_cli:main", "render a motion file to mp4 / gif"),
     "export": ("skeleton_mamba.tasks.motion.export_cli:main", "write a motion file as glTF 2.0 (.glb)"),
+    "view": ("skeleton_mamba.tasks.motion.view:main", "motions in one self-contained HTML viewer"),
     "stream": ("skeleton_mamba.tasks.stream.cli:main", "live music-to-dance / online recognition"),
     "make-ego": ("skeleton_mamba.tasks.egodance.builder.cli:main", "build EgoAIST++-style egocentric data"),
     "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),
