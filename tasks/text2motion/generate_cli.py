@@ -27,6 +27,7 @@ import torch
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
@@ -66,7 +67,7 @@ def save_generated(
         render: ``None``, ``"gif"`` or ``"mp4"``.
 
     Returns:
-        ``{"joints": ..., "features": ..., "video": ...}`` paths (``video`` only when rendered).
+        ``{"joints": ..., "features": ..., "glb": ..., "video": ...}`` paths (``video`` only when rendered).
     """
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
@@ -76,6 +77,7 @@ def save_generated(
     for key, array in (("features", features.float().numpy()), ("joints", joints)):
         with atomic_open(paths[key], "wb") as f:
             np.save(f, array)
+    paths["glb"] = write_glb(from_joints(joints, HUMANML3D22.name, FPS), stem.with_suffix(".glb"), stem.name)
     if render:
         paths["video"] = render_motion(
             joints,
