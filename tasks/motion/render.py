@@ -351,6 +351,7 @@ def _write_mp4(
         audio_path=None if music is None else str(music),
         audio_codec=None if music is None else "aac",
         output_params=["-preset", "veryfast"] + (["-shortest"] if music is not None else []),
+        ffmpeg_log_level="error",  # not ffmpeg's notes ("Guessed Channel Layout: mono" for a WAV track)
     )
     writer.send(None)
     try:
