@@ -108,15 +108,18 @@ class QEANModule(BackboneModule):
         return self.model(motion, music)
 
     def setup(self, stage: str) -> None:
-        datamodule = getattr(attached_trainer(self), "datamodule", None)
-        hparams = getattr(datamodule, "hparams", {})
+        """The window lengths must be the data's (:class:`DataContract`; ``sm`` links them, a module built
+        by hand may differ)."""
+        super().setup(stage)
+        contract = self.data_contract()
         lengths = ("seed_frames", "music_frames", "predict_frames")
         ours = {key: getattr(self.model.config, key) for key in lengths}
         ours["generate_frames"] = self.hparams.generate_frames
         for key, value in ours.items():
-            if key in hparams and hparams[key] != value:
+            data = None if contract is None else getattr(contract, key)
+            if data is not None and data != value:
                 raise ValueError(
-                    f"the model's {key} = {value} but data.{key} = {hparams[key]}: set both to the same "
+                    f"the model's {key} = {value} but data.{key} = {data}: set both to the same "
                     "value (sm links them from the data module)"
                 )
 

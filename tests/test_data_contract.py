@@ -1,0 +1,127 @@
+"""The data-to-model contract (issue 28): what follows from the data is declared once, by the data module.
+
+Sizes and rates reach the model through LightningCLI's links from the data module's attributes, the
+training statistics through ``BackboneModule.setup``; both are read from the data module's
+:class:`DataContract`, so a data module with another music width or other training music changes the model
+without any recipe saying so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import lightning.pytorch as pl
+import pytest
+import torch
+from lightning.pytorch import LightningDataModule, LightningModule
+
+from skeleton_mamba.tasks.qean.model import QEANConfig
+from skeleton_mamba.tasks.qean.module import QEANModule
+from skeleton_mamba.tasks.recognition.data import SyntheticRecognitionDataModule
+from skeleton_mamba.tasks.stream.data import StreamDanceDataModule
+from skeleton_mamba.tasks.stream.module import StreamDanceModule
+from skeleton_mamba.tasks.text2motion.data import SyntheticTextMotionDataModule
+from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, data_contract
+from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
+
+TINY = {"dim": 16, "depth": 1, "heads": 2, "mlp_dim": 32, "group_paths": [[1, 2, 0, 3, 4]],
+        "mixer": {"d_state": 16, "headdim": 8, "chunk_size": 16}}  # fmt: skip
+
+
+class NarrowMusic(StreamDanceDataModule):
+    """The streaming dancer's data with 20 music features per frame (the first 20 of the causal 34)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.music_dim = 20
+
+    def sequence(self, name: str):
+        motion, music = super().sequence(name)
+        return motion, music[:, : self.music_dim]
+
+
+def test_every_task_data_module_exposes_the_typed_contract(tmp_path):
+    recognition = SyntheticRecognitionDataModule(num_classes=3, train_per_class=2, val_per_class=1)
+    assert isinstance(recognition, SplitDataModule)
+    contract = recognition.contract
+    assert isinstance(contract, DataContract)
+    assert (contract.num_classes, contract.skeleton) == (3, recognition.skeleton)
+    assert contract.statistics == {}  # recognition has no data-dependent normalisation
+    stream = StreamDanceDataModule(root=str(tmp_path), synthetic=True, synthetic_count=2, window_frames=30)
+    assert data_contract(stream).music_dim == 34 and data_contract(stream).statistics == {}  # before setup
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        contract.music_dim = 3  # type: ignore[misc]
+
+
+def test_text_statistics_are_the_normalised_training_features():
+    data = SyntheticTextMotionDataModule(train_clips=4, val_clips=2, batch_size=2)
+    data.setup("fit")
+    statistics = data.contract.statistics
+    mean, std = data.statistics()
+    clips = data.evaluation_clips("train")
+    truth = torch.cat([torch.as_tensor(c.features, dtype=torch.float64) for c in clips])
+    truth = (truth - mean.double()) / std.double()
+    torch.testing.assert_close(statistics["features"].double(), truth, rtol=1e-6, atol=1e-6)
+    assert torch.equal(statistics["feature_mean"], mean) and torch.equal(statistics["feature_std"], std)
+
+
+def _cli(tmp_path, *args: str) -> SkeletonMambaCLI:
+    import_task_modules()
+    return SkeletonMambaCLI(
+        LightningModule,
+        LightningDataModule,
+        subclass_mode_model=True,
+        subclass_mode_data=True,
+        run=False,
+        args=[
+            "--recipe", "stream_dance_demo.yaml", f"--data.init_args.root={tmp_path}",
+            "--data.init_args.synthetic_count=4", "--data.init_args.synthetic_duration_s=4.0",
+            "--data.init_args.window_frames=30", "--trainer.logger=false", "--trainer.callbacks=null",
+            "--trainer.enable_checkpointing=false", *args,
+        ],
+    )  # fmt: skip
+
+
+def test_music_width_flows_from_the_data_to_the_model_without_the_recipe(tmp_path):
+    default = _cli(tmp_path / "a")
+    assert default.model.hparams.music_dim == data_contract(default.datamodule).music_dim == 34
+    narrow = _cli(tmp_path / "b", f"--data.class_path={__name__}.NarrowMusic")
+    assert data_contract(narrow.datamodule).music_dim == 20
+    assert narrow.model.hparams.music_dim == 20 and narrow.model.model.music_dim == 20
+    assert narrow.model.model.music_mean.shape == (20,)
+
+
+def test_training_statistics_reach_the_model_once_at_fit(tmp_path):
+    data = NarrowMusic(root=str(tmp_path), synthetic=True, synthetic_count=4, synthetic_duration_s=4.0,
+                       window_frames=30, batch_size=2)  # fmt: skip
+    module = StreamDanceModule(backbone=TINY, music_dim=data.music_dim)
+    trainer = pl.Trainer(max_steps=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                         enable_model_summary=False, accelerator="cpu")  # fmt: skip
+    trainer.fit(module, data)
+    # independent: every training music frame's mean and population standard deviation in float64
+    music = torch.cat([m for _, m in data.datasets["train"].sequences.values()]).double()
+    assert music.shape[1] == 20
+    torch.testing.assert_close(module.model.music_mean.double(), music.mean(0), rtol=1e-5, atol=1e-5)
+    std = ((music - music.mean(0)) ** 2).mean(0).sqrt().clamp_min(1e-3)
+    torch.testing.assert_close(module.model.music_std.double(), std, rtol=1e-4, atol=1e-5)
+
+
+class _Windows(LightningDataModule):
+    """A data module fixing QEAN's window lengths, and nothing else."""
+
+    def __init__(self, seed_frames: int) -> None:
+        super().__init__()
+        self.seed_frames, self.music_frames, self.predict_frames = seed_frames, 24, 4
+
+    def train_dataloader(self):
+        return [{}]
+
+
+def test_qean_checks_its_window_lengths_against_the_data_contract():
+    sizes = dict(hidden=32, heads=2, motion_layers=1, audio_layers=1, cross_layers=1, mlp_dim=64, dropout=0.0)
+    network = QEANConfig(**sizes, num_periods=2, seed_frames=12, music_frames=24, predict_frames=4)
+    module = QEANModule(network=network)
+    trainer = pl.Trainer(max_steps=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                         enable_model_summary=False, accelerator="cpu")  # fmt: skip
+    with pytest.raises(ValueError, match=r"seed_frames = 12 but data.seed_frames = 16"):
+        trainer.fit(module, _Windows(seed_frames=16))
