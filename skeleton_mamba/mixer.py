@@ -82,10 +82,11 @@ class Mamba2Mixer(nn.Module):
     def causal_conv(self, xbc: torch.Tensor) -> torch.Tensor:
         """Causal depthwise convolution over time, (B, L, C) -> (B, L, C).
 
-        On CUDA, ``conv1d`` (cuDNN); on CPU :func:`causal_depthwise_conv`, which avoids the slow
-        depthwise ``convolution_backward`` of CPU builds. Both read ``self.conv1d``'s weights.
+        On CUDA and under ``torch.export``, ``conv1d`` (cuDNN; one operator for any length); on CPU
+        :func:`causal_depthwise_conv`, which avoids the slow depthwise ``convolution_backward`` of CPU
+        builds. Both read ``self.conv1d``'s weights.
         """
-        if xbc.is_cuda:
+        if xbc.is_cuda or torch.compiler.is_exporting():
             return self.conv1d(xbc.transpose(1, 2))[..., : xbc.shape[1]].transpose(1, 2)
         return causal_depthwise_conv(xbc, self.conv1d.weight[:, 0], self.conv1d.bias)
 

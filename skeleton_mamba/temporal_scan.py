@@ -38,10 +38,14 @@ def valid_prefix_reversal(mask: torch.Tensor) -> torch.Tensor:
 
 
 def check_prefix_mask(mask: torch.Tensor) -> None:
-    """Raise if a padding mask is not a valid prefix (True...True False...False) per row."""
+    """Raise if a padding mask is not a valid prefix (True...True False...False) per row.
+
+    Under ``torch.export`` only the dtype and rank are checked (a value check has no place in a graph):
+    an exported model trusts its mask to be a prefix.
+    """
     if mask.dtype != torch.bool or mask.dim() != 2:
         raise ValueError(f"padding mask must be a (B, T) bool tensor, got {tuple(mask.shape)} {mask.dtype}")
-    if bool((mask[:, 1:] & ~mask[:, :-1]).any()):
+    if not torch.compiler.is_exporting() and bool((mask[:, 1:] & ~mask[:, :-1]).any()):
         raise ValueError("padding mask must mark a valid prefix of each sequence (right padding only)")
 
 

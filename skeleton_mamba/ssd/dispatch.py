@@ -4,7 +4,8 @@ impl="auto": the mamba-ssm Triton kernel when installed and x is on CUDA; else t
 (:func:`ssd_quadratic`: masked diagonal blocks of about ``quadratic.BLOCK_SIZE`` positions plus the
 factorised blocks below the diagonal, no chunk states) when L <= max(chunk_size, QUADRATIC_MAX_LEN)
 and no initial/final state is involved; else the chunked form. impl="torch": the same choice
-without the kernel.
+without the kernel. Under ``torch.export`` (and so ONNX export) both resolve to the exportable form
+(:func:`ssd_exportable`: no Python loop over sizes), so one graph serves every batch and length.
 
 QUADRATIC_MAX_LEN is where the quadratic form's O(L²) work starts to cost more than the chunked form's
 per-chunk states (on a 2-core CPU at 4 heads, P = N = 64).
@@ -16,19 +17,22 @@ import torch
 
 from skeleton_mamba.ssd.chunked import ssd_chunked
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
+from skeleton_mamba.ssd.exportable import ssd_exportable
 from skeleton_mamba.ssd.kernel import kernel_available, ssd_kernel
 from skeleton_mamba.ssd.precision import full_precision
 from skeleton_mamba.ssd.quadratic import ssd_quadratic
 from skeleton_mamba.ssd.recurrence import ssd_recurrence
 
 QUADRATIC_MAX_LEN = 256
-IMPLS = ("auto", "torch", "recurrence", "chunked", "quadratic", "kernel")
+IMPLS = ("auto", "torch", "recurrence", "chunked", "quadratic", "kernel", "exportable")
 
 
 def choose_impl(x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "auto") -> str:
     """The concrete implementation ``ssd`` runs for ``impl`` ("auto"/"torch" resolved)."""
     if impl not in IMPLS:
         raise ValueError(f"ssd: impl must be one of {IMPLS}, got {impl!r}")
+    if impl in ("auto", "torch") and torch.compiler.is_exporting():
+        return "exportable"
     if impl == "auto" and kernel_available(x):
         return "kernel"
     if impl in ("auto", "torch"):
@@ -69,7 +73,7 @@ def ssd(
         initial_state: (b, H, P, N) or ``None`` (zeros).
         return_final_state: also return the final state (b, H, P, N) in fp32.
         chunk_size: chunk length of the chunked form (and of the kernel).
-        impl: "auto" | "torch" | "recurrence" | "chunked" | "quadratic" | "kernel".
+        impl: "auto" | "torch" | "recurrence" | "chunked" | "quadratic" | "kernel" | "exportable".
 
     Returns:
         y (b, L, H, P) in x's dtype, or (y, final_state) when ``return_final_state``.
@@ -88,6 +92,8 @@ def ssd(
         return ssd_kernel(x, dt, A, B, C, chunk_size=chunk_size, **kwargs)
     if chosen == "chunked":
         return ssd_chunked(x, dt, A, B, C, chunk_size=chunk_size, **kwargs)
+    if chosen == "exportable":
+        return ssd_exportable(x, dt, A, B, C, **kwargs)
     if chosen == "quadratic":
         return ssd_quadratic(x, dt, A, B, C, **kwargs)
     return ssd_recurrence(x, dt, A, B, C, **kwargs)

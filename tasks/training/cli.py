@@ -40,6 +40,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "make-ego": ("skeleton_mamba.tasks.egodance.builder.cli:main", "build EgoAIST++-style egocentric data"),
     "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),
     "generate": ("skeleton_mamba.tasks.text2motion.generate_cli:main", "generate motion from text"),
+    "export-onnx": (
+        "skeleton_mamba.tasks.training.onnx_export:main",
+        "the backbone's sequence forward and streaming step as ONNX",
+    ),
     "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
     "export-pretrained": (
         "skeleton_mamba.tasks.training.export_pretrained:main",

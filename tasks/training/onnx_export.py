@@ -1,0 +1,276 @@
+"""``sm export-onnx``: the backbone's sequence forward and its causal streaming step as ONNX graphs.
+
+Two graphs, both through ``torch.export`` (strict) and ``torch.onnx``'s dynamo exporter:
+
+- ``sequence.onnx``: ``x`` (batch, frames, J, C_in) float32 and ``mask`` (batch, frames) bool (True on
+  valid frames, a valid prefix per row) -> ``y`` (batch, frames, J, D or C_out); batch and frames dynamic.
+- ``step.onnx`` (causal backbones): one frame ``x`` (batch, J, C_in) and the recurrent state as explicit
+  tensors, per block i ``conv_i`` (batch, J, conv_dim, d_conv) and ``ssm_i`` (batch, J, nheads,
+  headdim, d_state), -> ``y`` (batch, J, D or C_out) and the next state ``next_conv_i`` / ``next_ssm_i``;
+  batch dynamic. Zeros are the state of a new stream; feeding each step's next state to the following
+  step equals the causal sequence forward ([Mamba-2] SSD recurrence, ``skeleton_mamba.streaming``).
+
+``export.json`` beside them names the inputs, outputs, state shapes and the skeleton. Inside an exported
+graph the SSD runs as one tensor-only form (``skeleton_mamba.ssd.exportable``, O(frames²) per head), and
+the padding mask is not value-checked.
+
+Example::
+
+    sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
+        --causal --out onnx/ --check
+    sm export-onnx --ckpt runs/stream_demo/version_0/checkpoints/last.ckpt --out onnx/
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import onnxruntime
+import torch
+import yaml
+from torch import nn
+from torch.export import Dim
+
+from skeleton_mamba import SkeletonMamba
+from skeleton_mamba.streaming import frame_forward
+from skeleton_mamba.tasks.motion.atomic import atomic_path
+from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
+from skeleton_mamba.tasks.training.backbone_config import backbone_config
+from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
+from skeleton_mamba.tasks.training.pretrained import import_project_class
+
+__all__ = [
+    "ExportSpec",
+    "SequenceGraph",
+    "StepGraph",
+    "export_onnx",
+    "export_program",
+    "main",
+    "run_onnx",
+    "sequence_spec",
+    "step_spec",
+]
+
+
+@dataclass
+class ExportSpec:
+    """A module to export with example inputs, the graph's names and its dynamic axes.
+
+    Attributes:
+        module: takes ``args`` positionally and returns a tensor or a tuple of tensors.
+        args: example inputs, in the order of ``input_names``.
+        input_names, output_names: the names in the ONNX graph.
+        dynamic: input name -> {axis: dimension name}; inputs sharing a name share the dimension.
+        varargs_from: the position from which ``module.forward`` takes its inputs as ``*args``, if it does.
+    """
+
+    module: nn.Module
+    args: tuple[torch.Tensor, ...]
+    input_names: list[str]
+    output_names: list[str]
+    dynamic: dict[str, dict[int, str]] = field(default_factory=dict)
+    varargs_from: int | None = None
+
+
+class SequenceGraph(nn.Module):
+    """``backbone(x, mask)``, the mask a positional input: (B, T, J, C), (B, T) -> (B, T, J, D)."""
+
+    def __init__(self, backbone: SkeletonMamba):
+        super().__init__()
+        self.backbone = backbone
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        return self.backbone(x, mask)
+
+
+class StepGraph(nn.Module):
+    """One frame of a causal backbone with its state as explicit inputs and outputs (no in-place update).
+
+    forward(x (B, J, C), conv_0, ssm_0, conv_1, ssm_1, ...) -> (y (B, J, D), next_conv_0, next_ssm_0, ...)
+    with conv_i (B, J, conv_dim, d_conv) and ssm_i (B, J, nheads, headdim, d_state): the
+    :class:`~skeleton_mamba.streaming.StreamState` tensors of block i with the streams' rows (B·J)
+    split into (B, J), so every input has the batch first.
+    """
+
+    def __init__(self, backbone: SkeletonMamba):
+        super().__init__()
+        if not backbone.config.causal:
+            raise InputError("the streaming step needs a causal backbone (SkeletonMambaConfig(causal=True))")
+        self.backbone = backbone
+
+    def forward(self, x: torch.Tensor, *states: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        b, j = x.shape[:2]
+        conv = [s.reshape(b * j, *s.shape[2:]).clone() for s in states[0::2]]
+        ssm = [s.reshape(b * j, *s.shape[2:]).clone() for s in states[1::2]]
+        y = frame_forward(self.backbone, x, conv, ssm)  # updates the clones in place
+        nxt = [t for pair in zip(conv, ssm) for t in pair]
+        return (y, *(t.reshape(b, j, *t.shape[1:]) for t in nxt))
+
+
+def _export_ready(backbone: SkeletonMamba) -> SkeletonMamba:
+    """The backbone in eval mode, with no CPU slicing (one call over everything; exact, see its config)."""
+    backbone.eval()
+    backbone.config = replace(backbone.config, cpu_slice_elements=None)
+    for block in backbone.blocks:
+        block.slice_elements = None
+        block.temporal_scan.slice_elements = None
+    return backbone
+
+
+def sequence_spec(backbone: SkeletonMamba, batch: int = 2, frames: int = 20) -> ExportSpec:
+    """The sequence forward with example inputs (one padded sequence), batch and frames dynamic."""
+    if backbone.config.context_dim is not None:
+        raise InputError("export of a backbone with cross-attention (context_dim) is not supported")
+    j = backbone.skeleton.num_joints
+    c = backbone.config.in_channels or backbone.config.dim
+    x = torch.randn(batch, frames, j, c)
+    mask = torch.ones(batch, frames, dtype=torch.bool)
+    mask[-1, frames // 2 :] = False
+    axes = {0: "batch", 1: "frames"}
+    return ExportSpec(SequenceGraph(_export_ready(backbone)), (x, mask), ["x", "mask"], ["y"],
+                      {"x": axes, "mask": axes})  # fmt: skip
+
+
+def zero_states(backbone: SkeletonMamba, batch: int) -> list[torch.Tensor]:
+    """The zero state of :class:`StepGraph` for ``batch`` streams: conv_0, ssm_0, conv_1, ..."""
+    state = backbone.init_state(batch)
+    j = backbone.skeleton.num_joints
+    return [t.reshape(batch, j, *t.shape[1:]) for pair in zip(state.conv, state.ssm) for t in pair]
+
+
+def step_spec(backbone: SkeletonMamba, batch: int = 2) -> ExportSpec:
+    """The causal step with example inputs (a frame and random states), batch dynamic."""
+    graph = StepGraph(_export_ready(backbone))
+    j = backbone.skeleton.num_joints
+    c = backbone.config.in_channels or backbone.config.dim
+    states = [torch.randn_like(t) for t in zero_states(backbone, batch)]
+    names = [f"{kind}_{i}" for i in range(len(states) // 2) for kind in ("conv", "ssm")]
+    dynamic = {name: {0: "batch"} for name in ["x", *names]}
+    return ExportSpec(graph, (torch.randn(batch, j, c), *states), ["x", *names],
+                      ["y", *(f"next_{n}" for n in names)], dynamic, varargs_from=1)  # fmt: skip
+
+
+def export_program(spec: ExportSpec, strict: bool = True) -> torch.export.ExportedProgram:
+    """``torch.export.export`` of ``spec`` with its dynamic axes (strict: traced by TorchDynamo)."""
+    dims: dict[str, Dim] = {}
+    shapes = []
+    for name in spec.input_names:
+        axes = spec.dynamic.get(name, {})
+        shapes.append({axis: dims.setdefault(dim, Dim(dim)) for axis, dim in axes.items()} or None)
+    if spec.varargs_from is not None:
+        shapes = [*shapes[: spec.varargs_from], tuple(shapes[spec.varargs_from :])]
+    with torch.no_grad():
+        return torch.export.export(spec.module, spec.args, dynamic_shapes=tuple(shapes), strict=strict)
+
+
+def export_onnx(
+    spec: ExportSpec, path: str | Path, program: torch.export.ExportedProgram | None = None
+) -> Path:
+    """Write ``spec`` (or its exported ``program``) as an ONNX file at ``path`` (written atomically)."""
+    program = export_program(spec) if program is None else program
+    path = Path(path)
+    onnx_program = torch.onnx.export(
+        program, spec.args, input_names=spec.input_names, output_names=spec.output_names, dynamo=True,
+        verbose=False, optimize=True,
+    )  # fmt: skip
+    with atomic_path(path) as tmp:
+        onnx_program.save(str(tmp))
+    return path
+
+
+def run_onnx(path: str | Path, inputs: dict[str, torch.Tensor]) -> list[np.ndarray]:
+    """Run an ONNX file with onnxruntime on the CPU; returns its outputs in graph order."""
+    session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    names = {i.name for i in session.get_inputs()}
+    return session.run(None, {k: v.numpy() for k, v in inputs.items() if k in names})
+
+
+def _check(spec: ExportSpec, path: Path) -> float:
+    """Max abs difference between onnxruntime and eager PyTorch on the example inputs."""
+    with torch.no_grad():
+        eager = spec.module(*spec.args)
+    eager = eager if isinstance(eager, tuple) else (eager,)
+    ours = run_onnx(path, dict(zip(spec.input_names, spec.args)))
+    return max(float(np.abs(o - e.numpy()).max()) for o, e in zip(ours, eager))
+
+
+def backbone_from_checkpoint(ckpt: str) -> SkeletonMamba:
+    """The SkeletonMamba inside the network of a Lightning checkpoint (read through the one checker)."""
+    checkpoint = load_checkpoint(ckpt)
+    hparams = checkpoint.get("hyper_parameters") or {}
+    class_path = hparams.get("_class_path") if isinstance(hparams, dict) else None
+    if not isinstance(class_path, str):
+        raise CheckpointError(f"{ckpt}: its hyper-parameters name no module class (_class_path)")
+    module, _ = load_module_and_checkpoint(import_project_class(class_path, ckpt), ckpt)
+    backbones = [m for m in module.modules() if isinstance(m, SkeletonMamba)]
+    if not backbones:
+        raise CheckpointError(f"{ckpt}: its module holds no SkeletonMamba backbone")
+    return backbones[0]
+
+
+def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
+    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides."""
+    p = Path(path)
+    try:
+        fields = yaml.safe_load(p.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise InputError(f"{p}: not valid YAML ({' '.join(str(err).split())})") from err
+    if not isinstance(fields, dict):
+        raise InputError(f"{p}: a backbone file holds a mapping of SkeletonMambaConfig fields")
+    try:
+        config = backbone_config({**fields, **{k: v for k, v in overrides.items() if v is not None}})
+    except TypeError as err:
+        raise InputError(f"{p}: not a SkeletonMambaConfig ({err})") from err
+    return SkeletonMamba(config)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sm export-onnx", description=__doc__.split("\n\n")[0])
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--ckpt", help="a Lightning checkpoint: its network's backbone is exported")
+    src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
+    p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
+    p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
+    p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
+    p.add_argument("--out", required=True, help="the folder to write (created)")
+    p.add_argument("--frames", type=int, default=20, help="frames of the example input (any length runs)")
+    p.add_argument("--check", action="store_true", help="compare onnxruntime with eager PyTorch")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm export-onnx``; returns the exit code."""
+    args = _parser().parse_args(list(argv) if argv is not None else None)
+    if args.ckpt is not None:
+        backbone = backbone_from_checkpoint(args.ckpt)
+    else:
+        overrides = {"skeleton": args.skeleton, "in_channels": args.in_channels, "causal": args.causal}
+        backbone = backbone_from_yaml(args.backbone, overrides)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = {"sequence": sequence_spec(backbone, frames=args.frames)}
+    if backbone.config.causal:
+        specs["step"] = step_spec(backbone)
+    record = {"skeleton": backbone.skeleton.name, "num_joints": backbone.skeleton.num_joints, "graphs": {}}
+    for name, spec in specs.items():
+        print(f"sm export-onnx: exporting {name} ...", flush=True)
+        path = export_onnx(spec, out / f"{name}.onnx")
+        entry = {
+            "file": path.name,
+            "inputs": {n: {"shape": list(a.shape), "dtype": str(a.dtype).removeprefix("torch."),
+                           "dynamic": spec.dynamic.get(n, {})} for n, a in zip(spec.input_names, spec.args)},
+            "outputs": spec.output_names,
+        }  # fmt: skip
+        if args.check:
+            diff = entry["max_abs_diff_vs_eager"] = _check(spec, path)
+            print(f"sm export-onnx: {name}: onnxruntime vs eager max |diff| {diff:.2e}")
+        record["graphs"][name] = entry
+    with atomic_path(out / "export.json") as tmp:
+        tmp.write_text(json.dumps(record, indent=2) + "\n")
+    print(f"sm export-onnx: wrote {', '.join(f'{n}.onnx' for n in specs)} and export.json to {out}")
+    return 0
