@@ -3,6 +3,7 @@
     python benchmarks/bench_stream.py --json
     python benchmarks/bench_stream.py --json --widths tiny --memory-minutes 1,10
     python benchmarks/bench_stream.py --json --compile     # + the step compiled with torch.compile
+    python benchmarks/bench_stream.py --json --onnx        # + the backbone step in onnxruntime (CPU)
 
 For each backbone width (``paper``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
 skeleton_mamba_tiny.yaml) the causal dance network (:class:`StreamDancer`, SMPL-24, random weights)
@@ -155,6 +156,63 @@ def compiled_and_eager(model, backbone_step, count: int) -> dict:
     }
 
 
+def onnx_and_eager(model, frames: int, threads: int) -> dict:
+    """The backbone step exported to ONNX (``sm export-onnx``'s step graph) in onnxruntime on the CPU, and
+    the eager backbone step, on alternate frames of the same run, each with its own state and both fed
+    the same frames (the dancer's previous pose and music features): median / p99 / max / fps of both,
+    their ratio and the largest difference of their outputs."""
+    import tempfile
+
+    import numpy as np
+    import onnxruntime
+    import torch
+
+    from skeleton_mamba import streaming
+    from skeleton_mamba.tasks.training import onnx_export
+    from skeleton_mamba.tasks.training.frame_timing import latency_summary
+
+    backbone = model.backbone
+    spec = onnx_export.step_spec(backbone, batch=2)  # a size-1 example would fix the batch; runs at 1
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        path = onnx_export.export_onnx(spec, Path(folder) / "step.onnx")
+        export_seconds = time.perf_counter() - start
+        options = onnxruntime.SessionOptions()
+        options.intra_op_num_threads = threads
+        session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    names = spec.input_names
+    states = [t.numpy() for t in onnx_export.zero_states(backbone, 1)]
+    eager_state = backbone.init_state(1)
+    prev, music = torch.zeros(1, 24, 12), torch.randn(1, 34)
+    ort_ms, eager_ms, difference = [], [], 0.0
+    for i in range(frames + 10):
+        x = model._inputs(prev, music)
+        start = time.perf_counter()
+        y, *states = session.run(None, dict(zip(names, [x.numpy(), *states])))
+        ort_elapsed = 1e3 * (time.perf_counter() - start)
+        start = time.perf_counter()
+        out, eager_state = streaming.step(backbone, x, eager_state)
+        eager_elapsed = 1e3 * (time.perf_counter() - start)
+        difference = max(difference, float(np.abs(y - out.numpy()).max()))
+        prev = torch.randn_like(prev)  # a new pose each frame (the timing does not depend on its values)
+        if i >= 10:  # warm-up
+            ort_ms.append(ort_elapsed)
+            eager_ms.append(eager_elapsed)
+    ort_ms, eager_ms = np.asarray(ort_ms), np.asarray(eager_ms)
+    ort, eager = latency_summary(ort_ms), latency_summary(eager_ms)
+    return {
+        "export_seconds": round(export_seconds, 1),
+        **{k: round(v, 3) for k, v in ort.items()},
+        "fps": round(1e3 / float(np.mean(ort_ms)), 1),
+        **{f"eager_{k}_same_frames": round(v, 3) for k, v in eager.items()},
+        "eager_fps_same_frames": round(1e3 / float(np.mean(eager_ms)), 1),
+        "eager_over_onnx_median": round(eager["median_ms"] / ort["median_ms"], 2),
+        "eager_over_onnx_p99": round(eager["p99_ms"] / ort["p99_ms"], 2),
+        "max_abs_difference": difference,
+        "frames": frames,
+    }
+
+
 def measure(
     width: str,
     frames: int,
@@ -163,6 +221,7 @@ def measure(
     minutes: list[float],
     memory_only: bool = False,
     compile_mode: str | None = None,
+    onnx: bool = False,
 ) -> dict:
     """All figures of one width (run in a subprocess); ``compile_mode``: None, or "default" (or a
     ``torch.compile`` mode) to add the compiled step."""
@@ -220,6 +279,10 @@ def measure(
             reference_prev = out
         return times, reference_times
 
+    if onnx and not memory_only:
+        print(f"[{width}] exporting the step to ONNX; timing", file=sys.stderr, flush=True)
+        with torch.no_grad():
+            result["onnx"] = onnx_and_eager(model, frames, torch.get_num_threads())
     with torch.inference_mode():
         if not memory_only and backbone_step is not None:
             result["compiled"].update(compiled_and_eager(model, backbone_step, frames))
@@ -344,6 +407,11 @@ def main() -> int:
         help="also time the step compiled with torch.compile (skeleton_mamba.compiling; MODE: a "
         "torch.compile mode, default 'default') side by side with the eager step; memory run compiled",
     )
+    p.add_argument(
+        "--onnx",
+        action="store_true",
+        help="also time the backbone step exported to ONNX in onnxruntime (CPU) beside the eager step",
+    )
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
     minutes = [float(m) for m in args.memory_minutes.split(",")]
@@ -367,6 +435,7 @@ def main() -> int:
             minutes,
             args.memory_only,
             args.compile,
+            args.onnx,
         )
         print(json.dumps(figures))
         return 0
@@ -385,6 +454,7 @@ def main() -> int:
         cmd += ["--memory-only"] * args.memory_only + ["--profile", str(args.profile)]
         cmd += ["--adaptive-malloc"] * args.adaptive_malloc
         cmd += ["--compile", args.compile] if args.compile else []
+        cmd += ["--onnx"] * args.onnx
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         if args.omp_wait_policy != "inherit":
             env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
@@ -423,6 +493,14 @@ def main() -> int:
             )
         elif c:
             print(f"      compiled: {c.get('error')}")
+        o = r.get("onnx")
+        if o:
+            print(
+                f"      onnxruntime step: median {o['median_ms']:.2f} ms, p99 {o['p99_ms']:.2f} ms,"
+                f" {o['fps']:.0f} fps | eager on the alternate frames: median"
+                f" {o['eager_median_ms_same_frames']:.2f} ms, p99 {o['eager_p99_ms_same_frames']:.2f} ms"
+                f" ({o['eager_over_onnx_median']}x) | max difference {o['max_abs_difference']:.2g}"
+            )
     return 0
 
 
