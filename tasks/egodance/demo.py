@@ -32,8 +32,10 @@ from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.view import write_view
 
 __all__ = ["DanceDemo"]
 
@@ -155,4 +157,9 @@ class DanceDemo(Callback):
             f"{trainer.global_step} steps (baselines from the {len(train)} training windows):",
             format_scores(scores, checks),
         ]
+        if records and "reference" in records[0]:  # the first dance beside its ground truth, in a browser
+            first = records[0]
+            motions = [(kind, load_skeleton_motion(first[kind]["npz"])) for kind in ("dance", "reference")]
+            view = write_view(motions, out / "view.html", first["dance"].get("wav"), summary["scores"])
+            lines.append(f"[egodance demo] viewer: {view}")
         print("\n".join(lines), flush=True)
