@@ -40,6 +40,7 @@ from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_ch
 from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
+    install_bounded_yaml_loader,
     packaged_recipes,
     recipe_description,
 )
@@ -118,7 +119,11 @@ class SkeletonMambaCLI(LightningCLI):
         super().__init__(*args, parser_class=parser_class, **kwargs)
 
     def init_parser(self, **kwargs) -> LightningArgumentParser:
-        """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``."""
+        """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``.
+
+        jsonargparse's YAML loader is bounded first (:func:`~.recipe_resolution.check_yaml_bounds`).
+        """
+        install_bounded_yaml_loader()
         kwargs.setdefault(
             "dump_header", [f"skeleton_mamba=={__version__}", f"lightning.pytorch=={pl.__version__}"]
         )

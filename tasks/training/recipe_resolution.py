@@ -24,15 +24,32 @@ import importlib.resources
 import os
 from pathlib import Path
 
+import jsonargparse
 import yaml
 from jsonargparse import ActionConfigFile
+from jsonargparse._loaders_dumpers import yaml_load as _jsonargparse_yaml_load
+
+from skeleton_mamba.tasks.motion.errors import InputError
 
 RECIPE_PACKAGE = "skeleton_mamba.recipes"
 RECIPE_SUFFIXES = (".yaml", ".yml")
 BASE_KEY = "base"  # an overlay's base recipe(s)
 
+# Bounds of every recipe, ``--config`` file and YAML-valued option: the packaged recipes are a few KiB with
+# a few hundred nodes nested < 10 deep, so these leave room for any real recipe and refuse alias / merge-key
+# bombs ("billion laughs") and deep nesting before anything is expanded or recursed into.
+MAX_RECIPE_BYTES = 1 << 20  # a recipe file or inline YAML value, in bytes
+MAX_RECIPE_NODES = 100_000  # scalars + sequences + mappings once every alias is expanded
+MAX_RECIPE_DEPTH = 64  # nested sequences / mappings
+
 __all__ = [
+    "MAX_RECIPE_BYTES",
+    "MAX_RECIPE_DEPTH",
+    "MAX_RECIPE_NODES",
     "RecipeConfigAction",
+    "bounded_yaml_load",
+    "check_yaml_bounds",
+    "install_bounded_yaml_loader",
     "packaged_recipe_dir",
     "packaged_recipes",
     "recipe_description",
@@ -83,9 +100,76 @@ def resolve_recipe(value: str) -> Path | None:
     return None
 
 
+def check_yaml_bounds(text: str, source: str = "YAML value") -> None:
+    """Raise :class:`InputError` naming ``source`` (and the line) if ``text`` passes the recipe bounds.
+
+    Size first; then depth, with PyYAML's event parser (a state machine: no recursion, nothing built);
+    then the node graph is composed (aliases are shared nodes there, so a bomb is still small) and its
+    size once expanded counted with one memoised sum per node, the size ``yaml.safe_dump`` or jsonargparse
+    would build. Syntax errors are left to the caller's parser, which names their line.
+    """
+    if len(text) > MAX_RECIPE_BYTES:
+        raise InputError(f"{source}: {len(text):,} bytes, more than a recipe's {MAX_RECIPE_BYTES:,}")
+    depth = 0
+    try:
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):
+            if isinstance(event, yaml.CollectionStartEvent):
+                depth += 1
+                if depth > MAX_RECIPE_DEPTH:
+                    line = event.start_mark.line + 1
+                    raise InputError(f"{source}:{line}: nested more than {MAX_RECIPE_DEPTH} levels deep")
+            elif isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+        nodes = list(yaml.compose_all(text, Loader=yaml.SafeLoader))
+    except yaml.YAMLError:
+        return
+    sizes: dict[int, int] = {}
+    stack = [(node, False) for node in nodes if node is not None]
+    while stack:  # post-order without recursion: a node's size is 1 + its children's (expanded) sizes
+        node, children_done = stack.pop()
+        if id(node) in sizes:
+            continue
+        children = (
+            node.value
+            if isinstance(node, yaml.SequenceNode)
+            else [n for pair in node.value for n in pair]
+            if isinstance(node, yaml.MappingNode)
+            else []
+        )
+        if children_done:
+            sizes[id(node)] = 1 + sum(sizes.get(id(c), 0) for c in children)
+            if sizes[id(node)] > MAX_RECIPE_NODES:
+                line = node.start_mark.line + 1
+                raise InputError(
+                    f"{source}:{line}: more than {MAX_RECIPE_NODES:,} values once its aliases are expanded "
+                    "(an alias or merge-key bomb?)"
+                )
+            continue
+        stack.append((node, True))
+        stack.extend((c, False) for c in children if id(c) not in sizes)
+
+
+def bounded_yaml_load(text: str, source: str = "YAML value"):
+    """``yaml.safe_load`` within :func:`check_yaml_bounds`."""
+    check_yaml_bounds(text, source)
+    return yaml.safe_load(text)
+
+
+def _jsonargparse_bounded_load(stream: str):
+    """jsonargparse's YAML loader (every ``--config`` file, inline mapping and option value) within bounds."""
+    if isinstance(stream, str):
+        check_yaml_bounds(stream, "--config/option YAML value")
+    return _jsonargparse_yaml_load(stream)
+
+
+def install_bounded_yaml_loader() -> None:
+    """Route jsonargparse's ``yaml`` parser mode through :func:`check_yaml_bounds` (idempotent)."""
+    jsonargparse.set_loader("yaml", _jsonargparse_bounded_load, exceptions=(yaml.YAMLError,))
+
+
 def _is_inline_mapping(value: str) -> bool:
     try:
-        return isinstance(yaml.safe_load(value), dict)
+        return isinstance(bounded_yaml_load(value, "--config inline YAML"), dict)
     except yaml.YAMLError:
         return False
 
@@ -109,7 +193,7 @@ class RecipeConfigAction(ActionConfigFile):
 
     def _apply_recipe(self, parser, cfg, path: Path, option_string, overlays: tuple[Path, ...]) -> None:
         """Apply the recipe at ``path``: its ``base`` recipes first (recursively), then its own keys."""
-        content = yaml.safe_load(path.read_text(encoding="utf-8"))
+        content = bounded_yaml_load(path.read_text(encoding="utf-8"), str(path))
         if not isinstance(content, dict) or BASE_KEY not in content:
             super().__call__(parser, cfg, str(path), option_string)
             return
@@ -134,7 +218,9 @@ class RecipeConfigAction(ActionConfigFile):
 def _check_yaml(parser, path: Path) -> None:
     """``parser.error`` naming ``path`` and the line of a YAML syntax error (jsonargparse names neither)."""
     try:
-        yaml.safe_load(path.read_text(encoding="utf-8"))
+        if path.stat().st_size > MAX_RECIPE_BYTES:
+            parser.error(f"{path}: {path.stat().st_size:,} bytes, more than a recipe's {MAX_RECIPE_BYTES:,}")
+        bounded_yaml_load(path.read_text(encoding="utf-8"), str(path))
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
