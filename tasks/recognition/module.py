@@ -103,7 +103,8 @@ class ActionRecognitionModule(BackboneModule):
         b, n = keypoint.shape[:2]
         logits = self.model(keypoint.flatten(0, 1))  # (B*N, K)
         # fp32 probabilities also under bf16-mixed (bf16's 8-bit mantissa: sums off by 2e-3)
-        return logits.float().softmax(dim=-1).unflatten(0, (b, n)).mean(dim=1)
+        probs = logits.softmax(dim=-1, dtype=torch.promote_types(logits.dtype, torch.float32))
+        return probs.unflatten(0, (b, n)).mean(dim=1)
 
     def training_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> torch.Tensor:
         keypoint, label = batch

@@ -75,7 +75,8 @@ class OnlineRecognizer:
         self.present |= frame.flatten(2).ne(0).any(dim=-1)
         self.frames += 1
         logits = self.model.head(pool_bodies(self.feature_sum / self.frames, self.present))
-        return logits.float().softmax(dim=-1)  # fp32 probabilities also under bf16 autocast
+        # at least fp32 probabilities (also under bf16 autocast); a float64 model keeps float64
+        return logits.softmax(dim=-1, dtype=torch.promote_types(logits.dtype, torch.float32))
 
 
 def _load_keypoints(path: Path) -> np.ndarray:
