@@ -4,6 +4,7 @@ encoder's loading, the recipes of the paper's protocol and of our fast variant, 
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from precision_cases import TRAINING_PRECISIONS, forward_context
 from scipy.spatial.transform import Rotation
 from transformers import ResNetConfig, ResNetModel
 
+from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera
 from skeleton_mamba.tasks.egodance.encoders import load_resnet
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
@@ -220,7 +222,8 @@ def _model_args(name: str) -> dict:
 
 def test_egodance_recipe_is_the_papers_protocol():
     paper = _model_args("egodance.yaml")
-    backbone = yaml.safe_load((RECIPES / paper["backbone"]).read_text())
+    # the backbone file states only what differs from SkeletonMambaConfig's defaults ([EgoMusic]'s sizes)
+    backbone = {**asdict(SkeletonMambaConfig()), **yaml.safe_load((RECIPES / paper["backbone"]).read_text())}
     assert (backbone["dim"], backbone["depth"], backbone["heads"], backbone["mlp_dim"]) == (128, 8, 4, 1024)
     assert (paper["context_dim"], paper["heads"], paper["transformer_ff"]) == (256, 4, 512)
     assert paper["encoder_layers"] == paper["fusion_layers"] == 2
