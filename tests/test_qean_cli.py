@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import soundfile
 import torch
+from gltf_reader import glb_joint_positions
 from lightning.pytorch import Trainer
 
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
@@ -148,11 +149,16 @@ def test_test_metrics_and_predict(aistpp, tmp_path):
         predict_seed=str(aistpp / "motions" / f"{NAMES[0]}.pkl"),
         predict_music=str(aistpp / "music" / "mBR0.wav"),
     )
-    paths = trainer.predict(module, datamodule=dm)[0]
-    with np.load(paths[0], allow_pickle=False) as saved:
+    paths = {p.suffix: p for p in trainer.predict(module, datamodule=dm)[0]}
+    assert sorted(paths) == [".bvh", ".glb", ".mp4", ".npz", ".wav"]
+    with np.load(paths[".npz"], allow_pickle=False) as saved:
         assert saved["smpl_poses"].shape == (12 + 20, 72) and saved["joints"].shape == (32, 24, 3)
         assert float(saved["fps"]) == 60.0
-    assert paths[1].suffix == ".mp4" and paths[1].stat().st_size > 0  # rendered with the music
+        joints = saved["joints"]
+    assert paths[".mp4"].stat().st_size > 0  # rendered with the music's slice (.wav)
+    # The .glb re-read with an independent reader reproduces the dance's joints.
+    _, glb_joints = glb_joint_positions(paths[".glb"])
+    np.testing.assert_allclose(glb_joints, joints, atol=1e-5)
 
 
 def test_sm_fit_one_training_step(aistpp, tmp_path, monkeypatch, caplog):

@@ -30,12 +30,12 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, features_to_smpl
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.music import BEAT, describe_audio_stack, record_audio_stack
-from skeleton_mamba.tasks.motion.render_cli import render_file
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
@@ -216,9 +216,9 @@ class QEANModule(BackboneModule):
 
     # ----- predict -----
     def predict_step(self, batch: dict, batch_idx: int) -> list[Path]:
-        """Generate, save ``<output_dir>/<name>.npz`` (and ``.mp4``); returns the written paths."""
+        """Generate and write ``<output_dir>/<name>.npz / .bvh / .glb`` (and ``.mp4`` with its ``.wav``, the
+        music's slice of the dance's length, when ``render``); returns the written paths."""
         full = self.generate(batch["seed"], batch["music"], progress=True)
-        out_dir = Path(self.hparams.output_dir)
         written = []
         for i, name in enumerate(batch["name"]):
             poses, root = features_to_smpl(full[i].double())
@@ -230,11 +230,9 @@ class QEANModule(BackboneModule):
                 scaling=1.0,
                 joints=features_to_joints(full[i].double()).cpu().numpy().astype(np.float32),
             )
-            path = save_motion(out_dir / f"{name}.npz", motion)
-            written.append(path)
-            if self.hparams.render:
-                written.append(render_file(path, path.with_suffix(".mp4"), music=batch["music_path"][i]))
-            rank_zero_info(
-                f"QEAN: wrote {', '.join(str(p) for p in written[-2 if self.hparams.render else -1 :])}"
-            )
+            music, render = batch["music_path"][i], self.hparams.render
+            files = write_motion(motion, self.hparams.output_dir, name, music=music, render=render)
+            paths = [p for p in vars(files).values() if p is not None]
+            written.extend(paths)
+            rank_zero_info(f"QEAN: wrote {', '.join(str(p) for p in paths)}")
         return written
