@@ -19,11 +19,10 @@ from hypothesis import strategies as st
 
 from skeleton_mamba.tasks.motion.bvh import load_bvh
 from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, read_features
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.kinetics import NUM_JOINTS as KINETICS_JOINTS
 from skeleton_mamba.tasks.recognition.kinetics import read_kinetics_clip
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
-from skeleton_mamba.tasks.text2motion.humanml3d import read_features
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])  # fmt: skip

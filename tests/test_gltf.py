@@ -14,14 +14,18 @@ import numpy as np
 import pygltflib
 import pytest
 import torch
+from conftest import shared_file
 from gltf_reader import accessor, glb_joint_positions
 
 from skeleton_mamba.tasks.motion.bvh import load_bvh, save_bvh, smpl_to_bvh
+from skeleton_mamba.tasks.motion.export_cli import main as export_main
 from skeleton_mamba.tasks.motion.gltf import from_joints, from_motion_data, load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.render_cli import load_joints
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.text2motion.convert_cli import convert_file
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 NPM = Path(os.environ.get("SM_NPM_CACHE", Path.home() / ".cache" / "skeleton_mamba" / "npm"))
@@ -130,3 +134,37 @@ def test_khronos_validator(tmp_path):
     assert result.returncode == 0, result.stderr
     for issues in json.loads(result.stdout):
         assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+def test_humanml3d_features_export_as_their_joints(tmp_path):
+    """A (T, 263) feature file (the dataset's real sample) -> .glb whose FK equals ``sm convert``'s joints."""
+    features = shared_file("humanml3d/new_joint_vecs/012314.npy")
+    assert export_main([str(features), "--out", str(tmp_path / "h.glb")]) == 0
+    names, positions = glb_joint_positions(tmp_path / "h.glb")
+    joints = np.load(convert_file(features, tmp_path / "joints.npy"))
+    assert names[0] == "pelvis" and positions.shape == joints.shape == (len(np.load(features)), 22, 3)
+    np.testing.assert_allclose(positions, joints, atol=1e-5, rtol=0)
+    _rules_by_rereading(tmp_path / "h.glb")
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (np.ones((5, 263), np.complex64), "expected real-valued features, got dtype complex64"),
+        (np.full((5, 263), 1e30, np.float32), "beyond +-10000"),
+        (np.ones((5, 263), bool), "expected real-valued features, got dtype bool"),
+    ],
+)
+def test_hostile_humanml3d_features_refused(tmp_path, capsys, bad, message):
+    np.save(tmp_path / "f.npy", bad)
+    assert export_main([str(tmp_path / "f.npy"), "--out", str(tmp_path / "f.glb")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("sm export: error: ") and str(tmp_path / "f.npy") in err and message in err, err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "f.glb").exists()
+
+
+def test_humanml3d_statistics_of_absurd_size_refused(tmp_path):
+    np.save(tmp_path / "Mean.npy", np.zeros(263, np.float32))
+    np.save(tmp_path / "Std.npy", np.full(263, 1e30, np.float32))
+    with pytest.raises(ValueError, match=r"Std\.npy: Std value 1e\+30 at column 0 \(0-based\) is beyond"):
+        read_statistics(tmp_path)

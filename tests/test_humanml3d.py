@@ -9,9 +9,10 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.skeletons import HUMANML3D22
+from skeleton_mamba.tasks.motion import humanml3d_features as F
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
-from skeleton_mamba.tasks.text2motion import features as F
 from skeleton_mamba.tasks.text2motion.convert_cli import main as convert_main
 from skeleton_mamba.tasks.text2motion.humanml3d import (
     crop_length,
@@ -21,7 +22,6 @@ from skeleton_mamba.tasks.text2motion.humanml3d import (
     read_captions,
     read_motion,
     read_split,
-    read_statistics,
 )
 
 SAMPLE = "humanml3d/new_joint_vecs/012314.npy"

@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics
 from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser
 from skeleton_mamba.tasks.text2motion.data import TextMotionDataset, collate_text_motion
-from skeleton_mamba.tasks.text2motion.features import group_statistics
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length
 from skeleton_mamba.tasks.text2motion.humanml3d import Caption, MotionClip
 from skeleton_mamba.tasks.text2motion.model import (

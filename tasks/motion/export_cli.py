@@ -1,8 +1,9 @@
 """``sm export MOTION --out dance.glb [--music FILE] [--skeleton NAME] [--motion-fps N]``.
 
-Writes any motion file the toolkit reads (``.npz``, AIST++ ``.pkl``, ``.bvh``, joints ``.npy``, NTU
-``.skeleton``) as a glTF 2.0 binary (:mod:`.gltf`): a skinned skeleton and one animation. ``--music`` writes
-the track's slice of the motion's length beside it (``dance.wav``), as glTF has no audio.
+Writes any motion file the toolkit reads (``.npz``, AIST++ ``.pkl``, ``.bvh``, joints ``.npy``, HumanML3D
+features ``.npy`` (T, 263), NTU ``.skeleton``) as a glTF 2.0 binary (:mod:`.gltf`): a skinned skeleton and
+one animation. ``--music`` writes the track's slice of the motion's length beside it (``dance.wav``), as
+glTF has no audio.
 """
 
 from __future__ import annotations
@@ -21,7 +22,11 @@ __all__ = ["main"]
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm export", description="Write a motion file as glTF 2.0 (.glb).")
-    p.add_argument("motion", help="motion file: .npz (ours), .pkl (AIST++), .npy (T,J,3), .bvh, .skeleton")
+    p.add_argument(
+        "motion",
+        help="motion file: .npz (ours), .pkl (AIST++), .npy: (T,J,3) joints or (T,263) HumanML3D features, "
+        ".bvh, .skeleton",
+    )
     p.add_argument("--out", required=True, help="output .glb")
     p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
     p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")

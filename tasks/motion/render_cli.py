@@ -6,7 +6,8 @@ Reads any motion file the toolkit knows and renders a skeleton animation (see :m
 - ``.pkl``: an AIST++ motion (60 fps, read with the restricted unpickler), through forward kinematics;
 - ``.npy``: joint positions (T, J, 3); the skeleton is ``--skeleton`` or inferred from J
   (22 HumanML3D, 24 SMPL, 25 NTU, 18 OpenPose); its frame rate ``--motion-fps`` (default 20 for
-  HumanML3D, 30 otherwise);
+  HumanML3D, 30 otherwise); or de-normalised HumanML3D features (T, 263) (``new_joint_vecs``,
+  ``sm generate``'s ``*_features.npy``), turned into the 22 joints by ``recover_from_ric`` at 20 fps;
 - ``.bvh``: any BVH file (hierarchy from the file);
 - ``.skeleton``: a raw NTU RGB+D file (every tracked body, 30 fps).
 
@@ -30,6 +31,8 @@ from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
 from skeleton_mamba.tasks.motion.bvh import load_bvh
 from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, check_features, recover_from_ric
+from skeleton_mamba.tasks.motion.humanml3d_features import FPS as HUMANML3D_FPS
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.render import render_motion
@@ -73,8 +76,16 @@ def load_joints(
         return _from_skeleton(motion.joint_positions(), "smpl24", motion_fps or motion.fps)
     if suffix == ".npy":
         joints = load_npy(path)
+        if joints.ndim == 2 and joints.shape[1] == FEATURE_DIM:
+            features = torch.from_numpy(check_features(joints, path).astype(np.float64))
+            joints = recover_from_ric(features).numpy()
+            joints = check_finite(joints, f"{path} (joints recovered)", "joints", ("frame", "joint"))
+            return _from_skeleton(joints, "humanml3d22", motion_fps or HUMANML3D_FPS)
         if joints.ndim != 3 or joints.shape[2] != 3:
-            raise ValueError(f"{path}: expected joint positions (T, J, 3), got shape {joints.shape}")
+            raise ValueError(
+                f"{path}: expected joint positions (T, J, 3) or HumanML3D features (T, {FEATURE_DIM}), "
+                f"got shape {joints.shape}"
+            )
         name = skeleton or _BY_JOINT_COUNT.get(joints.shape[1])
         if name is None:
             raise ValueError(f"{path}: cannot infer a skeleton for {joints.shape[1]} joints; pass --skeleton")

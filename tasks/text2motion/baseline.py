@@ -20,7 +20,7 @@ import math
 import torch
 from torch import nn
 
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
+from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.model import TextCondition, timestep_embedding
 
 __all__ = ["TransformerDenoiser", "width_for_parameters"]

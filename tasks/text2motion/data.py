@@ -19,14 +19,8 @@ import torch
 from torch.utils.data import Dataset
 
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
-from skeleton_mamba.tasks.text2motion.features import group_statistics
-from skeleton_mamba.tasks.text2motion.humanml3d import (
-    UNIT_LENGTH,
-    MotionClip,
-    crop_length,
-    load_clips,
-    read_statistics,
-)
+from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics, read_statistics
+from skeleton_mamba.tasks.text2motion.humanml3d import UNIT_LENGTH, MotionClip, crop_length, load_clips
 from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clips
 from skeleton_mamba.tasks.training.base_data import SplitDataModule
 

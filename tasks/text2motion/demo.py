@@ -24,8 +24,8 @@ import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.humanml3d_features import recover_from_ric
 from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores, format_caption_scores
-from skeleton_mamba.tasks.text2motion.features import recover_from_ric
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
 from skeleton_mamba.tasks.training.diffusion import SamplingOptions
 

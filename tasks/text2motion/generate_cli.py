@@ -28,8 +28,8 @@ from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import one_line_message
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
+from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.render import render_motion
-from skeleton_mamba.tasks.text2motion.features import FPS, recover_from_ric
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from

@@ -28,23 +28,18 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
-from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, FPS
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.humanml3d_features import FPS, NonFiniteFeaturesError, read_features
 
 __all__ = [
     "Caption",
     "MotionClip",
-    "NonFiniteFeaturesError",
     "MIN_MOTION_LENGTH",
     "MAX_MOTION_LENGTH",
     "UNIT_LENGTH",
     "is_mirrored",
     "mirror_source",
     "read_split",
-    "read_statistics",
-    "read_feature_vector",
-    "read_features",
     "read_motion",
     "read_captions",
     "load_clips",
@@ -128,51 +123,6 @@ def read_split(root: str | PathLike[str], split: str) -> list[str]:
             raise ValueError(f"{path}:{number}: malformed HumanML3D id {name!r} (6 digits, optional M)")
         ids.append(name)
     return ids
-
-
-def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
-    """A (263,) float32 vector from a ``.npy`` file (statistics); ``what`` names it in errors."""
-    path = Path(path)
-    array = load_npy(_require(path, what))
-    if array.shape != (FEATURE_DIM,) or not np.issubdtype(array.dtype, np.number):
-        raise DataFileError(f"{path}: expected numeric {what} of shape ({FEATURE_DIM},), got {array.shape}")
-    with np.errstate(over="ignore"):
-        return check_finite(array.astype(np.float32), str(path), what, ("column",))
-
-
-def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; finite, Std positive."""
-    root = Path(root)
-    mean = read_feature_vector(root / "Mean.npy", "Mean")
-    std = read_feature_vector(root / "Std.npy", "Std")
-    if not np.all(std > 0):
-        column = int(np.argmin(std > 0))
-        raise DataFileError(f"{root / 'Std.npy'}: Std must be positive, column {column} is {std[column]}")
-    return mean, std
-
-
-class NonFiniteFeaturesError(DataFileError):
-    """A feature file holds NaN or Inf. The released HumanML3D has two such motions, 007975 and its
-    mirror M007975 (reported on the [HumanML3D] issue tracker); :func:`load_clips` leaves them out."""
-
-
-def read_features(path: str | PathLike[str]) -> np.ndarray:
-    """A (T, 263) HumanML3D feature ``.npy`` (T >= 1) as float32.
-
-    Raises:
-        FileNotFoundError: no such file.
-        DataFileError: not a numeric ``.npy`` array of that shape.
-        NonFiniteFeaturesError: a NaN / Inf (or a value beyond float32), naming its frame and column.
-    """
-    path = Path(path)
-    array = load_npy(path)
-    if array.ndim != 2 or array.shape[1] != FEATURE_DIM or not len(array):
-        raise DataFileError(f"{path}: expected HumanML3D features (T >= 1, {FEATURE_DIM}), got {array.shape}")
-    if not np.issubdtype(array.dtype, np.number):
-        raise DataFileError(f"{path}: expected numeric features, got dtype {array.dtype}")
-    with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
-        array = array.astype(np.float32)
-    return check_finite(array, str(path), "features", ("frame", "column"), NonFiniteFeaturesError)
 
 
 def read_motion(root: str | PathLike[str], motion_id: str) -> np.ndarray:

@@ -33,8 +33,8 @@ from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, NUM_JOINTS
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM, NUM_JOINTS
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
 

@@ -31,6 +31,7 @@ from pathlib import Path
 import torch
 
 from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, read_feature_vector
 from skeleton_mamba.tasks.text2motion.evaluation import T2MEvalConfig, T2MEvaluation
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     COMPARABLE,
@@ -40,9 +41,7 @@ from skeleton_mamba.tasks.text2motion.evaluation_report import (
     write_report,
 )
 from skeleton_mamba.tasks.text2motion.evaluator import load_evaluator
-from skeleton_mamba.tasks.text2motion.features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.glove import HashedWordVectorizer, WordVectorizer
-from skeleton_mamba.tasks.text2motion.humanml3d import read_feature_vector
 from skeleton_mamba.tasks.text2motion.model import LengthMaskedDenoiser, TextCondition, TextToMotionDenoiser
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 from skeleton_mamba.tasks.training.backbone_config import config_from

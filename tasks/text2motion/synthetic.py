@@ -2,7 +2,7 @@
 
 Each clip is a procedural dance of :mod:`skeleton_mamba.tasks.motion.synthetic.dance` (styles
 ``bounce``, ``sway``, ``arms``; random tempo 90-140 BPM and length) at 20 fps, turned into the
-HumanML3D 263-d representation by :func:`~skeleton_mamba.tasks.text2motion.features.joints_to_features`
+HumanML3D 263-d representation by :func:`~skeleton_mamba.tasks.motion.humanml3d_features.joints_to_features`
 (the SMPL-24 joints 0..21 as the 22 HumanML3D joints, the SMPL local rotations as the 6D rotations),
 with a caption drawn from a few templates of its style. Every caption starts with "synthetic:" so
 generated demo data is never mistaken for HumanML3D.
@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.motion.humanml3d_features import FPS, NUM_JOINTS, joints_to_features
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_rotation_6d
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
-from skeleton_mamba.tasks.text2motion.features import FPS, NUM_JOINTS, joints_to_features
 from skeleton_mamba.tasks.text2motion.humanml3d import Caption, MotionClip
 
 __all__ = ["CAPTIONS", "synthetic_clip", "synthetic_clips"]

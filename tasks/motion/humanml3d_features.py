@@ -1,4 +1,4 @@
-"""The HumanML3D 263-d motion representation: its slices, normalisation and joint recovery.
+"""The HumanML3D 263-d motion representation: its slices, normalisation, joint recovery and feature files.
 
 Layout for J = 22 joints (``EricGuo5513/HumanML3D motion_representation.ipynb``):
 
@@ -20,9 +20,15 @@ slice          dims   content
 
 from __future__ import annotations
 
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
 import torch
 
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
+from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
 
 __all__ = [
     "NUM_JOINTS",
@@ -44,6 +50,12 @@ __all__ = [
     "canonicalize",
     "joints_to_features",
     "group_statistics",
+    "FEATURE_MAGNITUDE_LIMIT",
+    "NonFiniteFeaturesError",
+    "check_features",
+    "read_feature_vector",
+    "read_features",
+    "read_statistics",
 ]
 
 NUM_JOINTS = 22
@@ -235,3 +247,82 @@ def group_statistics(features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor
     for part in groups:
         std[part] = std[part].mean()
     return mean, std
+
+
+# ----------------------------------------------------------------------------------------------- files
+FEATURE_MAGNITUDE_LIMIT = 1e4
+"""Largest |value| accepted in a feature or statistics file. Features are metres, metres per frame,
+6D rotation entries and contact flags (|x| < 10 in the released data), and normalised features stay far
+below this; a larger value is a wrong file, not a motion."""
+
+
+class NonFiniteFeaturesError(DataFileError):
+    """A feature file holds NaN or Inf. The released HumanML3D has two such motions, 007975 and its
+    mirror M007975 (reported on the [HumanML3D] issue tracker); the data loader leaves them out."""
+
+
+def _real_float32(array: np.ndarray, path: Path, what: str, axes: tuple[str, ...], error=DataFileError):
+    """``array`` as float32 when it holds real numbers, all finite and within the magnitude limit."""
+    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise DataFileError(f"{path}: expected real-valued {what}, got dtype {array.dtype}")
+    with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
+        array = array.astype(np.float32)
+    check_finite(array, str(path), what, axes, error)
+    magnitude = np.abs(array)
+    if array.size and float(magnitude.max()) > FEATURE_MAGNITUDE_LIMIT:
+        where = np.unravel_index(int(np.argmax(magnitude)), array.shape)
+        named = ", ".join(f"{name} {i}" for name, i in zip(axes, where))
+        raise DataFileError(
+            f"{path}: {what} value {array[where]:.3g} at {named} (0-based) is beyond "
+            f"+-{FEATURE_MAGNITUDE_LIMIT:g}: not HumanML3D features"
+        )
+    return array
+
+
+def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
+    """A (263,) float32 vector from a ``.npy`` file (statistics); ``what`` names it in errors.
+
+    Raises:
+        DatasetNotFoundError: no such file.
+        DataFileError: not a real (263,) array, a NaN / Inf, or a value beyond the magnitude limit.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetNotFoundError(f"{path}: missing HumanML3D {what}")
+    array = load_npy(path)
+    if array.shape != (FEATURE_DIM,):
+        raise DataFileError(f"{path}: expected {what} of shape ({FEATURE_DIM},), got {array.shape}")
+    return _real_float32(array, path, what, ("column",))
+
+
+def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; finite, Std positive."""
+    root = Path(root)
+    mean = read_feature_vector(root / "Mean.npy", "Mean")
+    std = read_feature_vector(root / "Std.npy", "Std")
+    if not np.all(std > 0):
+        column = int(np.argmin(std > 0))
+        raise DataFileError(f"{root / 'Std.npy'}: Std must be positive, column {column} is {std[column]}")
+    return mean, std
+
+
+def check_features(array: np.ndarray, path: str | PathLike[str]) -> np.ndarray:
+    """``array`` read from ``path`` as (T, 263) float32 HumanML3D features (T >= 1), checked.
+
+    Raises:
+        DataFileError: not a real-valued array of that shape, or a value beyond the magnitude limit.
+        NonFiniteFeaturesError: a NaN / Inf (or a value beyond float32), naming its frame and column.
+    """
+    path = Path(path)
+    if array.ndim != 2 or array.shape[1] != FEATURE_DIM or not len(array):
+        raise DataFileError(f"{path}: expected HumanML3D features (T >= 1, {FEATURE_DIM}), got {array.shape}")
+    return _real_float32(array, path, "features", ("frame", "column"), NonFiniteFeaturesError)
+
+
+def read_features(path: str | PathLike[str]) -> np.ndarray:
+    """A (T, 263) HumanML3D feature ``.npy`` as float32, checked by :func:`check_features`.
+
+    Raises:
+        FileNotFoundError: no such file; and the errors of :func:`check_features`.
+    """
+    return check_features(load_npy(path), path)
