@@ -16,6 +16,7 @@ import soundfile as sf
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.atomic import atomic_path
+from skeleton_mamba.tasks.motion.audio_io import read_audio
 from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
 from skeleton_mamba.tasks.motion.gltf import from_motion_data, write_glb
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
@@ -39,18 +40,14 @@ class DanceFiles:
 
 
 def write_music_slice(src: str | Path, start_s: float, duration_s: float, out: str | Path) -> Path:
-    """Write ``duration_s`` seconds of the audio file ``src`` from ``start_s`` as 16-bit wav at ``out``."""
-    import librosa  # lazy: librosa's import is slow (numba)
+    """Write ``duration_s`` seconds of the audio file ``src`` from ``start_s`` as 16-bit mono wav at ``out``.
 
-    src = Path(src)
-    if not src.is_file():
-        raise FileNotFoundError(f"{src}: no such music file")
-    audio, sr = librosa.load(src, sr=None, mono=True, offset=max(0.0, start_s), duration=duration_s)
-    if audio.size == 0:
-        raise ValueError(f"{src}: no audio between {start_s:.2f} s and {start_s + duration_s:.2f} s")
+    Read by the one checked reader (:func:`.audio_io.read_audio`): only the slice is decoded.
+    """
+    audio, sr = read_audio(src, offset_s=max(0.0, start_s), duration_s=duration_s)
     out = Path(out)
     with atomic_path(out) as tmp:
-        sf.write(tmp, audio, sr, subtype="PCM_16")
+        sf.write(tmp, np.clip(audio, -1.0, 1.0), sr, subtype="PCM_16")
     return out
 
 

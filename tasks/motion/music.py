@@ -39,7 +39,6 @@ from __future__ import annotations
 import inspect
 import os
 import re
-import warnings
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -47,8 +46,8 @@ from pathlib import Path
 import numpy as np
 import soundfile
 
+from skeleton_mamba.tasks.motion.audio_io import probe_audio, read_audio
 from skeleton_mamba.tasks.motion.cache import FeatureCache
-from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
 
 __all__ = [
@@ -174,33 +173,21 @@ def record_audio_stack(loggers) -> None:
 
 
 def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
-    """Mono float32 audio resampled to ``sr`` (anything librosa/soundfile reads: wav, flac, ogg/opus, mp3).
+    """Mono float32 audio resampled to ``sr``, read by the one checked reader (:func:`.audio_io.read_audio`).
+
+    Rates, channels and duration are checked against the bounds of :mod:`.audio_io` before decoding; the
+    channels are averaged (as ``librosa.to_mono``) and the result resampled with librosa's default
+    resampler, as ``librosa.load(path, sr=sr)`` does.
 
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: the file cannot be decoded or holds no samples (the message names the file).
-        DataFileError: a decoded sample is NaN or Inf (the message gives the time of the first).
+        AudioFileError: (a ``DataFileError``, so a ``ValueError``) the file cannot be decoded, is out of
+            bounds, holds no samples, or a sample is NaN, Inf or out of range (the message names the file
+            and the time).
     """
     import librosa  # lazy: librosa's import is slow (numba)
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: audio file not found")
-    try:
-        with warnings.catch_warnings():  # librosa warns before falling back to audioread; we raise instead
-            warnings.simplefilter("ignore", UserWarning)
-            warnings.simplefilter("ignore", FutureWarning)
-            # native rate, all channels: librosa's mono mix and resampling refuse NaN with a vaguer error
-            y, native_sr = librosa.load(path, sr=None, mono=False)
-    except Exception as err:  # soundfile/audioread raise many unrelated types
-        raise ValueError(f"{path}: cannot decode audio ({type(err).__name__}: {err})") from err
-    if y.size == 0:
-        raise ValueError(f"{path}: the audio holds no samples")
-    bad = np.flatnonzero(~np.isfinite(y))  # (channels, samples) flattened
-    if bad.size:  # float WAV / FLAC can store NaN and Inf
-        first = np.unravel_index(bad[0], y.shape)[-1] / native_sr
-        raise DataFileError(f"{path}: {bad.size} audio samples are NaN or Inf, the first at {first:.3f} s")
-    y = librosa.to_mono(y)
+    y, native_sr = read_audio(path, mono=True)
     return y if native_sr == sr else librosa.resample(y, orig_sr=native_sr, target_sr=sr)  # as librosa.load
 
 
@@ -327,6 +314,8 @@ def extract_music_features(
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: audio file not found")
+    # The header's checks come first, on cache hits too (and before the cache key hashes the content).
+    info = probe_audio(path)
     if start_bpm is None:
         start_bpm = aist_start_bpm(path.name)
     settings = {
@@ -346,4 +335,4 @@ def extract_music_features(
         features = compute_music_features(y, fps, start_bpm, tightness, bpm_range).features
         cache.store(key, features)
     # The header duration, identical on hits and misses (the decoded length can differ by a few samples).
-    return MusicAnalysis.from_features(features, fps, float(librosa.get_duration(path=path)))
+    return MusicAnalysis.from_features(features, fps, info.duration_s)

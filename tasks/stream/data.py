@@ -20,12 +20,12 @@ import pickle
 from pathlib import Path
 
 import numpy as np
-import soundfile as sf
 import torch
 from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
@@ -88,10 +88,7 @@ def audio_rate(path: Path) -> int:
 
     if not path.is_file():
         raise FileNotFoundError(f"{path}: music file not found")
-    try:
-        return int(sf.info(path).samplerate)
-    except Exception as err:  # soundfile raises its own error types
-        raise ValueError(f"{path}: cannot read audio ({err})") from err
+    return probe_audio(path).sample_rate  # the one checked reader: rate, channels, duration in bounds
 
 
 class WindowDataset(Dataset):
