@@ -1,6 +1,7 @@
-"""``sm export-onnx``: the backbone's sequence forward and its causal streaming step as ONNX graphs.
+"""``sm export-onnx``: the backbone or a task network as ONNX graphs (sequence forward, causal step).
 
-Two graphs, both through ``torch.export`` (strict) and ``torch.onnx``'s dynamo exporter:
+Every graph goes through ``torch.export`` (strict) and ``torch.onnx``'s dynamo exporter. Graphs of the
+backbone:
 
 - ``sequence.onnx``: ``x`` (batch, frames, J, C_in) float32 and ``mask`` (batch, frames) bool (True on
   valid frames, a valid prefix per row) -> ``y`` (batch, frames, J, D or C_out); batch and frames dynamic.
@@ -10,9 +11,26 @@ Two graphs, both through ``torch.export`` (strict) and ``torch.onnx``'s dynamo e
   batch dynamic. Zeros are the state of a new stream; feeding each step's next state to the following
   step equals the causal sequence forward ([Mamba-2] SSD recurrence, ``skeleton_mamba.streaming``).
 
-``export.json`` beside them names the inputs, outputs, state shapes and the skeleton. Inside an exported
-graph the SSD runs as one tensor-only form (``skeleton_mamba.ssd.exportable``, O(frames²) per head), and
-the padding mask is not value-checked.
+Graphs of the task networks (``--ckpt`` / ``--pretrained`` of a task; ``--part backbone`` for its backbone):
+
+- streaming dancer (``StreamDancer``): ``sequence.onnx`` ``prev`` (batch, frames, 24, 12) and ``music``
+  (batch, frames, M) -> ``pose`` (batch, frames, 24, 12); ``step.onnx`` ``prev`` (batch, 24, 12), ``music``
+  (batch, M) and the state as above -> ``pose`` (batch, 24, 12) and the next state. The music
+  standardisation is inside the graphs.
+- recognition network (``ActionRecognizer``): ``sequence.onnx`` ``x`` (batch, bodies, frames, J, C) ->
+  ``logits`` (batch, classes); batch and frames dynamic (absent bodies are zeros, as in PyTorch).
+- EMM (``EMM``): ``denoiser.onnx`` ``x_t`` (batch, frames, 24, 10), ``t`` (batch,) int64, ``context``
+  (batch, tokens, Dc) (the fused condition) and ``mask`` (batch, frames) -> ``x0`` (batch, frames, 24,
+  10); batch, frames and tokens dynamic (tokens = frames with ``frame_condition``). The condition
+  encoders (music Transformer, the ``transformers`` ResNet of the frames, the fusion) stay in
+  PyTorch: their output is computed once per clip, the denoiser is what a sampler calls at every step.
+- text-to-motion denoiser (``TextToMotionDenoiser``): ``denoiser.onnx`` ``x_t`` (batch, frames, 263),
+  ``t`` (batch,), ``text`` (batch, words, text_dim) caption token embeddings, ``text_mask`` (batch, words)
+  bool and ``mask`` (batch, frames) -> ``x0`` (batch, frames, 263); the caption encoder stays in PyTorch.
+
+Other networks (QEAN) export their backbone. ``export.json`` beside the graphs names the inputs,
+outputs, state shapes and the skeleton. Inside an exported graph the SSD runs as one tensor-only form
+(``skeleton_mamba.ssd.exportable``, O(frames²) per head), and the padding mask is not value-checked.
 
 Example::
 
@@ -42,18 +60,29 @@ from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.training.backbone_config import backbone_config
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
-from skeleton_mamba.tasks.training.pretrained import import_project_class
+from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
 
 __all__ = [
+    "NETWORK_SPECS",
+    "DancerStepGraph",
     "ExportSpec",
     "SequenceGraph",
     "StepGraph",
+    "TextDenoiserGraph",
+    "TextTokens",
+    "backbone_specs",
+    "dancer_specs",
+    "emm_specs",
     "export_onnx",
     "export_program",
     "main",
+    "network_specs",
+    "recognizer_specs",
     "run_onnx",
     "sequence_spec",
     "step_spec",
+    "text_denoiser_specs",
+    "zero_states",
 ]
 
 
@@ -112,6 +141,56 @@ class StepGraph(nn.Module):
         return (y, *(t.reshape(b, j, *t.shape[1:]) for t in nxt))
 
 
+class DancerStepGraph(nn.Module):
+    """One frame of the streaming dancer with its state explicit: the dancer's own ``step`` with
+    :class:`StepGraph` as its backbone step.
+
+    forward(prev (B, 24, 12), music (B, M), conv_0, ssm_0, ...) -> (pose (B, 24, 12), next_conv_0, ...).
+    """
+
+    def __init__(self, dancer: nn.Module):
+        super().__init__()
+        self.dancer = dancer
+        self.backbone_step = StepGraph(dancer.backbone)
+
+    def forward(
+        self, prev: torch.Tensor, music: torch.Tensor, *states: torch.Tensor
+    ) -> tuple[torch.Tensor, ...]:
+        outputs, _ = self.dancer.step(
+            prev, music, None, lambda x, _state: (self.backbone_step(x, *states), None)
+        )
+        return outputs
+
+
+@dataclass
+class TextTokens:
+    """A caption condition as the text-to-motion denoiser reads it: ``tokens`` (B, S, D), ``mask`` (B, S)."""
+
+    tokens: torch.Tensor
+    mask: torch.Tensor
+
+
+class TextDenoiserGraph(nn.Module):
+    """The text-to-motion denoiser with its caption condition as two tensors.
+
+    forward(x_t (B, T, 263), t (B,), text (B, S, D), text_mask (B, S), mask (B, T)) -> x0 (B, T, 263).
+    """
+
+    def __init__(self, denoiser: nn.Module):
+        super().__init__()
+        self.denoiser = denoiser
+
+    def forward(
+        self,
+        x_t: torch.Tensor,
+        t: torch.Tensor,
+        text: torch.Tensor,
+        text_mask: torch.Tensor,
+        mask: torch.Tensor,
+    ) -> torch.Tensor:
+        return self.denoiser(x_t, t, TextTokens(text, text_mask), mask)
+
+
 def _export_ready(backbone: SkeletonMamba) -> SkeletonMamba:
     """The backbone in eval mode, with no CPU slicing (one call over everything; exact, see its config)."""
     backbone.eval()
@@ -125,12 +204,13 @@ def _export_ready(backbone: SkeletonMamba) -> SkeletonMamba:
 def sequence_spec(backbone: SkeletonMamba, batch: int = 2, frames: int = 20) -> ExportSpec:
     """The sequence forward with example inputs (one padded sequence), batch and frames dynamic."""
     if backbone.config.context_dim is not None:
-        raise InputError("export of a backbone with cross-attention (context_dim) is not supported")
+        raise InputError(
+            "a backbone with cross-attention (context_dim) exports inside its task network's denoiser graph"
+        )
     j = backbone.skeleton.num_joints
     c = backbone.config.in_channels or backbone.config.dim
     x = torch.randn(batch, frames, j, c)
-    mask = torch.ones(batch, frames, dtype=torch.bool)
-    mask[-1, frames // 2 :] = False
+    mask = _padding_mask(batch, frames)
     axes = {0: "batch", 1: "frames"}
     return ExportSpec(SequenceGraph(_export_ready(backbone)), (x, mask), ["x", "mask"], ["y"],
                       {"x": axes, "mask": axes})  # fmt: skip
@@ -149,10 +229,123 @@ def step_spec(backbone: SkeletonMamba, batch: int = 2) -> ExportSpec:
     j = backbone.skeleton.num_joints
     c = backbone.config.in_channels or backbone.config.dim
     states = [torch.randn_like(t) for t in zero_states(backbone, batch)]
-    names = [f"{kind}_{i}" for i in range(len(states) // 2) for kind in ("conv", "ssm")]
+    names = _state_names(len(states))
     dynamic = {name: {0: "batch"} for name in ["x", *names]}
     return ExportSpec(graph, (torch.randn(batch, j, c), *states), ["x", *names],
                       ["y", *(f"next_{n}" for n in names)], dynamic, varargs_from=1)  # fmt: skip
+
+
+def _padding_mask(batch: int, frames: int) -> torch.Tensor:
+    """(batch, frames) bool, all valid but the last row's second half (a padded sequence)."""
+    mask = torch.ones(batch, frames, dtype=torch.bool)
+    mask[-1, frames // 2 :] = False
+    return mask
+
+
+def _network_ready(network: nn.Module) -> nn.Module:
+    """The network in eval mode with every backbone in it :func:`_export_ready`."""
+    for module in network.modules():
+        if isinstance(module, SkeletonMamba):
+            _export_ready(module)
+    return network.eval()
+
+
+def _state_names(count: int) -> list[str]:
+    return [f"{kind}_{i}" for i in range(count // 2) for kind in ("conv", "ssm")]
+
+
+def backbone_specs(backbone: SkeletonMamba, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
+    """The backbone's graphs: ``sequence`` and, for a causal backbone, ``step``."""
+    specs = {"sequence": sequence_spec(backbone, batch, frames)}
+    if backbone.config.causal:
+        specs["step"] = step_spec(backbone, batch)
+    return specs
+
+
+def dancer_specs(dancer: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
+    """The streaming dancer's ``sequence`` (teacher-forced forward) and ``step`` (one frame) graphs."""
+    _network_ready(dancer)
+    cfg = dancer.backbone.config
+    prev = torch.randn(batch, frames, dancer.backbone.skeleton.num_joints, cfg.out_channels)
+    music = torch.randn(batch, frames, dancer.music_dim)
+    axes = {0: "batch", 1: "frames"}
+    sequence = ExportSpec(dancer, (prev, music), ["prev", "music"], ["pose"], {"prev": axes, "music": axes})
+    states = [torch.randn_like(t) for t in zero_states(dancer.backbone, batch)]
+    names = _state_names(len(states))
+    step = ExportSpec(
+        DancerStepGraph(dancer), (prev[:, 0], music[:, 0], *states), ["prev", "music", *names],
+        ["pose", *(f"next_{n}" for n in names)], {n: {0: "batch"} for n in ["prev", "music", *names]},
+        varargs_from=2,
+    )  # fmt: skip
+    return {"sequence": sequence, "step": step}
+
+
+def recognizer_specs(
+    network: nn.Module, batch: int = 2, frames: int = 20, bodies: int = 2
+) -> dict[str, ExportSpec]:
+    """The recognition network's ``sequence`` graph: keypoints (B, M, T, J, C) -> logits (B, K).
+
+    The example's last sample has its other bodies absent (zeros), the padding the network reads.
+    """
+    _network_ready(network)
+    cfg = network.backbone.config
+    x = torch.randn(batch, bodies, frames, network.backbone.skeleton.num_joints, cfg.in_channels or cfg.dim)
+    x[-1, 1:] = 0.0
+    axes = {0: "batch", 1: "bodies", 2: "frames"}
+    return {"sequence": ExportSpec(network, (x,), ["x"], ["logits"], {"x": axes})}
+
+
+def emm_specs(emm: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
+    """EMM's ``denoiser`` graph: (x_t, t, context, mask) -> x0, the condition already encoded."""
+    _network_ready(emm)
+    per_frame = emm.frame_condition is not None  # one condition token per frame
+    tokens = frames if per_frame else frames // 2 + 1
+    x_t = torch.randn(batch, frames, *emm.skip_x0.data_mean.shape)
+    t = torch.arange(batch, dtype=torch.long) % emm.skip_x0.num_steps
+    context = torch.randn(batch, tokens, emm.context_dim)
+    axes = {0: "batch", 1: "frames"}
+    context_axes = {0: "batch", 1: "frames" if per_frame else "tokens"}
+    dynamic = {"x_t": axes, "t": {0: "batch"}, "context": context_axes, "mask": axes}
+    spec = ExportSpec(emm, (x_t, t, context, _padding_mask(batch, frames)), ["x_t", "t", "context", "mask"],
+                      ["x0"], dynamic)  # fmt: skip
+    return {"denoiser": spec}
+
+
+def text_denoiser_specs(denoiser: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
+    """The text-to-motion denoiser's ``denoiser`` graph: (x_t, t, text, text_mask, mask) -> x0."""
+    _network_ready(denoiser)
+    words = frames // 2 + 1
+    x_t = torch.randn(batch, frames, *denoiser.skip_x0.data_mean.shape)
+    t = torch.arange(batch, dtype=torch.long) % denoiser.skip_x0.num_steps
+    text = torch.randn(batch, words, denoiser.text_proj.in_features)
+    text_mask = torch.ones(batch, words, dtype=torch.bool)
+    text_mask[-1, words // 2 :] = False
+    axes, text_axes = {0: "batch", 1: "frames"}, {0: "batch", 1: "words"}
+    spec = ExportSpec(
+        TextDenoiserGraph(denoiser), (x_t, t, text, text_mask, _padding_mask(batch, frames)),
+        ["x_t", "t", "text", "text_mask", "mask"], ["x0"],
+        {"x_t": axes, "t": {0: "batch"}, "text": text_axes, "text_mask": text_axes, "mask": axes},
+    )  # fmt: skip
+    return {"denoiser": spec}
+
+
+NETWORK_SPECS = {
+    "StreamDancer": dancer_specs,
+    "ActionRecognizer": recognizer_specs,
+    "EMM": emm_specs,
+    "TextToMotionDenoiser": text_denoiser_specs,
+}
+"""Task network class name -> its graphs (matched by name: this layer imports no task)."""
+
+
+def network_specs(network: nn.Module, frames: int = 20) -> dict[str, ExportSpec]:
+    """The graphs of a backbone or a task network (:data:`NETWORK_SPECS`); another network: its backbone's."""
+    if isinstance(network, SkeletonMamba):
+        return backbone_specs(network, frames=frames)
+    build = NETWORK_SPECS.get(type(network).__name__)
+    if build is not None:
+        return build(network, frames=frames)
+    return backbone_specs(backbone_of(network, f"a {type(network).__name__}"), frames=frames)
 
 
 def export_program(spec: ExportSpec, strict: bool = True) -> torch.export.ExportedProgram:
@@ -199,17 +392,31 @@ def _check(spec: ExportSpec, path: Path) -> float:
     return max(float(np.abs(o - e.numpy()).max()) for o, e in zip(ours, eager))
 
 
-def backbone_from_checkpoint(ckpt: str) -> SkeletonMamba:
-    """The SkeletonMamba inside the network of a Lightning checkpoint (read through the one checker)."""
+def network_from_checkpoint(ckpt: str) -> nn.Module:
+    """The network of a Lightning checkpoint (read through the one checker): the first module in it that
+    :data:`NETWORK_SPECS` names, else its SkeletonMamba backbone."""
     checkpoint = load_checkpoint(ckpt)
     hparams = checkpoint.get("hyper_parameters") or {}
     class_path = hparams.get("_class_path") if isinstance(hparams, dict) else None
     if not isinstance(class_path, str):
         raise CheckpointError(f"{ckpt}: its hyper-parameters name no module class (_class_path)")
     module, _ = load_module_and_checkpoint(import_project_class(class_path, ckpt), ckpt)
-    backbones = [m for m in module.modules() if isinstance(m, SkeletonMamba)]
+    for m in module.modules():
+        if type(m).__name__ in NETWORK_SPECS or isinstance(m, SkeletonMamba):
+            return m
+    raise CheckpointError(f"{ckpt}: its module holds no SkeletonMamba backbone")
+
+
+def backbone_from_checkpoint(ckpt: str) -> SkeletonMamba:
+    """The SkeletonMamba inside the network of a Lightning checkpoint (read through the one checker)."""
+    return backbone_of(network_from_checkpoint(ckpt), ckpt)
+
+
+def backbone_of(network: nn.Module, source: str) -> SkeletonMamba:
+    """The (first) SkeletonMamba in ``network``."""
+    backbones = [m for m in network.modules() if isinstance(m, SkeletonMamba)]
     if not backbones:
-        raise CheckpointError(f"{ckpt}: its module holds no SkeletonMamba backbone")
+        raise CheckpointError(f"{source}: its network holds no SkeletonMamba backbone")
     return backbones[0]
 
 
@@ -229,11 +436,21 @@ def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
     return SkeletonMamba(config)
 
 
+PART_HELP = (
+    "network (default): a task network's own graphs (the streaming dancer: sequence and step; the "
+    "recognition network: sequence; EMM and the text-to-motion denoiser: denoiser, the condition or caption "
+    "already encoded, their encoders stay in PyTorch; other networks (QEAN): their backbone's); backbone: "
+    "its SkeletonMamba only"
+)
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm export-onnx", description=__doc__.split("\n\n")[0])
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--ckpt", help="a Lightning checkpoint: its network's backbone is exported")
+    src.add_argument("--ckpt", help="a Lightning checkpoint: its task network (see --part) is exported")
+    src.add_argument("--pretrained", help="a from_pretrained folder or Hub id (a backbone or a task network)")
     src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
+    p.add_argument("--part", choices=("network", "backbone"), default="network", help=PART_HELP)
     p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
     p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
     p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
@@ -247,16 +464,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-onnx``; returns the exit code."""
     args = _parser().parse_args(list(argv) if argv is not None else None)
     if args.ckpt is not None:
-        backbone = backbone_from_checkpoint(args.ckpt)
+        network, source = network_from_checkpoint(args.ckpt), args.ckpt
+    elif args.pretrained is not None:
+        network, source = load_network(args.pretrained), args.pretrained
     else:
         overrides = {"skeleton": args.skeleton, "in_channels": args.in_channels, "causal": args.causal}
-        backbone = backbone_from_yaml(args.backbone, overrides)
+        network, source = backbone_from_yaml(args.backbone, overrides), args.backbone
+    if args.part == "backbone":
+        network = backbone_of(network, source)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    specs = {"sequence": sequence_spec(backbone, frames=args.frames)}
-    if backbone.config.causal:
-        specs["step"] = step_spec(backbone)
-    record = {"skeleton": backbone.skeleton.name, "num_joints": backbone.skeleton.num_joints, "graphs": {}}
+    specs = network_specs(network, frames=args.frames)
+    backbone = backbone_of(network, source)
+    record = {
+        "network": type(network).__name__,
+        "skeleton": backbone.skeleton.name,
+        "num_joints": backbone.skeleton.num_joints,
+        "graphs": {},
+    }
     for name, spec in specs.items():
         print(f"sm export-onnx: exporting {name} ...", flush=True)
         path = export_onnx(spec, out / f"{name}.onnx")
