@@ -467,7 +467,7 @@ def test_undecodable_audio_unreadable_arrays_and_files_in_the_way_are_one_line_e
     assert sm_main(["convert", str(tmp_path / "bad.npy"), "--out", str(tmp_path / "j.npy")]) == 2
     assert sm_main(["make-ego", "--motion", str(motion), "--out", str(tmp_path / "afile")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines[0].startswith(f"sm render: error: {tmp_path / 'bad.wav'}: not a readable audio file (")
+    assert lines[0].startswith(f"sm render: error: {tmp_path / 'bad.wav'}: cannot decode audio (")
     assert lines[1].startswith(f"sm convert: error: {tmp_path / 'bad.npy'}: not a readable .npy file (")
     assert lines[2] == f"sm make-ego: {tmp_path / 'afile'}: is a file (a folder is expected)"
     assert not video.exists() and len(lines) == 3

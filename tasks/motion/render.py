@@ -7,8 +7,11 @@ extent. Its distance is fitted to the whole clip (:func:`fit_cameras`): the body
 about 60 % of the frame's height, or less where a joint of any frame (a jump, raised arms, a quick step
 the smoothed camera lags behind) would otherwise come closer than ``margin_fraction`` to an image edge.
 Drawing is done directly with OpenCV (anti-aliased lines, painter's order by depth), frames are
-encoded by the ffmpeg binary that imageio-ffmpeg ships, and music is muxed into the mp4 (AAC),
-cut to the motion's length. The file is written under a temporary name and renamed when complete.
+encoded by the ffmpeg binary that imageio-ffmpeg ships (:mod:`.mp4`: exit status, errors and streams
+checked), and music is muxed into the mp4 (AAC), cut to the motion's length. The music is read by the one
+checked reader (:mod:`.audio_io`) before anything is written, so audio that is unreadable, out of bounds or
+holds no samples is refused and never leaves an mp4 without its sound. The file is written under a
+temporary name beside the target and renamed when complete.
 
 Input joints are y-up (the toolkit's convention) in any unit: the floor grid spacing is chosen from
 the body's size (1 m for a human in metres).
@@ -16,10 +19,10 @@ the body's size (1 m for a human in metres).
 
 from __future__ import annotations
 
-import contextlib
 import math
+import os
 import re
-import subprocess
+import tempfile
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -27,12 +30,14 @@ from os import PathLike
 from pathlib import Path
 
 import cv2
-import imageio_ffmpeg
 import numpy as np
+import soundfile
 from PIL import Image
 from tqdm import tqdm
 
 from skeleton_mamba.tasks.motion.atomic import atomic_path, check_writable
+from skeleton_mamba.tasks.motion.audio_io import read_audio
+from skeleton_mamba.tasks.motion.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.value_checks import check_fps
 
 __all__ = ["RenderStyle", "fit_cameras", "joint_sides", "render_frames", "render_motion"]
@@ -272,18 +277,6 @@ def _write_gif(out: Path, frames: list[np.ndarray], fps: float) -> None:
     images[0].save(out, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0)
 
 
-def _check_audio(path: Path) -> None:
-    """Fail before rendering when ffmpeg cannot decode ``path`` (rather than a broken pipe mid-video)."""
-
-    if not path.is_file():
-        raise FileNotFoundError(2, "No such music file", str(path))
-    probe = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path), "-t", "0.1", "-f", "null", "-"]
-    result = subprocess.run(probe, capture_output=True, text=True, stdin=subprocess.DEVNULL)
-    if result.returncode != 0:
-        reason = (result.stderr.strip().splitlines() or ["ffmpeg cannot read it"])[-1]
-        raise ValueError(f"{path}: not a readable audio file ({reason})")
-
-
 def render_motion(
     joints: np.ndarray,
     parents: Sequence[int],
@@ -317,10 +310,11 @@ def render_motion(
         raise ValueError(f"{out}: output must end in .mp4 or .gif")
     check_fps(fps, "fps")  # bounds the camera smoothing window (it grows with fps)
     check_writable(out)
-    if music is not None:
-        _check_audio(Path(music))
     style = style or RenderStyle()
     joints = _check_joints(joints, parents)  # fail before an output file is opened
+    sound = None
+    if music is not None and suffix == ".mp4":  # decoded and checked before anything is written
+        sound = read_audio(music, duration_s=len(joints) / fps, mono=False)
     if suffix == ".mp4" and (style.width % 16 or style.height % 16):
         raise ValueError(f"mp4 width and height must be multiples of 16, got {style.width}x{style.height}")
     frames = render_frames(joints, parents, fps, names=names, style=style, title=title)
@@ -332,33 +326,30 @@ def render_motion(
             _write_gif(tmp, list(frames), fps)
         return out
     with atomic_path(out) as tmp:
-        _write_mp4(tmp, frames, fps, style, music)
+        _write_mp4(tmp, frames, fps, style, sound, target=out)
     return out
 
 
 def _write_mp4(
-    out: Path, frames: Iterable[np.ndarray], fps: float, style: RenderStyle, music: str | PathLike[str] | None
+    out: Path,
+    frames: Iterable[np.ndarray],
+    fps: float,
+    style: RenderStyle,
+    sound: tuple[np.ndarray, int] | None,
+    target: Path,
 ) -> None:
-    """Encode RGB frames to an H.264 mp4 with the ffmpeg binary of imageio-ffmpeg (music muxed as AAC)."""
+    """Encode the frames with :func:`.mp4.write_mp4`; ``sound`` ``((N, C) samples, rate)`` goes in as AAC.
 
-    writer = imageio_ffmpeg.write_frames(
-        str(out),
-        (style.width, style.height),
-        fps=fps,
-        codec="libx264",
-        quality=7,
-        macro_block_size=16,
-        audio_path=None if music is None else str(music),
-        audio_codec=None if music is None else "aac",
-        output_params=["-preset", "veryfast"] + (["-shortest"] if music is not None else []),
-        ffmpeg_log_level="error",  # not ffmpeg's notes ("Guessed Channel Layout: mono" for a WAV track)
-    )
-    writer.send(None)
+    The samples (already checked by :mod:`.audio_io`, cut to the motion's length) are written as a
+    temporary 32-bit float WAV beside ``out`` for ffmpeg to mux, and removed afterwards.
+    """
+    if sound is None:
+        write_mp4(out, frames, (style.width, style.height), fps, target=target)
+        return
+    fd, wav = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=".wav", dir=out.parent)
+    os.close(fd)
     try:
-        for image in frames:
-            writer.send(np.ascontiguousarray(image))
-    except BaseException:
-        with contextlib.suppress(Exception):  # ffmpeg may be gone already (Ctrl-C reaches it too)
-            writer.close()
-        raise
-    writer.close()
+        soundfile.write(wav, sound[0], sound[1], subtype="FLOAT")
+        write_mp4(out, frames, (style.width, style.height), fps, audio_wav=wav, target=target)
+    finally:
+        Path(wav).unlink(missing_ok=True)
