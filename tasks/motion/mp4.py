@@ -23,9 +23,9 @@ from pathlib import Path
 import imageio_ffmpeg
 import numpy as np
 
-__all__ = ["Mp4WriteError", "write_mp4"]
+__all__ = ["CRF", "Mp4WriteError", "write_mp4"]
 
-_CRF = 15  # x264 constant rate factor (imageio-ffmpeg's quality 7 of 10)
+CRF = 15  # x264 constant rate factor (imageio-ffmpeg's quality 7 of 10)
 
 
 class Mp4WriteError(OSError):
@@ -57,17 +57,21 @@ def write_mp4(
     audio_wav: str | Path | None = None,
     target: str | Path | None = None,
     preset: str = "veryfast",
+    crf: int = CRF,
+    pix_fmt: str = "yuv420p",
 ) -> int:
     """Encode ``(H, W, 3)`` uint8 RGB ``frames`` to ``out`` (H.264, yuv420p), muxing ``audio_wav`` as AAC.
 
     Args:
         out: the file to write (a temporary path beside ``target``).
         frames: RGB frames of ``size``.
-        size: ``(width, height)``, multiples of 16.
+        size: ``(width, height)`` (even for yuv420p; the renderer uses multiples of 16).
         fps: frame rate.
         audio_wav: a PCM WAV to mux (written by the caller from checked samples), or ``None``: no sound.
         target: the path named in errors (default ``out``).
         preset: x264 preset.
+        crf: x264 constant rate factor (0 lossless - 51 worst).
+        pix_fmt: encoded pixel format (``yuv420p`` plays everywhere and needs even sizes; ``yuv444p``).
 
     Returns:
         The number of frames written.
@@ -86,10 +90,13 @@ def write_mp4(
         cmd += ["-i", str(audio_wav), "-map", "0:v:0", "-map", "1:a:0", "-c:a", "aac"]
     else:
         cmd += ["-an"]
-    cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(_CRF), "-preset", preset, str(out)]
+    cmd += ["-c:v", "libx264", "-pix_fmt", pix_fmt, "-crf", str(int(crf)), "-preset", preset, str(out)]
     count = 0
     with tempfile.TemporaryFile() as log:  # a file, not a pipe: ffmpeg never blocks on its own messages
-        process = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
+        # its own session: Ctrl-C reaches only us, and we stop ffmpeg (its messages stay in the log)
+        process = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True
+        )
         broken = False
         try:
             for image in frames:
