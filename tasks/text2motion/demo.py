@@ -8,8 +8,12 @@ ends it samples one motion per prompt with the trained module and writes, into `
 - ``synthetic_NN_<words>.mp4`` (or ``.gif``): the rendering, titled with the prompt;
 - ``demo.json``: prompts, sampler settings, paths, and ``"synthetic": true``, and ``scores``: motions
   generated for ``score_captions`` held-out captions (``score_samples`` each) scored against the training
-  poses (:mod:`.demo_scores`: pose plausibility, and whether the caption matters), with ``checks``. The
-  scores are printed too.
+  poses (:mod:`.demo_scores`: pose plausibility, and whether the caption matters), and ``dynamics``:
+  their motion amplitude and jitter as ratios to the ground truth's (the held-out clip of the caption),
+  beside the ground truth, the training mean pose and a random training clip
+  (:mod:`~skeleton_mamba.tasks.motion.metrics.held_out_dynamics`), with ``checks``. The scores are printed;
+- ``view.html``: the first scored motion beside its ground truth in a browser (:mod:`~skeleton_mamba.tasks.
+  motion.view`; its path is printed).
 
 The demo model was trained on SYNTHETIC captioned dances; the files, metadata and message say so.
 """
@@ -23,8 +27,16 @@ from pathlib import Path
 import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
+from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.humanml3d_features import recover_from_ric
+from skeleton_mamba.tasks.motion.gltf import from_joints
+from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
+from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
+    format_dynamics,
+    held_out_dynamics,
+    held_out_dynamics_checks,
+)
+from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores, format_caption_scores
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
 from skeleton_mamba.tasks.training.diffusion import SamplingOptions
@@ -109,7 +121,7 @@ class TextToMotionDemo(Callback):
             "samples": records,
         }
         if scored is not None:
-            summary["scores"], summary["checks"] = scored
+            summary["scores"], summary["checks"], _ = scored
         out.mkdir(parents=True, exist_ok=True)
         with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
             f.write(json.dumps(summary, indent=2))
@@ -117,26 +129,36 @@ class TextToMotionDemo(Callback):
         for record in records:
             lines.append(f"  {record['prompt']!r}: {record.get('video', record['joints'])}")
         if scored is not None:
-            scores, checks = scored
-            lines.append(
+            scores, checks, (dance, truth) = scored
+            caption_keys = ("plausibility_m", "within_caption_m", "between_captions_m")
+            caption_checks_ = {k: v for k, v in checks.items() if k not in scores["dynamics"]["checks"]}
+            lines += [
                 f"[text2motion demo] {self.score_samples} motions for each of {len(scores['captions'])} "
-                f"held-out captions after {trainer.global_step} steps: {scores['captions']}"
-            )
-            lines.append(format_caption_scores(scores, checks))
+                f"held-out captions after {trainer.global_step} steps: {scores['captions']}",
+                format_caption_scores({k: scores[k] for k in caption_keys}, caption_checks_),
+                "[text2motion demo] amplitude and jitter beside the held-out ground truth (baselines from "
+                f"the {scores['dynamics']['training_clips']} training clips):",
+                format_dynamics(scores["dynamics"]["columns"], scores["dynamics"]["checks"]),
+            ]
+            pair = (("generated", dance), ("ground truth", truth))
+            motions = [(name, from_joints(j.numpy(), HUMANML3D22.name, FPS)) for name, j in pair]
+            view = write_view(motions, out / "view.html", metrics=summary["scores"])
+            lines.append(f"[text2motion demo] viewer: {view}")
         print("\n".join(lines), flush=True)
 
     def _score(
         self, trainer: Trainer, pl_module: LightningModule, sampling: SamplingOptions
-    ) -> tuple[dict, dict] | None:
-        """Generate for held-out captions and score them (:mod:`.demo_scores`); None when not scoring."""
+    ) -> tuple[dict, dict, tuple[torch.Tensor, torch.Tensor]] | None:
+        """Generate for held-out captions and score them (:mod:`.demo_scores`, amplitude and jitter beside
+        the caption's held-out clip): ``(scores, checks, (first motion, its truth))``; None: not scoring."""
         datasets = getattr(trainer.datamodule, "datasets", {}) or {}
         if not self.score_captions or "train" not in datasets or "val" not in datasets:
             return None
-        captions: list[str] = []
+        truths: dict[str, torch.Tensor] = {}  # caption -> joints (T, 22, 3) of its first held-out clip
         for clip in datasets["val"].clips:
-            if clip.captions[0].text not in captions:
-                captions.append(clip.captions[0].text)
-        captions = captions[: self.score_captions]
+            if clip.captions[0].text not in truths:
+                truths[clip.captions[0].text] = recover_from_ric(torch.from_numpy(clip.features).double())
+        captions = list(truths)[: self.score_captions]
         if len(captions) < 2:
             return None
         prompts = [c for c in captions for _ in range(self.score_samples)]
@@ -148,8 +170,13 @@ class TextToMotionDemo(Callback):
         )
         joints = recover_from_ric(features.detach().cpu().double())
         motions = {c: [joints[i] for i, p in enumerate(prompts) if p == c] for c in captions}
-        train = torch.cat(
-            [recover_from_ric(torch.from_numpy(c.features).double()) for c in datasets["train"].clips]
-        )
-        scores = caption_scores(motions, train)
-        return {"captions": captions, **scores}, caption_checks(scores)
+        train = [recover_from_ric(torch.from_numpy(c.features).double()) for c in datasets["train"].clips]
+        scores = caption_scores(motions, torch.cat(train))
+        dynamics = held_out_dynamics(list(joints), [truths[p] for p in prompts], train, FPS)
+        dynamics_checks = held_out_dynamics_checks(dynamics)
+        summary = {
+            "captions": captions,
+            **scores,
+            "dynamics": {"training_clips": len(train), "columns": dynamics, "checks": dynamics_checks},
+        }
+        return summary, {**caption_checks(scores), **dynamics_checks}, (joints[0], truths[prompts[0]])
