@@ -1,8 +1,10 @@
 """The Lightning internals the project still relies on, all in ``tasks/training/lightning_compat.py``.
 
-Checked against lightning 2.5.2 to 2.6.6 (``CHECKED_LIGHTNING``). These tests fail with a message naming the
-private name and that range when a Lightning release removes or changes what the adapter builds on, or when
-LightningCLI stops calling the public hook the adapter is installed from in the order it needs. Also here:
+Checked against lightning 2.5.2 to 2.6.6 (``CHECKED_LIGHTNING``) and jsonargparse 4.53.0
+(``CHECKED_JSONARGPARSE``: the import-path policy recipes' class paths go through). These tests fail with a
+message naming the private name and that range when a Lightning or jsonargparse release removes or changes
+what the adapter builds on, or when LightningCLI stops calling the public hook the adapter is installed from
+in the order it needs. Also here:
 :func:`~skeleton_mamba.tasks.training.base_module.attached_trainer`, the public replacement of
 ``module._trainer``.
 """
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 import sys
 
+import jsonargparse
 import lightning.pytorch as pl
 import pytest
 import torch
@@ -20,15 +23,19 @@ from lightning.pytorch.cli import LightningCLI
 from skeleton_mamba.tasks.training import lightning_compat
 from skeleton_mamba.tasks.training.base_module import attached_trainer
 from skeleton_mamba.tasks.training.lightning_compat import (
+    CHECKED_JSONARGPARSE,
     CHECKED_LIGHTNING,
     PRIVATE_NAMES,
+    import_policy,
     install_accepted_links,
+    jsonargparse_problems,
     private_api_problems,
 )
 
 CHECKED = (
-    f"lightning {pl.__version__} installed; tasks/training/lightning_compat.py was checked against lightning "
-    f"{CHECKED_LIGHTNING[0]} to {CHECKED_LIGHTNING[1]}"
+    f"lightning {pl.__version__} and jsonargparse {jsonargparse.__version__} installed; "
+    f"tasks/training/lightning_compat.py was checked against lightning {CHECKED_LIGHTNING[0]} to "
+    f"{CHECKED_LIGHTNING[1]} and jsonargparse {', '.join(CHECKED_JSONARGPARSE)}"
 )
 
 
@@ -42,6 +49,34 @@ def test_the_private_names_the_adapter_uses_are_there():
     assert hasattr(pl.cli.LightningArgumentParser, "add_instantiator"), (
         f"jsonargparse removed ArgumentParser.add_instantiator ({CHECKED})"
     )
+
+
+class _Outside(pl.Callback):
+    """A callback of this test module: outside any allow-list but the test's own."""
+
+
+def test_the_jsonargparse_import_policy_refuses_before_import_and_is_restored(tmp_path, monkeypatch):
+    assert jsonargparse_problems() == [], f"{jsonargparse_problems()} ({CHECKED})"
+    marker = tmp_path / "IMPORTED"
+    (tmp_path / "compat_policy_probe.py").write_text(
+        f"open({str(marker)!r}, 'w').close()\n"
+        "from lightning.pytorch import Callback\nclass C(Callback): pass\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    parser = jsonargparse.ArgumentParser(exit_on_error=False)
+    parser.add_subclass_arguments(pl.Callback, "cb")
+    with import_policy(["lightning.pytorch"]):
+        for path in ("compat_policy_probe.C", f"{__name__}._Outside", "os.system"):
+            with pytest.raises(jsonargparse.ArgumentError, match="not allowed"):
+                parser.parse_args([f"--cb={path}"])
+        assert not marker.exists(), f"the policy let an import through ({CHECKED})"
+        assert parser.parse_args(["--cb=lightning.pytorch.callbacks.ModelCheckpoint"]).cb.class_path
+    with import_policy(["lightning.pytorch", "compat_policy_probe"]):
+        assert parser.parse_args(["--cb=compat_policy_probe.C"]).cb.class_path == "compat_policy_probe.C"
+    assert marker.exists()
+    assert (
+        parser.parse_args([f"--cb={__name__}._Outside"]).cb.class_path == f"{__name__}._Outside"
+    )  # restored
 
 
 def test_a_changed_instantiator_is_reported(monkeypatch):

@@ -16,7 +16,7 @@ import yaml
 from lightning.pytorch import Trainer
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.data import RecognitionDataModule
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, body_presence
@@ -189,11 +189,11 @@ def test_data_module_errors_name_the_file_and_the_fix(tmp_path, ann_file):
         RecognitionDataModule(
             str(tmp_path / "none.pkl"), num_classes=60, prepare_command="sm prepare ntu60 ..."
         )
-    with pytest.raises(KeyError, match="xset_train"):
+    with pytest.raises(DataFileError, match="xset_train"):
         RecognitionDataModule(str(ann_file), num_classes=3, train_split="xset_train").setup("fit")
-    with pytest.raises(ValueError, match="labels outside"):
+    with pytest.raises(DataFileError, match="labels outside"):
         RecognitionDataModule(str(ann_file), num_classes=2).setup("fit")
-    with pytest.raises(ValueError, match=r"\[25\] joints; skeleton 'openpose18' has 18"):
+    with pytest.raises(DataFileError, match=r"\[25\] joints; skeleton 'openpose18' has 18"):
         RecognitionDataModule(str(ann_file), num_classes=3, skeleton="openpose18").setup("fit")
 
 

@@ -24,7 +24,7 @@ import torch
 from torch.utils.data import Dataset
 
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline
@@ -133,16 +133,18 @@ class RecognitionDataModule(SplitDataModule):
     def _split(self, name: str) -> list[dict]:
         data = self.load()
         if name not in data["split"]:
-            raise KeyError(f"{self.ann_file}: no split {name!r}; it has {sorted(data['split'])}")
+            raise DataFileError(f"{self.ann_file}: no split {name!r}; it has {sorted(data['split'])}")
+        if not data["split"][name]:
+            raise DataFileError(f"{self.ann_file}: split {name!r} is empty")
         by_name = {a["frame_dir"]: a for a in data["annotations"]}
         annotations = [by_name[n] for n in data["split"][name]]
         bad = [a["frame_dir"] for a in annotations if not 0 <= a["label"] < self.num_classes]
         if bad:
-            raise ValueError(f"{self.ann_file}: labels outside [0, {self.num_classes}) in {bad[:3]}")
+            raise DataFileError(f"{self.ann_file}: labels outside [0, {self.num_classes}) in {bad[:3]}")
         joints = get_skeleton(self.skeleton).num_joints
         found = sorted({a["keypoint"].shape[2] for a in annotations} - {joints})
         if found:
-            raise ValueError(
+            raise DataFileError(
                 f"{self.ann_file}: split {name!r} has samples with {found} joints; "
                 f"skeleton {self.skeleton!r} has {joints}"
             )
@@ -166,9 +168,12 @@ class RecognitionDataModule(SplitDataModule):
     @property
     def in_channels(self) -> int:
         """Per-joint channels C of the network input (from the first training sample)."""
-        first = self._split(self.splits["train"])[:1] or self.load()["annotations"][:1]
+        train = self.splits["train"]
+        first = (self._split(train)[:1] if self.load()["split"].get(train) else []) or self.load()[
+            "annotations"
+        ][:1]
         if not first:
-            raise ValueError(f"{self.ann_file}: no annotations")
+            raise DataFileError(f"{self.ann_file}: no annotations")
         return int(self.pipeline("validate")(first[0]).shape[-1])
 
     def setup(self, stage: str) -> None:

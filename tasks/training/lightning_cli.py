@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,9 +36,17 @@ from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCL
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
-from skeleton_mamba.tasks.training.lightning_compat import install_accepted_links
+from skeleton_mamba.tasks.training.lightning_compat import import_policy, install_accepted_links
 from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_checkpoint_source
 from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
+from skeleton_mamba.tasks.training.recipe_policy import (
+    ALLOW_IMPORT_ENV,
+    ALLOW_IMPORT_OPTION,
+    check_allowed_modules,
+    check_config_values,
+    refused_import_message,
+    split_allow_import,
+)
 from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
     install_bounded_yaml_loader,
@@ -101,14 +110,50 @@ def import_task_modules() -> list[str]:
     return imported
 
 
+MAX_MESSAGE_CHARS = 400  # a parse error as ``sm`` prints it (a quoted value is cut first)
+_DENIED_IMPORT = re.compile(r"Importing '([\w.]+)' is not allowed")
+
+
+def one_line_parse_message(message: str) -> str:
+    """jsonargparse's error as one short line: no usage, no Union bookkeeping, a long value cut.
+
+    A refused class path (:mod:`.recipe_policy`) becomes the policy's own message, keeping the recipe file
+    the message starts with.
+    """
+    text = " ".join(line.strip() for line in message.splitlines() if line.strip())
+    text = text.replace('Parser key "config": ', "")
+    denied = _DENIED_IMPORT.search(text)
+    if denied is not None:
+        source = re.match(r"^(\S+\.(?:ya?ml|ckpt)(?: \(hyper-parameters\))?): ", text)
+        return (f"{source.group(1)}: " if source else "") + refused_import_message(denied.group(1))
+    text = re.sub(
+        r"Does not validate against any of the Union subtypes Subtypes: \[.*?\] Errors: - ", "", text
+    )
+    text = re.sub(r" - Expected a <class 'NoneType'>(\. Got value: \S+)?", "", text)
+    text = re.sub(r" Given value type: <class '[\w.]+'>", "", text)
+    text = re.sub(r"Expected a <class '([\w.]+)'>", r"expected \1", text)
+    text = re.sub(r"<class '([\w.]+)'>", r"\1", text)
+    text = re.sub(r"(Given value: .{60}).+$", r"\1...", text)
+    return text if len(text) <= MAX_MESSAGE_CHARS else text[: MAX_MESSAGE_CHARS - 3] + "..."
+
+
 class OneLineErrorParser(LightningArgumentParser):
     """A parse error is an :class:`~skeleton_mamba.tasks.motion.errors.InputError` on one line, which ``sm``
-    prints with exit status 2 like every command's errors (jsonargparse prints the whole usage first)."""
+    prints with exit status 2 like every command's errors (jsonargparse prints the whole usage first).
+
+    ``error_source`` (set once the command line is parsed: the checkpoint whose hyper-parameters Lightning
+    parses next) starts the message when the message names no file of its own.
+    """
+
+    error_source: str | None = None
 
     def error(self, message: str, ex: Exception | None = None):
         if not self.exit_on_error:  # jsonargparse trying alternatives: it catches the ArgumentError
             super().error(message, ex)
-        raise InputError(" ".join(line.strip() for line in message.splitlines() if line.strip())) from ex
+        text = one_line_parse_message(message)
+        if self.error_source and not text.startswith(self.error_source):
+            text = f"{self.error_source}: {text}"
+        raise InputError(text) from ex
 
 
 class SkeletonMambaCLI(LightningCLI):
@@ -156,6 +201,8 @@ class SkeletonMambaCLI(LightningCLI):
         config = self.config.get(subcommand) if subcommand else None
         if config is None:
             return
+        sources = [str(p) for p in (config.get("config") or []) if p is not None]
+        check_config_values(config.as_dict(), sources)
         if "weights_only" in config:  # the Trainer method's argument (Lightning >= 2.6)
             config.weights_only = True
         ckpt_path = config.get("ckpt_path")
@@ -166,6 +213,8 @@ class SkeletonMambaCLI(LightningCLI):
             if subcommand != "fit" and not is_checkpoint_source(ckpt_path):  # an exported folder, a Hub id
                 ckpt_path = config.ckpt_path = str(checkpoint_file_from(ckpt_path))
             load_checkpoint(ckpt_path)
+            if isinstance(parser, OneLineErrorParser):  # Lightning parses its hyper-parameters next
+                parser.error_source = f"{ckpt_path} (hyper-parameters)"
             if subcommand == "fit":
                 resume_in_run_folder(config.trainer, Path(ckpt_path))
 
@@ -213,7 +262,16 @@ def _subcommand_config(config, subcommand: str | None):
 
 def run(argv: Sequence[str] | None = None) -> int:
     """``sm fit|validate|test|predict ARGS``: argv starts with the subcommand; returns the exit code."""
-    args = list(sys.argv[1:] if argv is None else argv)
+    given = list(sys.argv[1:] if argv is None else argv)
+    args, allowed_modules = split_allow_import(given)
+    from_command_line = given == sys.argv[1:]
+    if from_command_line:  # LightningCLI reads sys.argv itself (and warns when args repeat it)
+        sys.argv[1:] = args
+    with import_policy(check_allowed_modules(allowed_modules)):
+        return _run(args, None if from_command_line else args)
+
+
+def _run(args: list[str], cli_args: list[str] | None) -> int:
     import_task_modules()
     recorder = InterruptRecorder()
     silence_interrupt_notice()
@@ -226,9 +284,12 @@ def run(argv: Sequence[str] | None = None) -> int:
             save_config_kwargs={"overwrite": True},
             trainer_defaults={"callbacks": [NonFiniteLossGuard(), recorder]},
             parser_kwargs={
-                "description": "Skeleton Mamba (LightningCLI). Pick a recipe with --recipe NAME|PATH."
+                "description": "Skeleton Mamba (LightningCLI). Pick a recipe with --recipe NAME|PATH. "
+                f"Class paths outside the project's modules are refused unless trusted with "
+                f"{ALLOW_IMPORT_OPTION} MODULE (repeatable, before or after the subcommand's options) or "
+                f"{ALLOW_IMPORT_ENV}=mod1,mod2."
             },
-            args=None if args == sys.argv[1:] else args,  # LightningCLI warns when both are given
+            args=cli_args,
         )
         if cli.subcommand == "fit":
             check_trained(cli.trainer)

@@ -27,7 +27,6 @@ from pathlib import Path
 import jsonargparse
 import yaml
 from jsonargparse import ActionConfigFile
-from jsonargparse._loaders_dumpers import yaml_load as _jsonargparse_yaml_load
 
 from skeleton_mamba.tasks.motion.errors import InputError
 
@@ -155,16 +154,27 @@ def bounded_yaml_load(text: str, source: str = "YAML value"):
     return yaml.safe_load(text)
 
 
-def _jsonargparse_bounded_load(stream: str):
+class _BoundedLoader:
     """jsonargparse's YAML loader (every ``--config`` file, inline mapping and option value) within bounds."""
-    if isinstance(stream, str):
-        check_yaml_bounds(stream, "--config/option YAML value")
-    return _jsonargparse_yaml_load(stream)
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+
+    def __call__(self, stream: str):
+        if isinstance(stream, str):
+            check_yaml_bounds(stream, "--config/option YAML value")
+        return self.inner(stream)
 
 
 def install_bounded_yaml_loader() -> None:
-    """Route jsonargparse's ``yaml`` parser mode through :func:`check_yaml_bounds` (idempotent)."""
-    jsonargparse.set_loader("yaml", _jsonargparse_bounded_load, exceptions=(yaml.YAMLError,))
+    """Route jsonargparse's ``yaml`` parser mode through :func:`check_yaml_bounds` (idempotent).
+
+    The loader wrapped is jsonargparse's own (public ``get_loader``), so its handling of plain option values
+    (``--x a`` stays the string ``a``) is unchanged.
+    """
+    current = jsonargparse.get_loader("yaml")
+    if not isinstance(current, _BoundedLoader):
+        jsonargparse.set_loader("yaml", _BoundedLoader(current), exceptions=(yaml.YAMLError,))
 
 
 def _is_inline_mapping(value: str) -> bool:
@@ -194,12 +204,23 @@ class RecipeConfigAction(ActionConfigFile):
     def _apply_recipe(self, parser, cfg, path: Path, option_string, overlays: tuple[Path, ...]) -> None:
         """Apply the recipe at ``path``: its ``base`` recipes first (recursively), then its own keys."""
         content = bounded_yaml_load(path.read_text(encoding="utf-8"), str(path))
-        if not isinstance(content, dict) or BASE_KEY not in content:
-            super().__call__(parser, cfg, str(path), option_string)
+        if content is not None and not isinstance(content, dict):
+            parser.error(
+                f"{path}: not a recipe (a YAML mapping of `key: value` lines is expected, the file holds a "
+                f"{type(content).__name__})"
+            )
+        if content is None or BASE_KEY not in content:
+            self._apply_named(parser, cfg, str(path), option_string, str(path))
             return
         if path.resolve() in overlays:
             parser.error(f"{path}: its base recipes include itself")
         bases = content.pop(BASE_KEY)
+        if not (
+            isinstance(bases, str) or (isinstance(bases, list) and all(isinstance(b, str) for b in bases))
+        ):
+            parser.error(
+                f"{path}: `{BASE_KEY}` names a recipe or a list of recipes, got {type(bases).__name__}"
+            )
         for name in [bases] if isinstance(bases, str) else bases:
             base = path.parent / str(name)
             base = base if base.is_file() else resolve_recipe(str(name))
@@ -210,9 +231,17 @@ class RecipeConfigAction(ActionConfigFile):
         cwd = os.getcwd()
         os.chdir(path.parent)  # relative paths in the overlay (a backbone fragment) resolve as in its file
         try:
-            super().__call__(parser, cfg, yaml.safe_dump(content), option_string)
+            self._apply_named(parser, cfg, yaml.safe_dump(content), option_string, str(path))
         finally:
             os.chdir(cwd)
+
+    def _apply_named(self, parser, cfg, value: str, option_string, source: str) -> None:
+        """jsonargparse's config action on ``value``, its refusal (a ``TypeError``) naming ``source``."""
+        try:
+            super().__call__(parser, cfg, value, option_string)
+        except TypeError as err:
+            message = str(err).replace('Parser key "config": ', "")
+            raise TypeError(message if message.startswith(source) else f"{source}: {message}") from err
 
 
 def _check_yaml(parser, path: Path) -> None:
