@@ -3,7 +3,8 @@
     python benchmarks/bench_stream.py --json
     python benchmarks/bench_stream.py --json --widths tiny --memory-minutes 1,10
     python benchmarks/bench_stream.py --json --compile     # + the step compiled with torch.compile
-    python benchmarks/bench_stream.py --json --onnx        # + the backbone step in onnxruntime (CPU)
+    python benchmarks/bench_stream.py --json --onnx        # + the dancer's step in onnxruntime (CPU)
+    python benchmarks/bench_stream.py --json --bf16        # + the step under bf16 autocast beside fp32
 
 For each backbone width (``paper``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
 skeleton_mamba_tiny.yaml) the causal dance network (:class:`StreamDancer`, SMPL-24, random weights)
@@ -23,6 +24,13 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
   weights from the caches); the memory run below then streams compiled;
 - ``windowed``: what a windowed model pays per new frame, re-running the same network's forward on
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
+- ``onnx`` (``--onnx``): the dancer's step graph of ``sm export-onnx`` (the state as explicit inputs and
+  outputs) in onnxruntime and the eager step on alternate frames, fed the same poses: median / p99 / max /
+  fps of both, the ratio and the largest difference;
+- ``bf16`` (``--bf16``): the eager step in fp32 and under bf16 autocast (``sm stream --precision bf16``)
+  on alternate frames, each with its own state: median / p99 / fps of both, the ratio and bf16's
+  largest difference from fp32;
+- ``gemm``: this machine's fp32 and bf16 ``torch.matmul`` rates (GFLOP/s, best of n = 512, 1024, 2048);
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
 - ``memory``: resident set size (VmRSS) after streaming ``--memory-minutes`` minutes of frames as
   fast as possible (synthetic features; at the paper width 10 minutes are 18,000 steps, about as long
@@ -50,7 +58,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine_info  # noqa: E402
+from common import gemm_gflop_per_s, machine_info  # noqa: E402
 
 WIDTHS = {"paper": "skeleton_mamba.yaml", "tiny": "skeleton_mamba_tiny.yaml"}
 
@@ -61,6 +69,15 @@ def rss_mib() -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     return float("nan")
+
+
+def gemm_rates(threads: int) -> dict:
+    """This machine's fp32 and bf16 GEMM rates (``torch.matmul``, GFLOP/s) with ``threads`` threads."""
+    import torch
+
+    torch.set_num_threads(threads)
+    sizes = (512, 1024, 2048)
+    return {"fp32": gemm_gflop_per_s(sizes), "bf16": gemm_gflop_per_s(sizes, dtype=torch.bfloat16)}
 
 
 def build(width: str):
@@ -157,22 +174,21 @@ def compiled_and_eager(model, backbone_step, count: int) -> dict:
 
 
 def onnx_and_eager(model, frames: int, threads: int) -> dict:
-    """The backbone step exported to ONNX (``sm export-onnx``'s step graph) in onnxruntime on the CPU, and
-    the eager backbone step, on alternate frames of the same run, each with its own state and both fed
-    the same frames (the dancer's previous pose and music features): median / p99 / max / fps of both,
-    their ratio and the largest difference of their outputs."""
+    """The dancer's step exported to ONNX (``sm export-onnx``'s step graph: music standardisation, the
+    backbone's step, the state as inputs and outputs) in onnxruntime on the CPU, and the eager
+    :meth:`StreamDancer.step`, on alternate frames of the same run, each with its own state and both fed
+    the same previous pose and music: median / p99 / max / fps of both, their ratio and the largest
+    difference of their outputs."""
     import tempfile
 
     import numpy as np
     import onnxruntime
     import torch
 
-    from skeleton_mamba import streaming
     from skeleton_mamba.tasks.training import onnx_export
     from skeleton_mamba.tasks.training.frame_timing import latency_summary
 
-    backbone = model.backbone
-    spec = onnx_export.step_spec(backbone, batch=2)  # a size-1 example would fix the batch; runs at 1
+    spec = onnx_export.dancer_specs(model)["step"]  # a size-1 example would fix the batch; runs at 1
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         path = onnx_export.export_onnx(spec, Path(folder) / "step.onnx")
@@ -181,20 +197,19 @@ def onnx_and_eager(model, frames: int, threads: int) -> dict:
         options.intra_op_num_threads = threads
         session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
     names = spec.input_names
-    states = [t.numpy() for t in onnx_export.zero_states(backbone, 1)]
-    eager_state = backbone.init_state(1)
+    states = [t.numpy() for t in onnx_export.zero_states(model.backbone, 1)]
+    eager_state = model.init_state(1)
     prev, music = torch.zeros(1, 24, 12), torch.randn(1, 34)
     ort_ms, eager_ms, difference = [], [], 0.0
     for i in range(frames + 10):
-        x = model._inputs(prev, music)
         start = time.perf_counter()
-        y, *states = session.run(None, dict(zip(names, [x.numpy(), *states])))
+        pose, *states = session.run(None, dict(zip(names, [prev.numpy(), music.numpy(), *states])))
         ort_elapsed = 1e3 * (time.perf_counter() - start)
         start = time.perf_counter()
-        out, eager_state = streaming.step(backbone, x, eager_state)
+        out, eager_state = model.step(prev, music, eager_state)
         eager_elapsed = 1e3 * (time.perf_counter() - start)
-        difference = max(difference, float(np.abs(y - out.numpy()).max()))
-        prev = torch.randn_like(prev)  # a new pose each frame (the timing does not depend on its values)
+        difference = max(difference, float(np.abs(pose - out.numpy()).max()))
+        prev = out  # the eager step's pose feeds both
         if i >= 10:  # warm-up
             ort_ms.append(ort_elapsed)
             eager_ms.append(eager_elapsed)
@@ -208,7 +223,48 @@ def onnx_and_eager(model, frames: int, threads: int) -> dict:
         "eager_fps_same_frames": round(1e3 / float(np.mean(eager_ms)), 1),
         "eager_over_onnx_median": round(eager["median_ms"] / ort["median_ms"], 2),
         "eager_over_onnx_p99": round(eager["p99_ms"] / ort["p99_ms"], 2),
-        "max_abs_difference": difference,
+        "max_abs_difference": float(f"{difference:.3g}"),
+        "frames": frames,
+    }
+
+
+def bf16_and_fp32(model, frames: int) -> dict:
+    """The eager step in fp32 and under bf16 autocast (``sm stream --precision bf16``) on alternate frames
+    of the same run, each with its own state, both fed the fp32 step's previous pose: median / p99 / fps
+    of both, the ratio fp32 over bf16, and bf16's largest difference from fp32 (absolute, and relative to
+    the largest fp32 output)."""
+    import numpy as np
+    import torch
+
+    from skeleton_mamba.ssd.precision import inference_precision
+    from skeleton_mamba.tasks.training.frame_timing import latency_summary
+
+    music, prev = torch.randn(1, 34), torch.zeros(1, 24, 12)
+    state, bf16_state = model.init_state(1), model.init_state(1)
+    fp32_ms, bf16_ms, difference, largest = [], [], 0.0, 0.0
+    for i in range(frames + 10):
+        start = time.perf_counter()
+        with inference_precision("bf16"):
+            low, bf16_state = model.step(prev, music, bf16_state)
+        bf16_elapsed = 1e3 * (time.perf_counter() - start)
+        start = time.perf_counter()
+        prev, state = model.step(prev, music, state)
+        fp32_elapsed = 1e3 * (time.perf_counter() - start)
+        difference = max(difference, float((low.float() - prev).abs().max()))
+        largest = max(largest, float(prev.abs().max()))
+        if i >= 10:  # warm-up
+            fp32_ms.append(fp32_elapsed)
+            bf16_ms.append(bf16_elapsed)
+    fp32_ms, bf16_ms = np.asarray(fp32_ms), np.asarray(bf16_ms)
+    fp32, bf16 = latency_summary(fp32_ms), latency_summary(bf16_ms)
+    return {
+        **{f"fp32_{k}": round(v, 3) for k, v in fp32.items()},
+        "fp32_fps": round(1e3 / float(np.mean(fp32_ms)), 1),
+        **{f"bf16_{k}": round(v, 3) for k, v in bf16.items()},
+        "bf16_fps": round(1e3 / float(np.mean(bf16_ms)), 1),
+        "fp32_over_bf16_median": round(fp32["median_ms"] / bf16["median_ms"], 2),
+        "max_abs_difference": float(f"{difference:.3g}"),
+        "max_relative_difference": float(f"{difference / max(largest, 1e-12):.3g}"),
         "frames": frames,
     }
 
@@ -222,6 +278,7 @@ def measure(
     memory_only: bool = False,
     compile_mode: str | None = None,
     onnx: bool = False,
+    bf16: bool = False,
 ) -> dict:
     """All figures of one width (run in a subprocess); ``compile_mode``: None, or "default" (or a
     ``torch.compile`` mode) to add the compiled step."""
@@ -283,6 +340,10 @@ def measure(
         print(f"[{width}] exporting the step to ONNX; timing", file=sys.stderr, flush=True)
         with torch.no_grad():
             result["onnx"] = onnx_and_eager(model, frames, torch.get_num_threads())
+    if bf16 and not memory_only:
+        print(f"[{width}] fp32 and bf16 steps on alternate frames", file=sys.stderr, flush=True)
+        with torch.inference_mode():
+            result["bf16"] = bf16_and_fp32(model, frames)
     with torch.inference_mode():
         if not memory_only and backbone_step is not None:
             result["compiled"].update(compiled_and_eager(model, backbone_step, frames))
@@ -410,7 +471,12 @@ def main() -> int:
     p.add_argument(
         "--onnx",
         action="store_true",
-        help="also time the backbone step exported to ONNX in onnxruntime (CPU) beside the eager step",
+        help="also time the dancer's step exported to ONNX in onnxruntime (CPU) beside the eager step",
+    )
+    p.add_argument(
+        "--bf16",
+        action="store_true",
+        help="also time the eager step under bf16 autocast (--precision bf16) beside the fp32 one",
     )
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -436,6 +502,7 @@ def main() -> int:
             args.memory_only,
             args.compile,
             args.onnx,
+            args.bf16,
         )
         print(json.dumps(figures))
         return 0
@@ -445,6 +512,7 @@ def main() -> int:
         if args.omp_wait_policy != "inherit"
         else os.environ.get("OMP_WAIT_POLICY", "default"),
         "load_before": [round(v, 2) for v in os.getloadavg()],
+        "gemm": gemm_rates(args.threads),
         "widths": {},
     }
     for width in args.widths.split(","):
@@ -454,7 +522,7 @@ def main() -> int:
         cmd += ["--memory-only"] * args.memory_only + ["--profile", str(args.profile)]
         cmd += ["--adaptive-malloc"] * args.adaptive_malloc
         cmd += ["--compile", args.compile] if args.compile else []
-        cmd += ["--onnx"] * args.onnx
+        cmd += ["--onnx"] * args.onnx + ["--bf16"] * args.bf16
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         if args.omp_wait_policy != "inherit":
             env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
@@ -468,6 +536,10 @@ def main() -> int:
         return 0
     print(results["machine"])
     print(f"load (1/5/15 min) before {results['load_before']}, after {results['load_after']}")
+    g = results["gemm"]
+    fp32, bf16 = g["fp32"], g["bf16"]
+    print(f"GEMM ({fp32['threads']} threads): fp32 {fp32['gflop_per_s']:.0f} GFLOP/s (n = {fp32['size']}),"
+          f" bf16 {bf16['gflop_per_s']:.0f} GFLOP/s (n = {bf16['size']})")  # fmt: skip
     for width, r in results["widths"].items():
         if "memory" not in r:
             continue
@@ -500,6 +572,14 @@ def main() -> int:
                 f" {o['fps']:.0f} fps | eager on the alternate frames: median"
                 f" {o['eager_median_ms_same_frames']:.2f} ms, p99 {o['eager_p99_ms_same_frames']:.2f} ms"
                 f" ({o['eager_over_onnx_median']}x) | max difference {o['max_abs_difference']:.2g}"
+            )
+        b = r.get("bf16")
+        if b:
+            print(
+                f"      fp32 vs bf16 step (alternate frames): median {b['fp32_median_ms']:.2f} vs"
+                f" {b['bf16_median_ms']:.2f} ms, p99 {b['fp32_p99_ms']:.2f} vs {b['bf16_p99_ms']:.2f} ms,"
+                f" {b['fp32_fps']:.0f} vs {b['bf16_fps']:.0f} fps ({b['fp32_over_bf16_median']}x) | bf16"
+                f" max difference {b['max_abs_difference']:.2g} ({b['max_relative_difference']:.2g} relative)"
             )
     return 0
 

@@ -42,8 +42,11 @@ def median_ms(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> fl
     return statistics.median(times)
 
 
-def gemm_gflop_per_s(sizes: tuple[int, ...] = (1024, 2048, 4096), repeats: int = 3) -> dict:
-    """The machine's fp32 matrix-product rate, timed in this process: the best median over square sizes.
+def gemm_gflop_per_s(
+    sizes: tuple[int, ...] = (1024, 2048, 4096), repeats: int = 3, dtype: torch.dtype = torch.float32
+) -> dict:
+    """The machine's matrix-product rate in ``dtype`` (fp32 by default), timed in this process: the best
+    median over square sizes.
 
     ``2 n^3`` floating-point operations per ``n x n @ n x n`` product (on the current device, with the
     current torch thread count). Report a model's rate as a fraction of ``gflop_per_s`` to see how far it
@@ -52,8 +55,8 @@ def gemm_gflop_per_s(sizes: tuple[int, ...] = (1024, 2048, 4096), repeats: int =
     device = "cuda" if torch.cuda.is_available() else "cpu"
     by_size = {}
     for n in sizes:
-        a = torch.randn(n, n, device=device)
-        b = torch.randn(n, n, device=device)
+        a = torch.randn(n, n, device=device, dtype=dtype)
+        b = torch.randn(n, n, device=device, dtype=dtype)
         ms = median_ms(lambda a=a, b=b: a @ b, repeats=repeats, warmup=1)
         by_size[str(n)] = round(2 * n**3 / (ms / 1e3) / 1e9, 1)
     best = max(by_size, key=by_size.get)
@@ -63,6 +66,7 @@ def gemm_gflop_per_s(sizes: tuple[int, ...] = (1024, 2048, 4096), repeats: int =
         "by_size": by_size,
         "threads": torch.get_num_threads(),
         "device": device,
+        "dtype": str(dtype).removeprefix("torch."),
     }
 
 
