@@ -28,6 +28,7 @@ import torch
 from skeleton_mamba.tasks.motion.motion_file import MotionData, MotionFileError
 from skeleton_mamba.tasks.motion.resample import resample_smpl
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.value_checks import check_real
 
 __all__ = [
     "AISTPP_FPS",
@@ -51,8 +52,10 @@ def load_aistpp_motion(path: str | PathLike[str]) -> MotionData:
     """Read one AIST++ ``motions/*.pkl`` file as a 60 fps SMPL-24 :class:`MotionData`.
 
     Raises:
-        UnsafePickleError: the pickle names anything beyond numpy arrays and plain values.
-        MotionFileError: keys or shapes are wrong (the message names the file).
+        UnsafePickleError: the pickle names anything beyond numpy arrays and plain values, or claims
+            sizes beyond the unpickler's bounds.
+        MotionFileError: keys, shapes or dtypes are wrong (complex, datetime, object arrays are refused,
+            not cast), or values are implausible (the message names the file and the key).
     """
     path = Path(path)
     data = safe_load_pickle(path)
@@ -61,6 +64,12 @@ def load_aistpp_motion(path: str | PathLike[str]) -> MotionData:
     missing = [k for k in ("smpl_poses", "smpl_trans", "smpl_scaling") if k not in data]
     if missing:
         raise MotionFileError(f"{path}: missing keys {missing} (found {sorted(map(str, data))})")
+    for key in ("smpl_poses", "smpl_trans", "smpl_scaling"):
+        try:
+            value = np.asarray(data[key])  # lists of numbers become arrays; ragged or mixed ones objects
+        except (TypeError, ValueError) as e:
+            raise MotionFileError(f"{path}: {key!r} must be a numeric array ({e})") from None
+        check_real(value, str(path), key, MotionFileError)  # complex or datetime would be cast silently
     try:
         with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused by validate()
             poses = np.asarray(data["smpl_poses"], dtype=np.float32)  # (N, 72) is reshaped by MotionData

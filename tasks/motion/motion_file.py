@@ -13,12 +13,14 @@ key                shape          meaning
 ``joints``         (T, J, 3)      joint positions in metres, when known
 =================  =============  ==========================================================
 
-A file holds SMPL parameters (then ``skeleton`` is ``smpl24``), joint positions, or both.
+A file holds SMPL parameters (then ``skeleton`` is ``smpl24``), joint positions, or both. Reading checks
+every array's header before inflating it (at most ``MAX_NPZ_MEMBER_BYTES`` each), refuses non-real dtypes
+(complex, datetime, object, ...) and implausible magnitudes: positions beyond ``MAX_POSITION_M`` metres,
+axis-angle rotations beyond :data:`MAX_ROTATION_RAD` radians, a scaling outside :data:`SCALING_RANGE`.
 """
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -31,9 +33,19 @@ from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
-from skeleton_mamba.tasks.motion.value_checks import check_fps, non_finite_message
+from skeleton_mamba.tasks.motion.value_checks import (
+    MAX_POSITION_M,
+    check_fps,
+    check_magnitude,
+    check_real,
+    load_npz,
+    non_finite_message,
+)
 
-__all__ = ["MotionData", "MotionFileError", "save_motion", "load_motion"]
+__all__ = ["MAX_ROTATION_RAD", "SCALING_RANGE", "MotionData", "MotionFileError", "save_motion", "load_motion"]
+
+MAX_ROTATION_RAD = 1000.0  # |axis-angle component|: a rotation is at most pi, wrapped ones a few turns
+SCALING_RANGE = (1e-6, 1e6)  # smpl_scaling (AIST++ stores about 90 to 100)
 
 
 class MotionFileError(DataFileError):
@@ -88,8 +100,9 @@ class MotionData:
                 fail(f"smpl_poses must be (T, 72) or (T, 24, 3), got {self.poses.shape}")
             if self.trans is None or self.trans.ndim != 2 or self.trans.shape[1] != 3:
                 fail(f"smpl_trans must be (T, 3), got {None if self.trans is None else self.trans.shape}")
-            if not (np.isfinite(self.scaling) and self.scaling > 0):
-                fail(f"smpl_scaling must be a positive number, got {self.scaling}")
+            if not (np.isfinite(self.scaling) and SCALING_RANGE[0] <= self.scaling <= SCALING_RANGE[1]):
+                fail(f"smpl_scaling must be a number in {SCALING_RANGE[0]:g}-{SCALING_RANGE[1]:g}, "
+                     f"got {self.scaling}")  # fmt: skip
             lengths |= {len(self.poses), len(self.trans)}
         if self.joints is not None:
             if self.joints.ndim != 3 or self.joints.shape[1:] != (skel.num_joints, 3):
@@ -99,11 +112,24 @@ class MotionData:
             fail(f"arrays disagree on the number of frames: {sorted(lengths)}")
         if lengths == {0}:
             fail("motion has no frames")
-        for name in ("poses", "trans", "joints"):
+        keys = {"poses": "smpl_poses", "trans": "smpl_trans", "joints": "joints"}
+        for name, key in keys.items():
             value = getattr(self, name)
-            message = None if value is None else non_finite_message(value, name, ("frame", "joint"))
+            if value is None:
+                continue
+            check_real(value, source, key, MotionFileError)
+            message = non_finite_message(value, name, ("frame", "joint"))
             if message is not None:
                 fail(message)
+        if self.poses is not None:
+            axes = ("frame", "joint", "axis")
+            check_magnitude(self.poses, MAX_ROTATION_RAD, source, "smpl_poses", axes, MotionFileError, " rad")
+            root = np.asarray(self.trans, dtype=np.float64) / self.scaling
+            check_magnitude(root, MAX_POSITION_M, source, "root position (smpl_trans / smpl_scaling)",
+                            ("frame", "axis"), MotionFileError, " m")  # fmt: skip
+        if self.joints is not None:
+            axes = ("frame", "joint", "axis")
+            check_magnitude(self.joints, MAX_POSITION_M, source, "joints", axes, MotionFileError, " m")
         return self
 
     @property
@@ -150,11 +176,7 @@ def load_motion(path: str | PathLike[str]) -> MotionData:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such motion file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
-        raise MotionFileError(f"{path}: not a readable .npz motion file ({e})") from e
+    arrays = load_npz(path, MotionFileError, text_keys=("skeleton",))
     if "fps" not in arrays:
         raise MotionFileError(f"{path}: missing key 'fps' (keys: {sorted(arrays)})")
     has_poses = "smpl_poses" in arrays
@@ -164,12 +186,13 @@ def load_motion(path: str | PathLike[str]) -> MotionData:
     scaling = arrays.get("smpl_scaling", np.ones(1))
     if scaling.size != 1:
         raise MotionFileError(f"{path}: smpl_scaling must hold one value, got shape {scaling.shape}")
-    skeleton = str(arrays["skeleton"]) if "skeleton" in arrays else "smpl24"
+    name = arrays.get("skeleton", np.asarray("smpl24"))
+    if name.dtype.kind != "U" or name.size != 1 or name.dtype.itemsize > 4 * 64:
+        raise MotionFileError(f"{path}: 'skeleton' must be one name of at most 64 characters, got "
+                              f"{name.dtype} of shape {name.shape}")  # fmt: skip
+    skeleton = str(name.reshape(-1)[0])
     if arrays["fps"].size != 1:
         raise MotionFileError(f"{path}: fps must be a single number, got shape {arrays['fps'].shape}")
-    for key, value in arrays.items():
-        if key != "skeleton" and not np.issubdtype(value.dtype, np.number):
-            raise MotionFileError(f"{path}: {key!r} must be numeric, got dtype {value.dtype}")
     motion = MotionData(
         fps=float(arrays["fps"].reshape(-1)[0]),
         skeleton=skeleton,

@@ -22,6 +22,17 @@ Admitted globals (the module names that numpy 1.x and 2.x write, and Python 2's 
   :class:`SparseMatrix` that keeps ``data``, ``indices``, ``indptr`` and the shape (scipy is not
   imported either). Both stand-ins only store and check arrays when the pickle restores their state;
   ``copy_reg._reconstructor`` (protocols 0-1 objects) is admitted for the stand-ins only.
+
+Sizes are bounded before anything is allocated, so a small hostile file cannot claim gigabytes:
+
+- the file is read by Python's own (pure-Python) unpickler through a reader that refuses any read longer
+  than the bytes left in the file or than :data:`MAX_PICKLE_OBJECT_BYTES` (the C unpickler allocates a
+  ``bytes`` / ``bytearray`` / frame of the claimed length before reading it);
+- the admitted callables are wrapped: ``bytes(n)`` / ``bytearray(n)`` and numpy arrays (``ndarray(shape,
+  dtype)``, ``_reconstruct``) are refused above :data:`MAX_PICKLE_OBJECT_BYTES`, containers built from a
+  sized argument (``list(range(10**9))``) above :data:`MAX_PICKLE_ITEMS` items, object dtypes (numpy would
+  allocate one Python reference per element of a claimed shape) are refused, and ``_codecs.encode`` admits
+  only the latin-1 encoding that protocols 0-2 write (another codec name is refused on one line).
 """
 
 from __future__ import annotations
@@ -29,7 +40,10 @@ from __future__ import annotations
 import codecs
 import collections
 import io
+import math
+import os
 import pickle
+import struct
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -43,6 +57,8 @@ __all__ = [
     "safe_load_pickle",
     "safe_loads_pickle",
     "ALLOWED_GLOBALS",
+    "MAX_PICKLE_ITEMS",
+    "MAX_PICKLE_OBJECT_BYTES",
     "ChumpyArray",
     "SparseMatrix",
 ]
@@ -50,6 +66,15 @@ __all__ = [
 
 class UnsafePickleError(SkeletonMambaError, ValueError):
     """A pickle names a global outside the allow-list (or is not a readable pickle)."""
+
+
+MAX_PICKLE_OBJECT_BYTES = 1 << 30  # one bytes object, frame or array of a data pickle: at most 1 GiB
+MAX_PICKLE_ITEMS = 10_000_000  # items of one container built by a call (list(range(n)), bytes(range(n)))
+_LATIN1 = {"latin1", "latin-1", "latin_1", "iso-8859-1", "iso8859-1", "iso8859_1", "l1"}
+
+
+class _SizeRefused(Exception):
+    """Raised by the bounded callables; turned into :class:`UnsafePickleError` naming the file."""
 
 
 class ChumpyArray:
@@ -149,15 +174,87 @@ def _numpy_core_attr(module: str, name: str) -> Any:
     return {"multiarray": multiarray, "numeric": numeric}[module].__dict__[name]
 
 
+def _refuse_items(what: str, args: tuple) -> None:
+    for arg in args:
+        if isinstance(arg, int) and not isinstance(arg, bool) and what in ("bytes", "bytearray"):
+            if arg > MAX_PICKLE_OBJECT_BYTES:
+                raise _SizeRefused(f"{what}({arg}) would allocate more than {MAX_PICKLE_OBJECT_BYTES} bytes")
+        elif isinstance(arg, range | str | bytes | bytearray | list | tuple | dict | set | frozenset):
+            if len(arg) > MAX_PICKLE_ITEMS:
+                raise _SizeRefused(f"{what}() of {len(arg)} items, more than {MAX_PICKLE_ITEMS}")
+
+
+class _BoundedType:
+    """An admitted builtins type whose call refuses sizes above the bounds (module docstring)."""
+
+    def __init__(self, cls: type) -> None:
+        self.cls = cls
+
+    def __call__(self, *args: Any) -> Any:
+        _refuse_items(self.cls.__name__, args)
+        return self.cls(*args)
+
+    def __repr__(self) -> str:
+        return f"<bounded {self.cls.__name__}>"
+
+
+def _array_bytes(shape: Any, dtype: Any) -> int:
+    """Bytes of an array of ``shape`` and ``dtype`` (refused above the bound or with object elements)."""
+    dtype = np.dtype(dtype)
+    if dtype.hasobject:
+        raise _SizeRefused(f"arrays of Python objects (dtype {dtype}) are not admitted")
+    dims = (shape,) if isinstance(shape, int) else tuple(shape)
+    if not all(isinstance(n, int | np.integer) and n >= 0 for n in dims):
+        raise _SizeRefused(f"an array shape must be non-negative integers, got {shape!r}")
+    size = math.prod(int(n) for n in dims) * dtype.itemsize
+    if size > MAX_PICKLE_OBJECT_BYTES:
+        raise _SizeRefused(f"an array of shape {dims} {dtype} claims {size} bytes, more than "
+                           f"{MAX_PICKLE_OBJECT_BYTES}")  # fmt: skip
+    return size
+
+
+def _bounded_ndarray(shape: Any, dtype: Any = float, *args: Any, **kwargs: Any) -> np.ndarray:
+    _array_bytes(shape, dtype)
+    return np.ndarray(shape, dtype, *args, **kwargs)
+
+
+def _bounded_dtype(obj: Any, *args: Any) -> np.dtype:
+    dtype = np.dtype(obj, *args)
+    if dtype.hasobject:
+        raise _SizeRefused(f"arrays of Python objects (dtype {dtype}) are not admitted")
+    if dtype.itemsize > MAX_PICKLE_OBJECT_BYTES:
+        raise _SizeRefused(f"dtype {dtype} claims {dtype.itemsize} bytes per element")
+    return dtype
+
+
+def _bounded_reconstruct(reconstruct: Any) -> Any:
+    def call(subtype: Any, shape: Any, dtype: Any) -> Any:
+        if subtype is not _bounded_ndarray:
+            raise _SizeRefused(f"only plain numpy arrays are admitted, got subtype {subtype!r}")
+        _array_bytes(shape, np.uint8)
+        return reconstruct(np.ndarray, shape, dtype)
+
+    return call
+
+
+def _latin1_encode(text: Any, encoding: str = "utf-8", *args: Any) -> bytes:
+    """``_codecs.encode`` as protocols 0-2 use it (bytes stored as latin-1 text); other codecs refused."""
+    if not isinstance(text, str) or str(encoding).lower() not in _LATIN1:
+        raise _SizeRefused(f"_codecs.encode with the codec {str(encoding)[:40]!r} is not admitted "
+                           "(protocols 0-2 store bytes as latin-1)")  # fmt: skip
+    return codecs.encode(text, "latin1", *args)
+
+
 def _build_allowed() -> dict[tuple[str, str], Any]:
     allowed: dict[tuple[str, str], Any] = {
-        ("numpy", "ndarray"): np.ndarray,
-        ("numpy", "dtype"): np.dtype,
-        ("_codecs", "encode"): codecs.encode,
-        ("collections", "OrderedDict"): collections.OrderedDict,
+        ("numpy", "ndarray"): _bounded_ndarray,
+        ("numpy", "dtype"): _bounded_dtype,
+        ("_codecs", "encode"): _latin1_encode,
+        ("collections", "OrderedDict"): _BoundedType(collections.OrderedDict),
     }
+    reconstruct = _bounded_reconstruct(_numpy_core_attr("multiarray", "_reconstruct"))
     for core in ("numpy.core", "numpy._core"):
-        allowed[(f"{core}.multiarray", "_reconstruct")] = _numpy_core_attr("multiarray", "_reconstruct")
+        allowed[(f"{core}.multiarray", "_reconstruct")] = reconstruct
         allowed[(f"{core}.multiarray", "scalar")] = _numpy_core_attr("multiarray", "scalar")
         allowed[(f"{core}.numeric", "_frombuffer")] = _numpy_core_attr("numeric", "_frombuffer")
     builtin_types = (
@@ -178,7 +275,7 @@ def _build_allowed() -> dict[tuple[str, str], Any]:
     )
     for module in ("builtins", "__builtin__"):
         for t in builtin_types:
-            allowed[(module, t.__name__)] = t
+            allowed[(module, t.__name__)] = _BoundedType(t)
         allowed[(module, "object")] = object  # base class argument of copy_reg._reconstructor
     allowed[("chumpy.ch", "Ch")] = ChumpyArray
     for fmt, stand_in in (("csc", _CSC), ("csr", _CSR)):
@@ -193,10 +290,52 @@ def _build_allowed() -> dict[tuple[str, str], Any]:
 ALLOWED_GLOBALS: dict[tuple[str, str], Any] = _build_allowed()
 
 
-class _RestrictedUnpickler(pickle.Unpickler):
+class _BoundedReader:
+    """A binary stream whose reads never exceed the bytes left in it nor :data:`MAX_PICKLE_OBJECT_BYTES`."""
+
+    def __init__(self, stream: Any, size: int, source: str) -> None:
+        self._stream, self._left, self._source = stream, size, source
+
+    def read(self, n: int = -1) -> bytes:
+        if n < 0:
+            n = self._left
+        if n > MAX_PICKLE_OBJECT_BYTES:
+            raise UnsafePickleError(
+                f"{self._source}: an object claims {n} bytes, more than the {MAX_PICKLE_OBJECT_BYTES} "
+                "admitted per object of a data pickle"
+            )
+        if n > self._left:  # checked before reading: nothing of the claimed size is allocated
+            raise pickle.UnpicklingError(
+                f"pickle data was truncated: an object claims {n} bytes but {self._left} are left"
+            )
+        data = self._stream.read(n)
+        self._left -= len(data)
+        if len(data) < n:
+            raise pickle.UnpicklingError("pickle data was truncated")
+        return data
+
+    def readline(self) -> bytes:
+        line = self._stream.readline(min(self._left, MAX_PICKLE_OBJECT_BYTES))
+        self._left -= len(line)
+        if not line.endswith(b"\n"):
+            raise pickle.UnpicklingError("pickle data was truncated (a text line without its end)")
+        return line
+
+
+class _RestrictedUnpickler(pickle._Unpickler):
+    # The pure-Python unpickler: it reads every counted object through ``read(n)`` (bounded above), where
+    # the C one allocates the claimed length first.
+    dispatch = dict(pickle._Unpickler.dispatch)
+
     def __init__(self, file: Any, source: str, encoding: str = "ASCII") -> None:
         super().__init__(file, encoding=encoding)
         self._source = source
+
+    def load_bytearray8(self) -> None:
+        (size,) = struct.unpack("<Q", self.read(8))
+        self.append(bytearray(self.read(size)))  # read first (bounded), unlike bytearray(size) + readinto
+
+    dispatch[pickle.BYTEARRAY8[0]] = load_bytearray8
 
     def find_class(self, module: str, name: str) -> Any:
         try:
@@ -212,12 +351,19 @@ class _RestrictedUnpickler(pickle.Unpickler):
         raise UnsafePickleError(f"{self._source}: persistent ids are not admitted (got {pid!r})")
 
 
-def _load(file: Any, source: str, encoding: str = "ASCII") -> Any:
+def _load(file: Any, size: int, source: str, encoding: str = "ASCII") -> Any:
     try:
-        return _RestrictedUnpickler(file, source, encoding).load()
+        return _RestrictedUnpickler(_BoundedReader(file, size, source), source, encoding).load()
     except UnsafePickleError:
         raise
+    except _SizeRefused as e:
+        raise UnsafePickleError(f"{source}: {e} (a data pickle holds plain arrays and values)") from None
+    except MemoryError:
+        raise UnsafePickleError(f"{source}: out of memory while unpickling (hostile or too large)") from None
+    except RecursionError:
+        raise UnsafePickleError(f"{source}: nested too deeply to unpickle") from None
     except (
+        LookupError,
         pickle.UnpicklingError,
         EOFError,
         ValueError,
@@ -249,10 +395,10 @@ def safe_load_pickle(path: str | PathLike[str], encoding: str = "ASCII") -> Any:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such pickle file")
     with path.open("rb") as f:
-        return _load(f, str(path), encoding)
+        return _load(f, os.fstat(f.fileno()).st_size, str(path), encoding)
 
 
 def safe_loads_pickle(data: bytes, source: str = "<bytes>", encoding: str = "ASCII") -> Any:
     """:func:`safe_load_pickle` for an in-memory pickle; ``source`` names it in error messages."""
 
-    return _load(io.BytesIO(data), source, encoding)
+    return _load(io.BytesIO(data), len(data), source, encoding)
