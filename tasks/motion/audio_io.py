@@ -466,7 +466,7 @@ def open_audio(path: str | os.PathLike) -> AudioReader:
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(2, "audio file not found", str(path))
+        raise FileNotFoundError(f"{path}: audio file not found")
     with open(path, "rb") as f:
         is_wav = f.read(12)[8:12] == b"WAVE"
     if is_wav and (reader := _open_wav_file(path)) is not None:
