@@ -26,6 +26,9 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
   frozen: ``skeleton_mamba/compiling.py``) in the same run: ``compiled_sample_step_ms``, its
   ``fraction_of_gemm``, ``compile_s`` (the first call) and ``compiled_max_abs_diff`` (against the
   eager step's output);
+- ``gemm.bf16``: the same rate in bf16 (``torch.matmul`` of bf16 matrices);
+- ``--bf16``: each denoiser's guided step in fp32 and under bf16 autocast (``sm dance --precision bf16``),
+  alternately in one loop: both medians, the ratio and bf16's largest difference from the fp32 x0;
 - ``--profile N``: the operators of one guided EMM sampling step by self CPU time (``torch.profiler``)
   and the share of it spent in matrix products.
 
@@ -51,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, operator_profile  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
+from skeleton_mamba.ssd.precision import inference_precision  # noqa: E402
 from skeleton_mamba.tasks.egodance.encoders import sinusoidal_embedding  # noqa: E402
 from skeleton_mamba.tasks.egodance.losses import alignment_loss, emm_losses  # noqa: E402
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig  # noqa: E402
@@ -279,6 +283,40 @@ def synchronize() -> None:
         torch.cuda.synchronize()
 
 
+def fp32_and_bf16_step(model: nn.Module, music: torch.Tensor, frames: torch.Tensor, repeats: int) -> dict:
+    """One guided denoising step (T frames, classifier-free guidance batched) in fp32 and under bf16 autocast
+    (``sm dance --precision bf16``), called alternately ``repeats`` times after one untimed call each:
+    median ms of both, the ratio fp32 over bf16, and bf16's largest difference from the fp32 x0 (absolute,
+    and relative to the largest fp32 value)."""
+    model.eval()
+    with torch.inference_mode():
+        context = model.encode_condition(music, frames)
+        x = torch.randn(1, music.shape[1], 24, 10, device=music.device)
+        t = torch.full((1,), 500, device=music.device)
+
+        def run(precision: str) -> torch.Tensor:
+            with inference_precision(precision, music.device.type):
+                return guided_x0(model, x, t, context, 2.0)
+
+        out = {p: run(p).float() for p in ("fp32", "bf16")}  # also the warm-up
+        times: dict[str, list[float]] = {"fp32": [], "bf16": []}
+        for _ in range(repeats):
+            for p in times:
+                start = time.perf_counter()
+                run(p)
+                times[p].append(1e3 * (time.perf_counter() - start))
+    ms = {p: statistics.median(v) for p, v in times.items()}
+    difference = float((out["bf16"] - out["fp32"]).abs().max())
+    return {
+        "fp32_ms": round(ms["fp32"], 2),
+        "bf16_ms": round(ms["bf16"], 2),
+        "fp32_over_bf16": round(ms["fp32"] / ms["bf16"], 2),
+        "max_abs_difference": float(f"{difference:.3g}"),
+        "max_relative_difference": float(f"{difference / float(out['fp32'].abs().max()):.3g}"),
+        "repeats": repeats,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", choices=sorted(SIZES), default="paper")
@@ -299,6 +337,11 @@ def main(argv: list[str] | None = None) -> int:
         "--compile",
         action="store_true",
         help="also time each denoiser's guided step compiled (torch.compile, weights frozen)",
+    )
+    ap.add_argument(
+        "--bf16",
+        action="store_true",
+        help="also time each denoiser's guided step in fp32 and under bf16 autocast, alternately",
     )
     ap.add_argument(
         "--profile",
@@ -334,6 +377,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{table}\nmatrix products: {100 * gemm_share:.0f} % of the self CPU time")
         return 0
     gemm_before = gemm_gflop_per_s()
+    bf16_gemm = gemm_gflop_per_s(dtype=torch.bfloat16)
     result = {
         "machine": machine_info(),
         "threads": torch.get_num_threads(),
@@ -366,10 +410,17 @@ def main(argv: list[str] | None = None) -> int:
                 args.compile,
             )
         )
+        if args.bf16:
+            r["bf16"] = fp32_and_bf16_step(model, music[:1], frames, args.step_repeats)
         result["models"][name] = r
         if not args.json:
             print(name, r, flush=True)
-    result["gemm"] = {"before": gemm_before, "after": gemm_gflop_per_s()}
+    result["gemm"] = {"before": gemm_before, "after": gemm_gflop_per_s(), "bf16": bf16_gemm}
+    if not args.json:
+        print(
+            f"GEMM: fp32 {gemm_before['gflop_per_s']:.0f} GFLOP/s,"
+            f" bf16 {bf16_gemm['gflop_per_s']:.0f} GFLOP/s"
+        )
     for r in result["models"].values():
         for key in ("sample_step", "train_step", "compiled_sample_step"):
             if f"{key}_gflop_per_s" in r:
@@ -378,7 +429,7 @@ def main(argv: list[str] | None = None) -> int:
     result["ratios_emm_over_transformer"] = {
         k: e[k] / t[k]
         for k in e
-        if k not in ("denoiser_params", "condition_encode_s", "compiled_max_abs_diff")
+        if k not in ("denoiser_params", "condition_encode_s", "compiled_max_abs_diff", "bf16")
         and e[k] is not None
         and t.get(k) is not None
     }
