@@ -142,7 +142,7 @@ def stream_dance(args: argparse.Namespace) -> int:
         with inference_precision(args.precision):
             for chunk in source:
                 if writer is not None:
-                    writer.write(chunk.samples)
+                    writer.write(np.clip(chunk.samples, -1.0, 1.0))  # float input may exceed full scale
                 dancer.push(chunk.samples, chunk.arrival)
             dancer.push(np.zeros(0, np.float32), last=True)
     except KeyboardInterrupt:
