@@ -24,6 +24,9 @@ Graphs of the task networks (``--ckpt`` / ``--pretrained`` of a task; ``--part b
   10); batch, frames and tokens dynamic (tokens = frames with ``frame_condition``). The condition
   encoders (music Transformer, the ``transformers`` ResNet of the frames, the fusion) stay in
   PyTorch: their output is computed once per clip, the denoiser is what a sampler calls at every step.
+  They do pass strict ``torch.export``, but in eval mode ``nn.TransformerEncoderLayer`` traces to its
+  fused inference kernel ``aten._transformer_encoder_layer_fwd``, for which ``torch.onnx`` has no ONNX
+  function, so they are not written as ONNX.
 - text-to-motion denoiser (``TextToMotionDenoiser``): ``denoiser.onnx`` ``x_t`` (batch, frames, 263),
   ``t`` (batch,), ``text`` (batch, words, text_dim) caption token embeddings, ``text_mask`` (batch, words)
   bool and ``mask`` (batch, frames) -> ``x0`` (batch, frames, 263); the caption encoder stays in PyTorch.
@@ -439,8 +442,9 @@ def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
 PART_HELP = (
     "network (default): a task network's own graphs (the streaming dancer: sequence and step; the "
     "recognition network: sequence; EMM and the text-to-motion denoiser: denoiser, the condition or caption "
-    "already encoded, their encoders stay in PyTorch; other networks (QEAN): their backbone's); backbone: "
-    "its SkeletonMamba only"
+    "already encoded (the caption encoder is not part of the network; EMM's condition encoders stay in "
+    "PyTorch: nn.TransformerEncoderLayer's fused inference op aten._transformer_encoder_layer_fwd has no "
+    "ONNX function); other networks (QEAN): their backbone's); backbone: its SkeletonMamba only"
 )
 
 
