@@ -14,11 +14,16 @@ Bodies follow the ST-GCN feeder: the first ``num_person_in`` (5) people of each 
 every frame the people are sorted by their summed joint score and the best ``num_person_out`` (2) kept
 (slots are per frame, not tracked). Unlike ST-GCN's fixed 300-frame buffer indexed by ``frame_index``, the
 clip keeps its true length, PYSKL style: frame ``i`` lands at ``frame_index[i] - min(frame_index)``.
+
+Files are parsed with bounds: at most :data:`MAX_JSON_BYTES` bytes, nested at most :data:`MAX_JSON_DEPTH`
+levels (checked on the text before parsing), integers of at most :data:`MAX_INT_DIGITS` digits, label
+indices below :data:`MAX_LABEL_INDEX`, and pose / score values that are JSON numbers (not strings).
 """
 
 from __future__ import annotations
 
 import json
+import re
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -28,19 +33,63 @@ import numpy as np
 from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
-__all__ = ["NUM_JOINTS", "KineticsFileError", "read_kinetics_clip", "read_kinetics_labels"]
+__all__ = [
+    "MAX_INT_DIGITS",
+    "MAX_JSON_BYTES",
+    "MAX_JSON_DEPTH",
+    "MAX_LABEL_INDEX",
+    "NUM_JOINTS",
+    "KineticsFileError",
+    "read_kinetics_clip",
+    "read_kinetics_labels",
+]
 
 NUM_JOINTS = 18  # OpenPose COCO-18
 MAX_FRAMES = 100_000  # a frame_index span beyond this (~55 min at 30 fps) is refused, not allocated
+MAX_JSON_BYTES = 256 << 20  # a clip is about 1 MB; the train label file of Kinetics-400 about 30 MB
+MAX_JSON_DEPTH = 16  # the layout nests 5 levels (clip, data, frame, skeleton, person)
+MAX_INT_DIGITS = 18  # frame and label indices fit an int64
+MAX_LABEL_INDEX = 100_000  # Kinetics has 400 (to 700) classes; larger indices size label arrays absurdly
+_BRACKETS_OR_STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
 
 
 class KineticsFileError(DataFileError):
     """A Kinetics-skeleton JSON file does not follow the ST-GCN layout (the message names the file)."""
 
 
+def _check_depth(text: str, path: Path) -> None:
+    """Refuse nesting deeper than :data:`MAX_JSON_DEPTH` (brackets inside strings do not count)."""
+    depth = 0
+    for match in _BRACKETS_OR_STRINGS.finditer(text):
+        token = match.group()
+        if token in "[{":
+            depth += 1
+            if depth > MAX_JSON_DEPTH:
+                line = text.count("\n", 0, match.start()) + 1
+                raise KineticsFileError(f"{path}:{line}: nested more than {MAX_JSON_DEPTH} levels deep")
+        elif token in "]}":
+            depth -= 1
+
+
+def _parse_int(path: Path):
+    def parse(digits: str) -> int:
+        if len(digits.lstrip("-")) > MAX_INT_DIGITS:
+            raise KineticsFileError(f"{path}: an integer of {len(digits)} digits (at most {MAX_INT_DIGITS})")
+        return int(digits)
+
+    return parse
+
+
 def _load_json(path: Path) -> Any:
+    size = path.stat().st_size
+    if size > MAX_JSON_BYTES:
+        raise KineticsFileError(f"{path}: {size} bytes, more than a Kinetics JSON's {MAX_JSON_BYTES}")
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        _check_depth(text, path)
+        return json.loads(text, parse_int=_parse_int(path))
+    except RecursionError:
+        raise KineticsFileError(f"{path}: nested too deeply") from None
     except json.JSONDecodeError as e:
         msg = f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})"
         raise KineticsFileError(f"{path}: {msg}") from None
@@ -52,6 +101,10 @@ def _numbers(values: Any, count: int, what: str) -> np.ndarray:
     if not isinstance(values, list) or len(values) != count:
         got = len(values) if isinstance(values, list) else type(values).__name__
         raise KineticsFileError(f"{what}: expected a list of {count} numbers, got {got}")
+    for k, value in enumerate(values):  # numpy would parse strings such as "0.5" as numbers
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise KineticsFileError(f"{what}: entry {k} is {type(value).__name__} {str(value)[:20]!r}, "
+                                    "not a number")  # fmt: skip
     try:
         with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
             array = np.asarray(values, dtype=np.float32)
@@ -89,8 +142,9 @@ def read_kinetics_clip(
     if not isinstance(clip, dict) or not isinstance(clip.get("data"), list):
         raise KineticsFileError(f"{path}: expected an object with a 'data' list of frames")
     label, label_name = clip.get("label_index"), clip.get("label")
-    if isinstance(label, bool) or not isinstance(label, int) or label < 0:
-        raise KineticsFileError(f"{path}: 'label_index' must be a 0-based integer, got {label!r}")
+    if isinstance(label, bool) or not isinstance(label, int) or not 0 <= label < MAX_LABEL_INDEX:
+        raise KineticsFileError(f"{path}: 'label_index' must be a 0-based integer below {MAX_LABEL_INDEX}, "
+                                f"got {str(label)[:20]}")  # fmt: skip
     if not isinstance(label_name, str):
         raise KineticsFileError(f"{path}: 'label' must be the class name string, got {label_name!r}")
 
@@ -145,7 +199,7 @@ def read_kinetics_labels(path: str | PathLike[str]) -> dict[str, dict]:
         if not isinstance(entry, dict) or not {"has_skeleton", "label_index"} <= entry.keys():
             raise KineticsFileError(f"{path}: entry {video_id!r} needs 'has_skeleton' and 'label_index'")
         label = entry["label_index"]
-        if isinstance(label, bool) or not isinstance(label, int) or label < 0:
-            raise KineticsFileError(f"{path}: entry {video_id!r}: 'label_index' must be a 0-based integer, "
-                                    f"got {label!r}")  # fmt: skip
+        if isinstance(label, bool) or not isinstance(label, int) or not 0 <= label < MAX_LABEL_INDEX:
+            raise KineticsFileError(f"{path}: entry {str(video_id)[:40]!r}: 'label_index' must be a 0-based "
+                                    f"integer below {MAX_LABEL_INDEX}, got {str(label)[:20]}")  # fmt: skip
     return labels
