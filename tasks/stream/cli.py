@@ -44,11 +44,12 @@ from skeleton_mamba.tasks.training.frame_timing import (
     announce_compile,
     latency_summary,
     prepare_live,
+    realtime_hint,
     report_compile,
 )
 from skeleton_mamba.tasks.training.pretrained import load_module_from
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "realtime_hint"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,7 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--skeleton", help="recognition: a skeleton file (NTU .skeleton, PYSKL-style .npy (T, J, C))"
     )
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    p.add_argument(
+        "--threads", type=int, default=None, help="torch CPU threads (default: OMP_NUM_THREADS, else 1)"
+    )
     p.add_argument(
         "--compile",
         action="store_true",
@@ -94,18 +97,6 @@ STREAM_BF16_ERROR = (
     "Measured on a tiny random network: joints within 1.4 %% of the largest fp32 coordinate "
     "over a 2 s stream."
 )
-
-
-def realtime_hint(latency: dict[str, float], compiled: bool, fps: int) -> str | None:
-    """A hint when, without --compile, frames were late (p99 latency above one frame period)."""
-    period_ms = 1e3 / fps
-    if compiled or not latency["p99_ms"] > period_ms:  # also no hint for NaN (no frames)
-        return None
-    return (
-        f"sm stream: the p99 latency ({latency['p99_ms']:.0f} ms) is above one {fps} fps frame "
-        f"({period_ms:.1f} ms): not real time on this machine; --compile runs the frame step compiled "
-        "(1.7x faster at the paper width, real time on 2 quiet cores in our runs)"
-    )
 
 
 def _load_dancer(ckpt: str):

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
+from skeleton_mamba.tasks.training.threads import apply_thread_defaults
 
 # name -> ("module:function", one-line help). Each function takes the arguments after the
 # command name (the LightningCLI entry also receives the subcommand) and returns an exit code.
@@ -101,6 +102,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if command not in commands:
         print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
         return 2
+    apply_thread_defaults()  # one intra-op thread unless OMP_NUM_THREADS is set (.threads)
     module_name, func_name = _target(command, rest, commands[command][0]).split(":")
     if command in LIGHTNING_SUBCOMMANDS:
         rest = [command, *rest]
