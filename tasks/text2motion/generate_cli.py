@@ -26,10 +26,11 @@ import torch
 
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError, one_line_message
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.render import render_motion
+from skeleton_mamba.tasks.motion.value_checks import non_finite_message
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from
@@ -68,11 +69,18 @@ def save_generated(
 
     Returns:
         ``{"joints": ..., "features": ..., "glb": ..., "video": ...}`` paths (``video`` only when rendered).
+
+    Raises:
+        InputError: the features or the joints recovered from them hold NaN or Inf (nothing is written).
     """
     stem = Path(stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
     features = features.detach().cpu()
     joints = recover_from_ric(features.double()).float().numpy()
+    for name, array in (("features", features.float().numpy()), ("joints", joints)):
+        message = non_finite_message(array, name, ("frame",))
+        if message is not None:  # checked before anything is written
+            raise InputError(f"{stem}: generated motion is not finite ({message}); nothing written")
+    stem.parent.mkdir(parents=True, exist_ok=True)
     paths = {"joints": stem.with_suffix(".npy"), "features": stem.with_name(stem.name + "_features.npy")}
     for key, array in (("features", features.float().numpy()), ("joints", joints)):
         with atomic_open(paths[key], "wb") as f:
@@ -130,6 +138,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         progress=True,
         **sampling_overrides(args),
     )
+    for i, caption in enumerate(captions):  # every motion checked before the first is written
+        message = non_finite_message(features[i].float().numpy(), "features", ("frame",))
+        if message is not None:
+            raise CheckpointError(
+                f"{args.checkpoint}: the model generated non-finite motion for {caption!r} ({message}); "
+                "nothing written"
+            )
     out = Path(args.out)
     for i, caption in enumerate(captions):
         paths = save_generated(features[i], caption, out / f"{i:03d}_{slug(caption)}", args.render)

@@ -8,40 +8,68 @@ goes through :func:`load_checkpoint`:
    remote file is only as trustworthy as the server; download it and check it, then pass the file;
 2. the file is read with ``torch.load(weights_only=True)``: tensors, numbers, strings and containers
    only; any other global makes the load fail before it is called;
-3. every class path stored in the hyper-parameters (``_class_path``, nested ``class_path`` entries,
+3. its structure is checked before anything walks it recursively: containers nest at most
+   :data:`MAX_NESTING` levels, ``state_dict`` maps names to tensors, the hyper-parameters are a mapping;
+4. every class path stored in the hyper-parameters (``_class_path``, nested ``class_path`` entries,
    Lightning's ``_instantiator``) must name a module of the project (``skeleton_mamba.*``) or one of
    the library classes recipes use (:data:`TRUSTED_CLASS_PREFIXES`), checked as text before anything
    is imported.
 
-:func:`load_module` builds a LightningModule from a checked checkpoint (``sm dance``, ``sm generate``);
-the Lightning CLI checks ``--ckpt_path`` the same way before Lightning reads it, and passes
-``weights_only=True`` to Lightning's own load.
+:func:`load_module` builds a LightningModule from a checked checkpoint (``sm dance``, ``sm generate``,
+``sm stream``, ``sm export-pretrained``, ``sm export-onnx``). Before any weight is copied it checks the
+checkpoint against the task: the class it names is the one the command runs (else the message names the
+task the file holds), every tensor is finite, and the tensors' names and shapes are those of the module
+built from the checkpoint's hyper-parameters (:func:`check_state_fits`: missing and unexpected names,
+the first shape that differs, both shapes). The Lightning CLI checks ``--ckpt_path`` the same way before
+Lightning reads it, checks its tensors against the instantiated model, and passes ``weights_only=True``
+to Lightning's own load. :class:`CheckedCheckpointIO` is the trainer's checkpoint reader and writer:
+reads through :func:`load_checkpoint`, writes through a temporary file in the checkpoint's own folder.
 """
 
 from __future__ import annotations
 
 import io
+import os
 import pickle
 import re
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping
 from os import PathLike
 from pathlib import Path
 from typing import Any, TypeVar
 
 import torch
+from lightning.pytorch.plugins.io import TorchCheckpointIO
 
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import CheckpointError, RandomWeightsWarning
 
 __all__ = [
+    "MAX_NESTING",
     "TRUSTED_CLASS_PREFIXES",
+    "CheckedCheckpointIO",
     "check_checkpoint_path",
+    "check_checkpoint_structure",
     "check_class_paths",
     "check_finite_state",
+    "check_finite_tensors",
+    "check_state_fits",
+    "checked_state_shapes",
     "load_checkpoint",
     "load_module",
     "load_module_and_checkpoint",
+    "state_shapes",
+    "use_checked_checkpoint_io",
 ]
+
+# Deepest nesting of containers a checkpoint may hold (a Lightning checkpoint with optimizer states
+# nests about 6 deep); checked without recursion before anything recursive (the class-path check,
+# Lightning's and jsonargparse's hyper-parameter handling) walks it.
+MAX_NESTING = 100
+# Entries of a Lightning checkpoint that hold plain-data mappings (when present).
+_MAPPING_KEYS = ("hyper_parameters", "datamodule_hyper_parameters")
+# Entries Lightning does not need to build a module (:func:`load_module_and_checkpoint`).
+_TRAINING_STATE_KEYS = ("state_dict", "optimizer_states", "lr_schedulers", "callbacks", "loops")
 
 # Module prefixes a class path in a checkpoint may name. Short names without a dot
 # (``ActionRecognitionModule``) resolve only among classes already imported, so they import nothing.
@@ -120,25 +148,144 @@ def _torch_load(data: bytes | Path, source: str, map_location: Any) -> Any:
         raise CheckpointError(
             f"{source}: not a plain-data checkpoint, refused (weights_only load: {detail.strip()})"
         ) from None
-    except (RuntimeError, EOFError, ValueError, KeyError) as err:
+    except OSError:  # the file itself (permissions, a read error): its own one-line message
+        raise
+    except Exception as err:  # any failure to parse untrusted bytes (IndexError, struct.error, ...)
+        first = str(err).strip().splitlines()
         raise CheckpointError(
-            f"{source}: not a readable PyTorch checkpoint ({type(err).__name__}: {err})"
+            f"{source}: not a readable PyTorch checkpoint ({type(err).__name__}: {first[0] if first else ''})"
         ) from None
 
 
-def load_checkpoint(path: str | PathLike[str], map_location: Any = "cpu") -> dict:
-    """A checkpoint as a dict, checked as the module docstring says (path, ``weights_only``, class paths).
+def _too_deep(value: Any, limit: int) -> str | None:
+    """The top-level key (or ``"the checkpoint"``) under which ``value`` nests deeper than ``limit``
+    containers; ``None`` when it does not. Iterative: no recursion, whatever the depth."""
+    stack: list[tuple[Any, int, str]] = [(value, 0, "the checkpoint")]
+    while stack:
+        item, depth, top = stack.pop()
+        if isinstance(item, Mapping):
+            children: Any = item.values()
+        elif isinstance(item, (list, tuple, set, frozenset)):
+            children = item
+        else:
+            continue
+        if depth >= limit:
+            return top
+        if depth == 0 and isinstance(item, Mapping):
+            stack.extend((child, 1, repr(key)) for key, child in item.items())
+        else:
+            stack.extend((child, depth + 1, top) for child in children)
+    return None
+
+
+def check_checkpoint_structure(checkpoint: Any, source: str) -> None:
+    """Refuse a checkpoint whose structure no loader may walk: not a dict, containers nested deeper than
+    :data:`MAX_NESTING`, a ``state_dict`` that is not a mapping of names to tensors, hyper-parameters that
+    are not a mapping.
 
     Raises:
-        CheckpointError: a URL, a pickle that names code, an unreadable file or a foreign class path.
+        CheckpointError: naming ``source`` and the entry at fault.
+    """
+    if not isinstance(checkpoint, dict):
+        raise CheckpointError(f"{source}: a checkpoint holds a dict, got {type(checkpoint).__name__}")
+    deep = _too_deep(checkpoint, MAX_NESTING)
+    if deep is not None:
+        raise CheckpointError(
+            f"{source}: {deep} nests containers deeper than {MAX_NESTING} levels; refused (a checkpoint's "
+            "hyper-parameters nest a few levels)"
+        )
+    if "state_dict" in checkpoint:
+        state = checkpoint["state_dict"]
+        if not isinstance(state, Mapping):
+            raise CheckpointError(
+                f"{source}: state_dict is a {type(state).__name__}, not a mapping of tensor names to tensors"
+            )
+        for key, value in state.items():
+            if not isinstance(key, str) or not isinstance(value, torch.Tensor):
+                raise CheckpointError(
+                    f"{source}: state_dict[{key!r}] is a {type(value).__name__}"
+                    f"{'' if isinstance(key, str) else f' under a {type(key).__name__} key'}, "
+                    "not a tensor under a name"
+                )
+    for key in _MAPPING_KEYS:
+        value = checkpoint.get(key)
+        if value is not None and not isinstance(value, Mapping):
+            raise CheckpointError(
+                f"{source}: {key} is a {type(value).__name__}, not a mapping of argument names to values"
+            )
+        if isinstance(value, Mapping) and not all(isinstance(name, str) for name in value):
+            bad = next(name for name in value if not isinstance(name, str))
+            raise CheckpointError(
+                f"{source}: {key} has a {type(bad).__name__} key {bad!r}, not an argument name"
+            )
+
+
+def load_checkpoint(path: str | PathLike[str], map_location: Any = "cpu") -> dict:
+    """A checkpoint as a dict, checked as the module docstring says (path, ``weights_only``, structure,
+    class paths).
+
+    Raises:
+        CheckpointError: a URL, a pickle that names code, an unreadable file, a structure no loader may
+            walk (:func:`check_checkpoint_structure`) or a foreign class path.
         FileNotFoundError / IsADirectoryError: the path is missing or a folder.
     """
     p = check_checkpoint_path(path)
-    checkpoint = _torch_load(p, str(p), map_location)
-    if not isinstance(checkpoint, dict):
-        raise CheckpointError(f"{p}: a checkpoint holds a dict, got {type(checkpoint).__name__}")
-    check_class_paths(checkpoint.get("hyper_parameters", {}), str(p))
+    return _checked(_torch_load(p, str(p), map_location), str(p))
+
+
+def _checked(checkpoint: Any, source: str) -> dict:
+    check_checkpoint_structure(checkpoint, source)
+    check_class_paths(checkpoint.get("hyper_parameters", {}), source)
     return checkpoint
+
+
+def _task_of(class_path: str) -> str:
+    """``"egodance"`` for ``skeleton_mamba.tasks.egodance.module.EgoDanceModule``; else the class name."""
+    parts = class_path.split(".")
+    if len(parts) > 3 and parts[:2] == ["skeleton_mamba", "tasks"]:
+        return parts[2]
+    return parts[-1]
+
+
+def _a(word: str) -> str:
+    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
+
+
+def state_shapes(state: Mapping[str, torch.Tensor] | torch.nn.Module) -> dict[str, tuple[int, ...]]:
+    """The name -> shape table of a state dict (or of a module's ``state_dict()``)."""
+    if isinstance(state, torch.nn.Module):
+        state = state.state_dict()
+    return {name: tuple(tensor.shape) for name, tensor in state.items()}
+
+
+def check_state_fits(
+    module: torch.nn.Module, found: Mapping[str, tuple[int, ...]], source: str, built_from: str = ""
+) -> None:
+    """Refuse a checkpoint whose tensors (``found``: name -> shape) are not those of ``module``.
+
+    Checked before ``load_state_dict``, so the message is one line: how many names are missing and how
+    many unexpected (the first of each, in the module's order), else the first tensor whose shape
+    differs, with both shapes. ``built_from`` says how the module was built (part of the message).
+
+    Raises:
+        CheckpointError: naming ``source``, the module's class and what does not match.
+    """
+    expected = state_shapes(module)
+    what = f"{source}: does not fit {type(module).__name__}{built_from}"
+    missing = [name for name in expected if name not in found]
+    unexpected = [name for name in found if name not in expected]
+    if missing or unexpected:
+        parts = []
+        if missing:
+            parts.append(f"{len(missing)} of its {len(expected)} tensors missing (first: {missing[0]!r})")
+        if unexpected:
+            parts.append(f"{len(unexpected)} unexpected (first: {unexpected[0]!r})")
+        raise CheckpointError(f"{what}: {', '.join(parts)}")
+    for name, shape in expected.items():
+        if tuple(found[name]) != shape:
+            raise CheckpointError(
+                f"{what}: {name} has shape {tuple(found[name])} in the checkpoint, {shape} in the model"
+            )
 
 
 def load_module(cls: type[ModuleT], path: str | PathLike[str], map_location: Any = "cpu") -> ModuleT:
@@ -156,31 +303,112 @@ def load_module_and_checkpoint(
     """:func:`load_module`, and the checkpoint's dict as read (e.g. its ``datamodule_hyper_parameters``),
     from one read of the file."""
     p = check_checkpoint_path(path)
-    data = p.read_bytes()
-    checkpoint = _torch_load(data, str(p), map_location)
-    if not isinstance(checkpoint, dict) or "state_dict" not in checkpoint:
+    checkpoint = _checked(_torch_load(p, str(p), map_location), str(p))
+    if "state_dict" not in checkpoint:
         raise CheckpointError(f"{p}: not a Lightning checkpoint (no 'state_dict')")
-    hparams = checkpoint.get("hyper_parameters", {})
-    check_class_paths(hparams, str(p))
-    stored = hparams.get("_class_path") if isinstance(hparams, dict) else None
-    if isinstance(stored, str) and stored.rsplit(".", 1)[-1] != cls.__name__:
-        raise CheckpointError(f"{p}: holds a {stored}, not a {cls.__name__}")
+    stored = checkpoint.get("hyper_parameters", {}).get("_class_path")
+    if stored is not None and str(stored).rsplit(".", 1)[-1] != cls.__name__:
+        raise CheckpointError(
+            f"{p}: holds a {stored}, not a {cls.__name__} (this is {_a(_task_of(str(stored)))} checkpoint, "
+            f"not {_a(_task_of(f'{cls.__module__}.{cls.__qualname__}'))} one)"
+        )
+    state = checkpoint["state_dict"]
+    check_finite_tensors(state, str(p))
+    # The module as Lightning builds it from the hyper-parameters (its instantiator, old hparams keys),
+    # with no weights: they are checked against it, then copied.
+    shell = {k: v for k, v in checkpoint.items() if k not in _TRAINING_STATE_KEYS}
+    buffer = io.BytesIO()
+    torch.save({**shell, "state_dict": {}}, buffer)
+    buffer.seek(0)
+    built = " (as built from the checkpoint's hyper-parameters)" if checkpoint.get("hyper_parameters") else ""
     try:
         with warnings.catch_warnings():  # the checkpoint's weights replace any random initialisation
             warnings.simplefilter("ignore", RandomWeightsWarning)
-            module = cls.load_from_checkpoint(io.BytesIO(data), map_location=map_location, weights_only=True)  # type: ignore[attr-defined]
-    except (KeyError, TypeError, RuntimeError) as err:
-        raise CheckpointError(f"{p}: does not fit {cls.__name__} ({type(err).__name__}: {err})") from err
-    check_finite_state(module, str(p))
-    return module, checkpoint
+            for built_empty in (
+                "The state dict in .* contains no parameters",
+                "Found keys that are in the model",
+            ):
+                warnings.filterwarnings("ignore", message=built_empty)
+            module = cls.load_from_checkpoint(  # type: ignore[attr-defined]
+                buffer, map_location=map_location, weights_only=True, strict=False
+            )
+    except (KeyError, TypeError, ValueError, RuntimeError) as err:
+        first = str(err).strip().splitlines()
+        raise CheckpointError(
+            f"{p}: does not fit {cls.__name__} ({type(err).__name__}: {first[0] if first else ''})"
+        ) from err
+    check_state_fits(module, state_shapes(state), str(p), built)
+    try:
+        module.load_state_dict(state, strict=True)
+    except RuntimeError as err:  # names and shapes fit; a dtype that does not (complex into real)
+        first = str(err).strip().splitlines()
+        raise CheckpointError(f"{p}: does not fit {cls.__name__} ({' '.join(first[-1:]).strip()})") from err
+    device = next((t.device for t in state.values()), None)
+    return (module if device is None else module.to(device)), checkpoint
 
 
-def check_finite_state(module: torch.nn.Module, source: str) -> None:
-    """Raise :class:`CheckpointError` naming the first parameter or buffer of ``module`` holding NaN or Inf
-    (such a model only produces non-finite output, which no command writes)."""
-    for name, tensor in (*module.named_parameters(), *module.named_buffers()):
+def checked_state_shapes(checkpoint: dict, source: str) -> dict[str, tuple[int, ...]]:
+    """The name -> shape table of a :func:`load_checkpoint` result's ``state_dict``, after checking it is a
+    Lightning checkpoint with finite tensors (for ``--ckpt_path``: the table is checked against the
+    instantiated model with :func:`check_state_fits` before the trainer loads the weights).
+
+    Raises:
+        CheckpointError: no ``state_dict``, or a tensor holding NaN or Inf.
+    """
+    if "state_dict" not in checkpoint:
+        raise CheckpointError(f"{source}: not a Lightning checkpoint (no 'state_dict')")
+    check_finite_tensors(checkpoint["state_dict"], source)
+    return state_shapes(checkpoint["state_dict"])
+
+
+def check_finite_tensors(
+    tensors: Mapping[str, torch.Tensor] | Iterator[tuple[str, torch.Tensor]], source: str
+) -> None:
+    """Raise :class:`CheckpointError` naming the first floating tensor of ``tensors`` (a state dict, or
+    ``(name, tensor)`` pairs) holding NaN or Inf (such a model only produces non-finite output, which no
+    command writes)."""
+    for name, tensor in tensors.items() if isinstance(tensors, Mapping) else tensors:
         if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
             bad = int((~torch.isfinite(tensor)).sum())
             raise CheckpointError(
                 f"{source}: weights are not finite ({name}: {bad} of {tensor.numel()} values NaN or Inf)"
             )
+
+
+def check_finite_state(module: torch.nn.Module, source: str) -> None:
+    """:func:`check_finite_tensors` on the parameters and buffers of ``module``."""
+    check_finite_tensors(iter((*module.named_parameters(), *module.named_buffers())), source)
+
+
+class CheckedCheckpointIO(TorchCheckpointIO):
+    """The trainer's checkpoint reader and writer (Lightning's ``CheckpointIO`` plugin API).
+
+    Reads go through :func:`load_checkpoint` (local file, ``weights_only``, structure and class paths).
+    Writes go through a temporary file in the checkpoint's own folder, fsynced, then renamed over the
+    target (:func:`~skeleton_mamba.tasks.motion.atomic.atomic_open`): a full disk or an interruption leaves
+    the previous checkpoint of that name intact and no partial file under the final name (Lightning's own
+    writer stages the file in the system temporary folder and moves it, which is a copy across file
+    systems).
+    """
+
+    def save_checkpoint(
+        self, checkpoint: dict[str, Any], path: Any, storage_options: Any | None = None
+    ) -> None:
+        if storage_options is not None:
+            raise TypeError(f"{type(self).__name__} writes local files: storage_options is not supported")
+        with atomic_open(os.fspath(path), "wb") as handle:
+            torch.save(checkpoint, handle)
+
+    def load_checkpoint(
+        self, path: Any, map_location: Callable | Any = None, weights_only: bool | None = None
+    ) -> dict[str, Any]:
+        if weights_only is False:
+            raise CheckpointError(f"{path}: checkpoints are read with weights_only=True only")
+        return load_checkpoint(os.fspath(path), map_location)
+
+
+def use_checked_checkpoint_io(trainer: Any) -> None:
+    """Make :class:`CheckedCheckpointIO` the checkpoint reader and writer of ``trainer`` (a Lightning
+    ``Trainer``) unless a recipe configured a checkpoint plugin of its own."""
+    if type(trainer.strategy.checkpoint_io) is TorchCheckpointIO:
+        trainer.strategy.checkpoint_io = CheckedCheckpointIO()
