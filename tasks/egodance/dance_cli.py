@@ -27,7 +27,6 @@ import json
 import sys
 from pathlib import Path
 
-import imageio.v3 as iio
 import numpy as np
 import torch
 
@@ -35,7 +34,7 @@ from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_p
 from skeleton_mamba.tasks.egodance.builder.layout import read_frames
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 from skeleton_mamba.tasks.egodance.export import write_dance
-from skeleton_mamba.tasks.egodance.frames import resize_frames
+from skeleton_mamba.tasks.egodance.frames import read_video_frames
 from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
@@ -104,28 +103,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _read_video(path: Path) -> np.ndarray:
-    """(T, H, W, 3) uint8 frames of a video file or a folder of images (sorted by name)."""
-
-    if path.is_dir():
-        images = sorted(p for p in path.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp"))
-        if not images:
-            raise InputError(f"{path}: holds no .png/.jpg images")
-        frames = [np.asarray(iio.imread(p)) for p in images]
-    elif path.is_file():
-        frames = list(np.asarray(iio.imread(path)))
-    else:
-        raise FileNotFoundError(2, "No such video file or image folder", str(path))
-    out = []
-    for i, f in enumerate(frames):
-        if f.ndim == 2:
-            f = np.repeat(f[..., None], 3, axis=-1)
-        if f.ndim != 3 or f.shape[-1] not in (3, 4):
-            raise InputError(f"{path}: frame {i} has shape {f.shape}, expected (H, W, 3)")
-        out.append(f[..., :3])
-    return np.stack(out)
-
-
 def _music_source(args) -> tuple[str | None, float]:
     """The audio file and start time (s) the dance is sampled for."""
     if args.music:
@@ -159,18 +136,18 @@ def _conditions(
     if vision:
         if not args.video:
             raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
-        rgb = torch.from_numpy(_read_video(Path(args.video))).permute(0, 3, 1, 2)
-        n = min(len(rgb), len(music))
-        if abs(len(rgb) - len(music)) > 1:  # one frame of rounding between the two lengths is no news
-            video_s, music_s = len(rgb) / fps, len(music) / fps
+        # decoded as a stream at the model's resolution, and only as far as the music goes
+        frames = read_video_frames(Path(args.video), size, max_frames=len(music) + 2)
+        n = min(len(frames), len(music))
+        if len(music) - len(frames) > 1:  # one frame of rounding between the two lengths is no news
+            video_s, music_s = len(frames) / fps, len(music) / fps
             print(
-                f"sm dance: warning: the video has {len(rgb)} frames ({video_s:.1f} s at {fps:g} fps), the "
-                f"music {len(music)} ({music_s:.1f} s); the dance covers the first {n / fps:.1f} s, where "
-                "both are (pass a video as long as the music for the whole track)",
+                f"sm dance: warning: the video has {len(frames)} frames ({video_s:.1f} s at {fps:g} fps), "
+                f"the music {len(music)} ({music_s:.1f} s); the dance covers the first {n / fps:.1f} s, "
+                "where both are (pass a video as long as the music for the whole track)",
                 file=sys.stderr,
             )
-        music = music[:n]
-        frames = resize_frames(rgb[:n].float() / 255.0, size)
+        music, frames = music[:n], frames[:n]
     return music, frames, None
 
 
