@@ -35,7 +35,12 @@ from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCL
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
+from skeleton_mamba.tasks.training.checkpoints import (
+    check_state_fits,
+    checked_state_shapes,
+    load_checkpoint,
+    use_checked_checkpoint_io,
+)
 from skeleton_mamba.tasks.training.lightning_compat import import_policy, install_accepted_links
 from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_checkpoint_source
 from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
@@ -212,11 +217,20 @@ class SkeletonMambaCLI(LightningCLI):
                 config.ckpt_path = ckpt_path
             if subcommand != "fit" and not is_checkpoint_source(ckpt_path):  # an exported folder, a Hub id
                 ckpt_path = config.ckpt_path = str(checkpoint_file_from(ckpt_path))
-            load_checkpoint(ckpt_path)
+            self.checkpoint_shapes = (ckpt_path, checked_state_shapes(load_checkpoint(ckpt_path), ckpt_path))
             if isinstance(parser, OneLineErrorParser):  # Lightning parses its hyper-parameters next
                 parser.error_source = f"{ckpt_path} (hyper-parameters)"
             if subcommand == "fit":
                 resume_in_run_folder(config.trainer, Path(ckpt_path))
+
+    checkpoint_shapes: tuple[str, dict] | None = None  # --ckpt_path and its tensors' shapes
+
+    def _check_checkpoint_fits(self) -> None:
+        """``--ckpt_path``'s tensors against the instantiated model, before the trainer loads them."""
+        if self.checkpoint_shapes is not None:
+            check_state_fits(self.model, self.checkpoint_shapes[1], self.checkpoint_shapes[0])
+
+    before_fit = before_validate = before_test = before_predict = _check_checkpoint_fits
 
     def before_instantiate_classes(self) -> None:
         """Lightning's model instantiator, given only the linked values the model accepts.
@@ -242,6 +256,7 @@ class SkeletonMambaCLI(LightningCLI):
             config.get("callbacks"), config.get("enable_progress_bar")
         )
         trainer = super().instantiate_trainer(**kwargs)
+        use_checked_checkpoint_io(trainer)  # checked reads, writes through a temporary file beside the target
         for logger in trainer.loggers:
             _ = logger.version
         recorder = next((c for c in trainer.callbacks if isinstance(c, InterruptRecorder)), None)
