@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -73,6 +74,8 @@ class AudioSource:
                 except AudioFileError as err:
                     raise AudioFileError(f"{err}; for raw PCM pass --raw-rate") from err
         else:
+            if not Path(source).is_file():
+                raise FileNotFoundError(f"{source}: music file not found")
             self._reader = open_audio(source)
         if self._reader is not None:
             self.sample_rate, self.channels = self._reader.info.sample_rate, self._reader.info.channels
