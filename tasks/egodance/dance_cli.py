@@ -4,12 +4,15 @@ Examples::
 
     sm dance --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt \\
         --sample runs/egodance_demo/data/ego/samples/<id> --out dance/
+    sm dance --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt --list-samples
     sm dance --ckpt last.ckpt --music song.wav --video ego.mp4 --out dance/ --sampler ddpm
 
 ``--sample`` reads an EgoAIST++ sample folder (music slice, egocentric frames and the ground-truth camera
-trajectory). ``--head`` chooses the head-guidance targets: ``estimate`` (the default for vision models: the
-checkpoint's head-trajectory estimator on the egocentric frames, what any video allows), ``oracle`` (the
-sample's ground-truth camera path; ``--sample`` only, printed as oracle) or ``none``.
+trajectory); ``--list-samples`` prints the held-out (test, then val) sample folders of the checkpoint's data,
+one per line, which the model never saw in training. ``--head`` chooses the head-guidance targets:
+``estimate`` (the default for vision models: the checkpoint's head-trajectory estimator on the egocentric
+frames, what any video allows), ``oracle`` (the sample's ground-truth camera path; ``--sample`` only,
+printed as oracle) or ``none``.
 ``--music`` (+ ``--video`` for vision models: a video file or a folder of images) dances a whole track:
 tracks longer than the training window are sampled as overlapping windows whose overlaps are in-painted
 at every denoising step (EDGE long-form), so a 60 s song gives one continuous dance.
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import inspect
 import json
 import sys
 from pathlib import Path
@@ -32,7 +36,11 @@ import torch
 
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
 from skeleton_mamba.tasks.egodance.builder.layout import read_frames
-from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
+from skeleton_mamba.tasks.egodance.data import (
+    EgoDanceDataModule,
+    EgoDanceDataset,
+    SyntheticEgoDanceDataModule,
+)
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.frames import read_video_frames
 from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
@@ -71,8 +79,13 @@ def build_parser() -> argparse.ArgumentParser:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sample", help="an EgoAIST++ sample folder (sm make-ego)")
     src.add_argument("--music", help="an audio file")
+    src.add_argument(
+        "--list-samples",
+        action="store_true",
+        help="print the held-out sample folders of the checkpoint's data (for --sample) and exit",
+    )
     p.add_argument("--video", help="egocentric video file or image folder for --music (vision models)")
-    p.add_argument("--out", required=True, help="output folder (or FILE.npz: files named after FILE)")
+    p.add_argument("--out", help="output folder (or FILE.npz: files named after FILE); required to dance")
     p.add_argument("--name", default="dance", help="file stem inside an output folder")
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
     p.add_argument("--render-size", type=_size, default=(640, 480), help="video WxH (multiples of 16)")
@@ -170,7 +183,6 @@ def _head_targets(args, module, frames: torch.Tensor | None, oracle: torch.Tenso
 
 def _dance(args, module, music, frames, oracle) -> tuple[torch.Tensor, str]:
     """The dance tokens (T, 24, C) in fp32 and the head source, in the caller's precision region."""
-    hp = module.hparams
     head_source, head = _head_targets(args, module, frames, oracle)
     model = module.model if args.no_ema else module.ema.module
     sampling = module.sampling.override(**sampling_overrides(args))
@@ -183,8 +195,8 @@ def _dance(args, module, music, frames, oracle) -> tuple[torch.Tensor, str]:
         window=args.window,
         overlap=args.overlap,
         **dataclasses.asdict(sampling),
-        head_guidance_weight=hp.head_guidance_weight if args.head_weight is None else args.head_weight,
-        head_guidance_steps=hp.head_guidance_steps,
+        head_guidance_weight=module.head_guidance.weight if args.head_weight is None else args.head_weight,
+        head_guidance_steps=module.head_guidance.steps,
         generator=torch.Generator().manual_seed(args.seed),
         progress=args.progress,
         compile=args.compile,
@@ -192,16 +204,49 @@ def _dance(args, module, music, frames, oracle) -> tuple[torch.Tensor, str]:
     return tokens.float(), head_source
 
 
+def held_out_samples(data_hparams: dict) -> dict[str, list[Path]]:
+    """``test`` and ``val`` sample folders of the data a checkpoint was trained on, from its data module's
+    hyper-parameters (the generated demo set when they have a ``count``, else an EgoAIST++ build)."""
+    cls = SyntheticEgoDanceDataModule if "count" in data_hparams else EgoDanceDataModule
+    accepted = inspect.signature(cls.__init__).parameters
+    data = cls(**{k: v for k, v in data_hparams.items() if k in accepted})
+    try:
+        splits = data.split_folders()
+    except FileNotFoundError as err:  # DatasetNotFoundError says what is missing and how to build it
+        raise InputError(f"the checkpoint's data: {err}") from err
+    return {split: splits[split] for split in ("test", "val") if splits[split]}
+
+
+def _list_samples(ckpt: str, checkpoint: dict) -> int:
+    data_hparams = checkpoint.get("datamodule_hyper_parameters") or {}
+    if not data_hparams:
+        raise InputError(f"{ckpt}: holds no data module hyper-parameters; its held-out samples are unknown")
+    found = held_out_samples(data_hparams)
+    if not found:
+        raise InputError(f"{ckpt}: its data holds no held-out (test / val) sample")
+    for split, folders in found.items():
+        print(
+            f"# {split}: {len(folders)} held-out samples (sm dance --ckpt {ckpt} --sample FOLDER --out DIR)"
+        )
+        print("\n".join(str(folder) for folder in folders))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not args.list_samples and not args.out:
+        parser.error("the following arguments are required: --out")
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
 
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
+    if args.list_samples:
+        return _list_samples(args.ckpt, checkpoint)
     module.eval()
     hp = module.hparams
-    fps = hp.get("fps", 30)
+    fps = hp.fps  # the frame rate the model was trained at (linked from its data module)
     data_hparams = checkpoint.get("datamodule_hyper_parameters") or {}
     canonical = bool(data_hparams.get("canonicalize_init_head", False))  # windows faced their first heading
     try:
