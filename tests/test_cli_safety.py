@@ -363,6 +363,8 @@ def test_a_non_finite_loss_stops_training_naming_the_samples(tmp_path, monkeypat
     monkeypatch.chdir(tmp_path)
     args = [
         "fit",
+        "--allow-import",  # this test module is outside the recipe import policy
+        "test_cli_safety",
         "--model",
         "test_cli_safety.TinyRegression",
         "--data",
