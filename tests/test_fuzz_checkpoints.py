@@ -356,3 +356,34 @@ def test_the_cli_trainer_reads_and_writes_checkpoints_through_the_checker(tmp_pa
     target.write_text("not a checkpoint")
     with pytest.raises(Exception, match="not a plain-data checkpoint"):
         checkpoint_io.load_checkpoint(target)
+
+
+def test_ckpt_path_is_checked_against_the_instantiated_model(tmp_path, monkeypatch, capsys):
+    """``sm test --ckpt_path``: the model LightningCLI builds from the checkpoint's hyper-parameters, then
+    its tensors' names and shapes, before the trainer loads them; and finite weights (validate and predict
+    share the hook, ``before_<subcommand>`` of SkeletonMambaCLI)."""
+    subcommand = "test"
+    from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
+
+    monkeypatch.chdir(tmp_path)
+    checkpoint = _checkpoint(ActionRecognitionModule(backbone=TINY, num_classes=3, batch_size=8))
+    key = _first_float(checkpoint["state_dict"])
+    shape = tuple(checkpoint["state_dict"][key].shape)
+    bad_shape = copy.deepcopy(checkpoint)
+    bad_shape["state_dict"][key] = torch.zeros(7)
+    nan = copy.deepcopy(checkpoint)
+    nan["state_dict"][key] = torch.full(shape, float("nan"))
+    n = int(np.prod(shape))
+    expected = {
+        "shape": f"does not fit ActionRecognitionModule: {key} has shape (7,) in the checkpoint, {shape} in "
+        "the model",
+        "nan": f"weights are not finite ({key}: {n} of {n} values NaN or Inf)",
+    }
+    for name, content in (("shape", bad_shape), ("nan", nan)):
+        path = _save(content, tmp_path / f"{name}.ckpt")
+        args = [subcommand, "--recipe", "recognition_synthetic.yaml", "--ckpt_path", str(path)]
+        assert sm_main([*args, "--trainer.enable_progress_bar", "false"]) == 2
+        err = capsys.readouterr().err
+        assert "Traceback" not in err
+        assert err.strip().splitlines()[-1] == f"sm {subcommand}: {path}: {expected[name]}", err[-2000:]
+    assert not list(tmp_path.glob("runs/*/version_*"))  # no run folder left behind
