@@ -52,7 +52,7 @@ class GroupScan(nn.Module):
     @property
     def path_elements(self) -> int:
         """Elements per frame of the widest intermediate, the projected n*G-token path sequence."""
-        return self.num_paths * self.num_groups * self.mixer.in_proj.out_features
+        return self.num_paths * self.num_groups * self.mixer.d_in_proj
 
     def forward(self, g: torch.Tensor, ops=None) -> torch.Tensor:
         """Same result as scanning ``mixer(g[:, path_index])``, at 1/n of the projection cost.

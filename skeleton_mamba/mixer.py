@@ -51,12 +51,11 @@ class Mamba2Mixer(nn.Module):
         self.nheads = self.d_ssm // cfg.headdim
         self.d_state = cfg.d_state
         self.chunk_size = cfg.chunk_size
-        conv_dim = self.d_ssm + 2 * cfg.ngroups * cfg.d_state
+        self.conv_dim = conv_dim = self.d_ssm + 2 * cfg.ngroups * cfg.d_state
 
         # Order of the projection: [z0, x0, z, x, B, C, dt] (as mamba_ssm; z0, x0 only when d_ssm < d_inner).
-        self.in_proj = nn.Linear(
-            d_model, 2 * self.d_inner + 2 * cfg.ngroups * cfg.d_state + self.nheads, bias=cfg.bias
-        )
+        self.d_in_proj = 2 * self.d_inner + 2 * cfg.ngroups * cfg.d_state + self.nheads
+        self.in_proj = nn.Linear(d_model, self.d_in_proj, bias=cfg.bias)
         self.conv1d = nn.Conv1d(
             conv_dim, conv_dim, cfg.d_conv, groups=conv_dim, padding=cfg.d_conv - 1, bias=cfg.conv_bias
         )
@@ -171,7 +170,7 @@ class Mamba2Mixer(nn.Module):
         weight = self.conv1d.weight
         dtype = dtype or weight.dtype
         device = device or weight.device
-        conv = torch.zeros(batch_size, weight.shape[0], weight.shape[-1], dtype=dtype, device=device)
+        conv = torch.zeros(batch_size, self.conv_dim, self.config.d_conv, dtype=dtype, device=device)
         ssm_dtype = compute_dtype(torch.empty(0, dtype=dtype))
         ssm = torch.zeros(batch_size, self.nheads, self.headdim, self.d_state, dtype=ssm_dtype, device=device)
         return conv, ssm

@@ -74,7 +74,7 @@ class TemporalScan(nn.Module):
             x = zero_padding(x, mask)  # padded values never enter the scans (matrix forms spread them back)
         seq = rearrange(x, "b t j d -> (b j) t d")
         index = valid_prefix_reversal(mask).repeat_interleave(num_joints, dim=0)
-        per_sequence = seq.shape[1] * self.forward_mixer.in_proj.out_features
+        per_sequence = seq.shape[1] * self.forward_mixer.d_in_proj
         length = slice_length(seq, 0, per_sequence, self.slice_elements)
         y = map_slices(self.scan, 0, length, seq, index)
         return rearrange(y, "(b j) t d -> b t j d", j=num_joints)

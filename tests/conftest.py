@@ -39,7 +39,13 @@ def tiny_egodance_module():
     ``tiny_egodance_module(**overrides)``: keyword arguments replace the tiny defaults.
     """
     from skeleton_mamba.tasks.egodance.model import EMMConfig
-    from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+    from skeleton_mamba.tasks.egodance.module import (
+        DanceSampling,
+        EgoDanceModule,
+        EvaluationOptions,
+        LossOptions,
+        OptimizerOptions,
+    )
 
     tiny = {
         "backbone": {
@@ -62,14 +68,29 @@ def tiny_egodance_module():
         },
         "image_size": 32,
         "diffusion_steps": 20,
-        "sampling_steps": 2,
+        "sampling": {"sampling_steps": 2},
         "head_estimator": {"input_size": 16, "channels": [8, 8], "dim": 8, "layers": 1},
     }
     network_fields = {f.name for f in dataclasses.fields(EMMConfig)}
+    # a field of a config group by its own name, or by the name its group gives it
+    renamed = {"lambda_pos": ("kinematic", "pos"), "lambda_vel": ("kinematic", "vel"),
+               "lambda_contact": ("kinematic", "contact"), "head_source": ("head_guidance", "source"),
+               "head_guidance_weight": ("head_guidance", "weight"),
+               "head_guidance_steps": ("head_guidance", "steps"),
+               "test_oracle_head": ("head_guidance", "test_oracle")}  # fmt: skip
+    groups = {"loss": LossOptions, "optimizer": OptimizerOptions, "sampling": DanceSampling,
+              "evaluation": EvaluationOptions}  # fmt: skip
+    for group, cls in groups.items():
+        renamed.update({f.name: (group, f.name) for f in dataclasses.fields(cls)})
 
     def build(**overrides) -> EgoDanceModule:
+        """Overrides by field name: ``lr=1e-3`` sets ``optimizer.lr``, ``heads=2`` the EMMConfig's."""
         network = {**tiny["network"], **{k: overrides.pop(k) for k in set(overrides) & network_fields}}
-        return EgoDanceModule(**{**tiny, "network": network, **overrides})
+        args = {**tiny, "network": network}
+        for name in set(overrides) & set(renamed):
+            group, field = renamed[name]
+            args[group] = {**args.get(group, {}), field: overrides.pop(name)}
+        return EgoDanceModule(**{**args, **overrides})
 
     return build
 

@@ -204,7 +204,7 @@ def test_image_size_and_fps_are_linked_from_the_data_module():
 
     import_task_modules()
     data = ["--data.init_args.image_size", "48", "--data.init_args.fps", "20"]
-    args = ["--config", "egodance_demo.yaml", *data, "--model.init_args.head_source", "none"]
+    args = ["--config", "egodance_demo.yaml", *data, "--model.init_args.head_guidance.source", "none"]
     args += ["--trainer.logger", "false"]
     with pytest.warns(UserWarning, match="randomly initialised"):
         cli = SkeletonMambaCLI(
@@ -273,7 +273,7 @@ def test_music_width_is_linked_from_the_data_module(recipe, data_module, encoder
         args += [f"--data.init_args.root={tmp_path}", "--model.init_args.network.hidden=32"]
         args += ["--model.init_args.network.heads=2"]
     if recipe == "egodance_demo.yaml":
-        args += ["--model.init_args.head_source", "none"]
+        args += ["--model.init_args.head_guidance.source", "none"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the demo's random ResNet
         cli = SkeletonMambaCLI(

@@ -22,6 +22,7 @@ from skeleton_mamba.tasks.stream.data import StreamDanceDataModule
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.text2motion.data import SyntheticTextMotionDataModule
 from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, data_contract
+from skeleton_mamba.tasks.training.base_module import BackboneModule
 from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
 TINY = {"dim": 16, "depth": 1, "heads": 2, "mlp_dim": 32, "group_paths": [[1, 2, 0, 3, 4]],
@@ -125,3 +126,39 @@ def test_qean_checks_its_window_lengths_against_the_data_contract():
                          enable_model_summary=False, accelerator="cpu")  # fmt: skip
     with pytest.raises(ValueError, match=r"seed_frames = 12 but data.seed_frames = 16"):
         trainer.fit(module, _Windows(seed_frames=16))
+
+
+class _CachedMusic(SplitDataModule):
+    """Test windows from a data module whose music features are cached in ``music_cache_dir``."""
+
+    def __init__(self, music_cache_dir: str) -> None:
+        super().__init__(batch_size=1, num_workers=0)
+        self.music_cache_dir, self.fps = music_cache_dir, 25
+
+    def setup(self, stage: str) -> None:
+        self.datasets["test"] = [torch.zeros(1)]
+
+    def training_statistics(self) -> dict[str, torch.Tensor]:
+        raise AssertionError("the training statistics are read at fit only")
+
+
+class _ReadsContract(BackboneModule):
+    """Records the contract its test step sees."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list[DataContract | None] = []
+
+    def test_step(self, batch, batch_idx) -> None:
+        self.seen.append(self.contract)
+
+
+def test_the_test_loop_reads_the_music_cache_from_the_contract_not_the_data_hparams(tmp_path):
+    module = _ReadsContract()
+    assert module.contract is None  # built alone: no data module
+    trainer = pl.Trainer(logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                         enable_model_summary=False, accelerator="cpu")  # fmt: skip
+    trainer.test(module, _CachedMusic(str(tmp_path / "cache")))
+    (contract,) = module.seen
+    assert contract.music_cache_dir == str(tmp_path / "cache") and contract.fps == 25
+    assert contract.statistics == {}

@@ -292,15 +292,16 @@ def test_text2motion_sampling_arguments_are_checked(text2motion_module_class):
 
 
 def test_old_egodance_checkpoint_without_eta_loads(tiny_egodance_module, tmp_path):
-    from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+    from skeleton_mamba.tasks.egodance.module import DanceSampling, EgoDanceModule
     from skeleton_mamba.tasks.training.checkpoints import load_module
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # random ResNet
         module = tiny_egodance_module(sampler="ddpm")
-        _save(module, {k: v for k, v in module.hparams.items() if k != "eta"}, tmp_path / "old.ckpt")
+        sampling = {k: v for k, v in module.hparams["sampling"].items() if k != "eta"}
+        _save(module, {**module.hparams, "sampling": sampling}, tmp_path / "old.ckpt")
         loaded = load_module(EgoDanceModule, tmp_path / "old.ckpt")
-    assert loaded.sampling == SamplingOptions("ddpm", 2, 1.0, 2.0) == module.sampling
+    assert loaded.sampling == DanceSampling("ddpm", 2, 1.0, 2.0) == module.sampling
 
 
 # ------------------------------------------------------------------------------- long dances

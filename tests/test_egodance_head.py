@@ -3,6 +3,8 @@ encoder's loading, the recipes of the paper's protocol and of our fast variant, 
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import math
 from dataclasses import asdict
 from pathlib import Path
@@ -26,6 +28,7 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     head_trajectory_errors,
     head_trajectory_loss,
 )
+from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
@@ -215,9 +218,18 @@ def test_offline_uncached_resnet_stops_with_one_clear_message(monkeypatch):
 
 # ---------------------------------------------------------------------------------------- recipes
 def _model_args(name: str) -> dict:
-    """The recipe's model arguments, the ``network`` (EMMConfig) fields among them."""
+    """The recipe's model arguments over EgoDanceModule's defaults: the ``network`` (EMMConfig) fields among
+    them, a config group's fields as ``group.field``."""
     args = yaml.safe_load((RECIPES / name).read_text())["model"]["init_args"]
-    return {**args.pop("network"), **args}
+    out = {**args.pop("network")}
+    for key, parameter in inspect.signature(EgoDanceModule).parameters.items():
+        if dataclasses.is_dataclass(parameter.default):
+            given = args.pop(key, None) or {}
+            out.update({f"{key}.{k}": v for k, v in {**asdict(parameter.default), **given}.items()})
+        elif key != "network":
+            out[key] = args.pop(key, parameter.default)
+    assert not args, f"{name}: unknown model arguments {sorted(args)}"
+    return out
 
 
 def test_egodance_recipe_is_the_papers_protocol():
@@ -227,21 +239,16 @@ def test_egodance_recipe_is_the_papers_protocol():
     assert (backbone["dim"], backbone["depth"], backbone["heads"], backbone["mlp_dim"]) == (128, 8, 4, 1024)
     assert (paper["context_dim"], paper["heads"], paper["transformer_ff"]) == (256, 4, 512)
     assert paper["encoder_layers"] == paper["fusion_layers"] == 2
-    assert (paper["diffusion_steps"], paper["sampler"]) == (1000, "ddpm")
-    assert paper["cond_drop_prob"] == 0.0 and paper["guidance_weight"] == 1.0  # no classifier-free guidance
-    assert (paper["lr"], paper["resnet_path"]) == (0.0002, "microsoft/resnet-50")
-    assert paper["head_source"] == "estimate" and paper["test_oracle_head"] is True
+    assert (paper["diffusion_steps"], paper["sampling.sampler"]) == (1000, "ddpm")
+    assert paper["loss.cond_drop_prob"] == 0.0 and paper["sampling.guidance_weight"] == 1.0  # no CFG
+    assert (paper["optimizer.lr"], paper["resnet_path"]) == (0.0002, "microsoft/resnet-50")
+    assert paper["head_guidance.source"] == "estimate" and paper["head_guidance.test_oracle"] is True
     overlay = yaml.safe_load((RECIPES / "egodance_fast.yaml").read_text())
     assert overlay["base"] == "egodance.yaml"  # the merged result: tests/test_cli.py
     fast = overlay["model"]["init_args"]
-    assert (fast["sampler"], fast["sampling_steps"], fast["guidance_weight"], fast["cond_drop_prob"]) == (
-        "ddim",
-        50,
-        2.0,
-        0.25,
-    )
-    sampling = ("sampler", "sampling_steps", "guidance_weight", "cond_drop_prob")
-    assert set(fast) == set(sampling) and set(overlay["model"]) == {"init_args"}  # only the sampling differs
+    assert fast["sampling"] == {"sampler": "ddim", "sampling_steps": 50, "guidance_weight": 2.0}
+    assert fast["loss"] == {"cond_drop_prob": 0.25}
+    assert set(fast) == {"sampling", "loss"} and set(overlay["model"]) == {"init_args"}  # sampling only
     assert set(overlay) == {"base", "trainer", "model"} and set(overlay["trainer"]) == {"logger"}
     header = (RECIPES / "egodance_fast.yaml").read_text().splitlines()[0]
     assert "THIS PROJECT'S" in header

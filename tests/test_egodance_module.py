@@ -230,7 +230,7 @@ def test_demo_recipe_through_sm(tmp_path):
         "--data.init_args.frame_size", "32", "--data.init_args.image_size", "32",
         "--model.init_args.image_size", "32", "--data.init_args.val_fraction", "0",
         "--data.init_args.test_fraction", "0.1", "--data.init_args.music_cache_dir", str(tmp_path / "cache"),
-        "--model.init_args.sampling_steps", "2",
+        "--model.init_args.sampling.sampling_steps", "2",
     ]  # fmt: skip
     proc = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]

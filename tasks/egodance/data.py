@@ -53,6 +53,10 @@ from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
+FPS = 30
+"""Motion and music frame rate of EgoAIST++ samples (what ``sm make-ego`` writes): the data modules' default,
+linked from them to the model (:class:`~skeleton_mamba.tasks.training.base_data.DataContract`)."""
+
 __all__ = [
     "EgoDanceDataset",
     "EgoDanceDataModule",
@@ -114,7 +118,7 @@ class EgoDanceDataset(Dataset):
         self,
         folders: list[Path],
         window: int = 150,
-        fps: int = 30,
+        fps: int = FPS,
         load_frames: bool = True,
         image_size: int = 224,
         music_cache_dir: str | None = None,
@@ -219,7 +223,7 @@ class EgoDanceDataModule(SplitDataModule):
         self,
         root: str = "data/egoaistpp",
         window: int = 150,
-        fps: int = 30,
+        fps: int = FPS,
         batch_size: int = 64,
         num_workers: int = 0,
         load_frames: bool = True,
@@ -234,6 +238,7 @@ class EgoDanceDataModule(SplitDataModule):
         self.save_hyperparameters()
         self.root = Path(root)
         self.fps, self.image_size = fps, image_size  # linked to the model
+        self.music_cache_dir = music_cache_dir  # the test loop's beats read the same cache (DataContract)
         self.music_dim = NUM_MUSIC_FEATURES  # the width of the 30 fps librosa features, linked too
 
     def check_data(self) -> list[Path]:
@@ -329,7 +334,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         seed: int = 0,
         swing_side: str = "random",
         window: int = 150,
-        fps: int = 30,
+        fps: int = FPS,
         batch_size: int = 4,
         num_workers: int = 0,
         load_frames: bool = True,

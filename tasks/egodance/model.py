@@ -114,7 +114,7 @@ class EMM(PretrainedMixin, nn.Module):
             out_channels=NUM_CHANNELS,
             context_dim=context_dim,
         )
-        d = cfg.dim
+        self.dim = d = cfg.dim
         self.context_dim = context_dim
         self.input_proj = nn.Linear(NUM_CHANNELS, d)
         self.time_mlp = nn.Sequential(nn.Linear(d, 4 * d), nn.SiLU(), nn.Linear(4 * d, d))
@@ -214,7 +214,7 @@ class EMM(PretrainedMixin, nn.Module):
         if context is None:
             context = self.null_context.to(x_t.dtype).expand(b, n, -1)
         # the [sin, cos] timestep embedding (EDGE's order; diffusion/embedding.py)
-        temb = self.time_mlp(sinusoidal_embedding(t, self.input_proj.out_features).to(x_t.dtype))
+        temb = self.time_mlp(sinusoidal_embedding(t, self.dim).to(x_t.dtype))
         h = self.input_proj(self.skip_x0.network_input(x_t, t)) + temb[:, None, None, :]
         if self.frame_condition is not None:
             if context.shape[1] != n:

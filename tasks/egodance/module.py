@@ -28,13 +28,13 @@ from __future__ import annotations
 import dataclasses
 
 import torch
-from lightning.pytorch import LightningModule
 from lightning.pytorch.utilities import rank_zero_info
 from torch import nn
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchmetrics import MeanMetric
 
 from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.egodance.data import FPS
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
 from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadEstimatorConfig,
@@ -50,7 +50,7 @@ from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.music import record_audio_stack
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
-from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
+from skeleton_mamba.tasks.training.base_module import BackboneModule
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, SamplingOptions
 
 __all__ = ["EgoDanceModule", "HEAD_SOURCES"]
@@ -59,14 +59,89 @@ HEAD_SOURCES = {"estimate": "estimated_head", "oracle": "oracle_head", "none": "
 """Head-guidance sources and the name their test metrics are logged under (``test/<name>/...``)."""
 
 
-def _music_cache_dir(module: LightningModule) -> str | None:
-    """The data module's ``music_cache_dir`` when the module runs in a Trainer with one, else ``None``."""
-    datamodule = getattr(attached_trainer(module), "datamodule", None)
-    return getattr(datamodule, "hparams", {}).get("music_cache_dir")
+@dataclasses.dataclass(frozen=True)
+class DanceSampling(SamplingOptions):
+    """The EMM's test and predict sampling (:class:`SamplingOptions`); classifier-free guidance w 2 (EDGE)."""
+
+    guidance_weight: float = 2.0
+
+
+@dataclasses.dataclass(frozen=True)
+class LossOptions:
+    """The training loss beside L_kin's weights (:class:`~.losses.KinematicLossWeights`).
+
+    Attributes:
+        cond_drop_prob: probability of training with the null condition (EDGE: 0.25).
+        reconstruction: ``l2`` (EDGE) or ``l1`` (original code).
+        contact_threshold: predicted-contact threshold of L_contact.
+        lambda_align: weight of the music-vision alignment loss (0 disables; vision models only).
+        align_temperature: its InfoNCE temperature tau.
+        lambda_head: weight of the head-trajectory estimator's loss.
+    """
+
+    cond_drop_prob: float = 0.25
+    reconstruction: str = "l2"
+    contact_threshold: float = 0.95
+    lambda_align: float = 0.01
+    align_temperature: float = 0.07
+    lambda_head: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class OptimizerOptions:
+    """AdamW and the weights' exponential moving average (original code: 0.995 every 10 steps).
+
+    Attributes:
+        lr: AdamW learning rate (2e-4). weight_decay: AdamW weight decay.
+        ema_decay: EMA decay. ema_every: update the EMA every this many optimizer steps.
+    """
+
+    lr: float = 2e-4
+    weight_decay: float = 0.02
+    ema_decay: float = 0.995
+    ema_every: int = 10
+
+
+@dataclasses.dataclass(frozen=True)
+class HeadGuidance:
+    """G_head at sampling time.
+
+    Attributes:
+        weight: step size (0 disables). steps: gradient steps per sampling step.
+        source: where it takes its targets (:data:`HEAD_SOURCES`): ``estimate`` (from the frames), ``oracle``
+            (the ground-truth camera path; evaluation only) or ``none``.
+        test_oracle: at test, also sample with the oracle head (logged as ``test/oracle_head/...``).
+    """
+
+    weight: float = 0.05
+    steps: int = 1
+    source: str = "estimate"
+    test_oracle: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class EvaluationOptions:
+    """Validation and test.
+
+    Attributes:
+        seed: seed of the evaluation noise.
+        protocol: dance-evaluation protocol of the test loop: ``"edge"`` (default), ``"bailando"`` or
+            ``"fact"`` (see the module docstring).
+    """
+
+    seed: int = 0
+    protocol: str = "edge"
+
+
+_GROUPS = ("loss", "kinematic", "optimizer", "sampling", "head_guidance", "head_estimator", "evaluation")
+"""EgoDanceModule's arguments that are config dataclasses (stored in checkpoints as plain dicts)."""
 
 
 class EgoDanceModule(BackboneModule):
     """EMM trained as a conditional diffusion model.
+
+    Every group of settings is a config dataclass passed whole; its defaults are the dataclass's and
+    checkpoints store it as a plain dict.
 
     Args:
         backbone: SkeletonMamba settings (recipes include ``backbones/skeleton_mamba.yaml``).
@@ -75,88 +150,67 @@ class EgoDanceModule(BackboneModule):
             downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
             ``network.resnet_layers`` (an explicit choice, warned).
         image_size: ResNet input size. Linked from the data module (not user-settable under ``sm``).
-        fps: motion and music frame rate of the test metrics. Linked from the data module.
+        fps: motion and music frame rate of the test metrics. Linked from the data module (its default
+            :data:`.data.FPS` when the module is built alone).
         diffusion_steps: T (1000).
-        cond_drop_prob: probability of training with the null condition.
-        reconstruction: ``l2`` (EDGE) or ``l1`` (original code).
-        lambda_pos: weight of L_pos. lambda_vel: of L_vel. lambda_contact: of L_contact (unpublished).
-        contact_threshold: predicted-contact threshold of L_contact.
-        lambda_align: weight of the music-vision alignment loss (0 disables; vision models only).
-        align_temperature: its InfoNCE temperature tau.
-        lr: AdamW learning rate (2e-4). weight_decay: AdamW weight decay.
-        ema_decay: EMA decay. ema_every: update the EMA every this many optimizer steps.
-        sampler: ``ddim`` or ``ddpm`` at test/predict time. sampling_steps: DDIM steps. eta: DDIM noise
-            (EDGE: 1) (:class:`~skeleton_mamba.tasks.training.diffusion.SamplingOptions`).
-        guidance_weight: classifier-free guidance weight w (EDGE: 2).
-        head_guidance_weight: G_head step size (0 disables). head_guidance_steps: gradient steps per step.
-        head_source: where head guidance takes its targets: ``estimate`` (from the frames), ``oracle`` (the
-            ground-truth camera path; evaluation only) or ``none``.
+        loss: :class:`LossOptions`. kinematic: L_kin's weights (:class:`~.losses.KinematicLossWeights`).
+        optimizer: :class:`OptimizerOptions`.
+        sampling: sampler at test/predict time (:class:`DanceSampling`).
+        head_guidance: :class:`HeadGuidance`.
         use_head_estimator: train the head-trajectory estimator (vision models only).
-        head_estimator: its settings (None: :class:`HeadEstimatorConfig` defaults).
-        lambda_head: weight of its loss.
-        test_oracle_head: at test, also sample with the oracle head (logged as ``test/oracle_head/...``).
-        seed: seed of the evaluation noise.
-        protocol: dance-evaluation protocol of the test loop: ``"edge"`` (default), ``"bailando"`` or
-            ``"fact"`` (see the module docstring).
+        head_estimator: its settings (:class:`~.head_estimator.HeadEstimatorConfig`).
+        evaluation: :class:`EvaluationOptions`.
     """
 
+    # Dataclass defaults (never mutated) so that LightningCLI shows and sets every field of each group.
     def __init__(
         self,
         backbone: SkeletonMambaConfig | None = None,
         network: EMMConfig | None = None,
         resnet_path: str | None = None,
         image_size: int = 224,
-        fps: int = 30,
+        fps: int = FPS,
         diffusion_steps: int = 1000,
-        cond_drop_prob: float = 0.25,
-        reconstruction: str = "l2",
-        lambda_pos: float = 1.0,
-        lambda_vel: float = 0.1,
-        lambda_contact: float = 1.0,
-        contact_threshold: float = 0.95,
-        lambda_align: float = 0.01,
-        align_temperature: float = 0.07,
-        lr: float = 2e-4,
-        weight_decay: float = 0.02,
-        ema_decay: float = 0.995,
-        ema_every: int = 10,
-        sampler: str = "ddim",
-        sampling_steps: int = 50,
-        eta: float = 1.0,
-        guidance_weight: float = 2.0,
-        head_guidance_weight: float = 0.05,
-        head_guidance_steps: int = 1,
-        head_source: str = "estimate",
+        loss: LossOptions = LossOptions(),  # noqa: B008
+        kinematic: KinematicLossWeights = KinematicLossWeights(),  # noqa: B008
+        optimizer: OptimizerOptions = OptimizerOptions(),  # noqa: B008
+        sampling: DanceSampling = DanceSampling(),  # noqa: B008
+        head_guidance: HeadGuidance = HeadGuidance(),  # noqa: B008
         use_head_estimator: bool = True,
-        head_estimator: HeadEstimatorConfig | None = None,
-        lambda_head: float = 1.0,
-        test_oracle_head: bool = True,
-        seed: int = 0,
-        protocol: str = "edge",
+        head_estimator: HeadEstimatorConfig = HeadEstimatorConfig(),  # noqa: B008
+        evaluation: EvaluationOptions = EvaluationOptions(),  # noqa: B008
     ) -> None:
         super().__init__()
         network = config_from(EMMConfig, network)
+        self.loss_options = config_from(LossOptions, loss)
+        self.weights = config_from(KinematicLossWeights, kinematic)
+        self.optimizer_options = config_from(OptimizerOptions, optimizer)
+        self.sampling = config_from(DanceSampling, sampling)
+        self.head_guidance = config_from(HeadGuidance, head_guidance)
+        estimator_config = config_from(HeadEstimatorConfig, head_estimator)
+        self.evaluation = config_from(EvaluationOptions, evaluation)
+        protocol = self.evaluation.protocol
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
-        if head_source not in HEAD_SOURCES:
-            raise ValueError(f"head_source must be one of {sorted(HEAD_SOURCES)}, got {head_source!r}")
+        source = self.head_guidance.source
+        if source not in HEAD_SOURCES:
+            raise ValueError(f"head_source must be one of {sorted(HEAD_SOURCES)}, got {source!r}")
         has_estimator = network.use_vision and use_head_estimator
-        if head_source == "estimate" and not has_estimator:
+        if source == "estimate" and not has_estimator:
             raise ValueError(
                 "head_source='estimate' needs the head-trajectory estimator, which needs egocentric frames "
                 "(use_vision=True, use_head_estimator=True); choose head_source 'none' (or 'oracle')"
             )
-        SamplingOptions(sampler, sampling_steps, eta, guidance_weight)  # checks them
-        estimator_config = config_from(HeadEstimatorConfig, head_estimator)
-        ignore = ("network", "head_estimator")
-        config = self.save_backbone_hyperparameters(backbone, ignore=ignore)
+        config = self.save_backbone_hyperparameters(backbone, ignore=("network", *_GROUPS))
         self.hparams["network"] = plain_backbone_config(network)
-        self.hparams["head_estimator"] = plain_backbone_config(estimator_config)
+        groups = (self.loss_options, self.weights, self.optimizer_options, self.sampling, self.head_guidance,
+                  estimator_config, self.evaluation)  # fmt: skip
+        self.hparams.update({name: plain_backbone_config(group) for name, group in zip(_GROUPS, groups)})
         self.model = EMM(config, network, resnet_path, image_size, diffusion_steps)
-        self.ema = AveragedModel(self.model, multi_avg_fn=get_ema_multi_avg_fn(ema_decay), use_buffers=True)
+        ema = get_ema_multi_avg_fn(self.optimizer_options.ema_decay)
+        self.ema = AveragedModel(self.model, multi_avg_fn=ema, use_buffers=True)
         self.ema.requires_grad_(False)
         self.diffusion = GaussianDiffusion(diffusion_steps)
-        self.weights = KinematicLossWeights(lambda_pos, lambda_vel, lambda_contact)
         self.head_estimator = HeadTrajectoryEstimator(estimator_config) if has_estimator else None
         self.test_metrics = nn.ModuleDict({name: DanceMetrics() for name in HEAD_SOURCES.values()})
         scorer = FACTProtocol(seed_frames=0) if protocol == "fact" else get_protocol(protocol)
@@ -195,7 +249,7 @@ class EgoDanceModule(BackboneModule):
         context = self.model.fuse(z_a, z_v)
         b = x0.shape[0]
         u = torch.rand(b, generator=generator).to(x0.device)
-        context = self.model.drop_condition(context, u < self.hparams.cond_drop_prob)
+        context = self.model.drop_condition(context, u < self.loss_options.cond_drop_prob)
         t = torch.randint(0, self.diffusion.num_steps, (b,), generator=generator).to(x0.device)
         noise = torch.randn(x0.shape, generator=generator).to(x0.device, x0.dtype)
         x_t, t, target = self.diffusion.training_pair(x0, t, noise)
@@ -203,12 +257,12 @@ class EgoDanceModule(BackboneModule):
             self.model(x_t, t, context),
             target,
             self.weights,
-            self.hparams.reconstruction,
-            self.hparams.contact_threshold,
+            self.loss_options.reconstruction,
+            self.loss_options.contact_threshold,
         )
-        if z_v is not None and self.hparams.lambda_align > 0:
-            losses["align"] = alignment_loss(z_a, z_v, self.hparams.align_temperature)
-            losses["loss"] = losses["loss"] + self.hparams.lambda_align * losses["align"]
+        if z_v is not None and self.loss_options.lambda_align > 0:
+            losses["align"] = alignment_loss(z_a, z_v, self.loss_options.align_temperature)
+            losses["loss"] = losses["loss"] + self.loss_options.lambda_align * losses["align"]
         return losses
 
     def _head_estimator_loss(self, batch: dict) -> torch.Tensor | None:
@@ -230,18 +284,18 @@ class EgoDanceModule(BackboneModule):
         head_loss = self._head_estimator_loss(batch)
         if head_loss is not None:  # independent parameters: adding it leaves the EMM's gradients unchanged
             losses["head_traj"] = head_loss
-            losses["loss"] = losses["loss"] + self.hparams.lambda_head * head_loss
+            losses["loss"] = losses["loss"] + self.loss_options.lambda_head * head_loss
         b = batch["motion"].shape[0]
         self.log_dict({f"train/{k}": v for k, v in losses.items() if k != "loss"}, batch_size=b)
         self.log("train/loss", losses["loss"], prog_bar=True, batch_size=b)
         return losses["loss"]
 
     def on_train_batch_end(self, outputs, batch, batch_idx: int) -> None:
-        if self.global_step % self.hparams.ema_every == 0:
+        if self.global_step % self.optimizer_options.ema_every == 0:
             self.ema.update_parameters(self.model)
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
-        gen = torch.Generator().manual_seed(self.hparams.seed + batch_idx)
+        gen = torch.Generator().manual_seed(self.evaluation.seed + batch_idx)
         losses = self._losses(batch, gen)
         b = batch["motion"].shape[0]
         self.log("val/loss", losses["loss"], prog_bar=True, batch_size=b, sync_dist=True)
@@ -264,11 +318,6 @@ class EgoDanceModule(BackboneModule):
                 nn.utils.clip_grad_norm_(grads, gradient_clip_val)
 
     # ------------------------------------------------------------------ sampling
-    @property
-    def sampling(self) -> SamplingOptions:
-        """Test and predict sampling: ``sampler``, ``sampling_steps``, ``eta``, ``guidance_weight``."""
-        return SamplingOptions.from_hparams(self.hparams)
-
     @torch.no_grad()
     def estimate_head(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Head positions (B, T, 3) and rotations (B, T, 3, 3) estimated from frames (B, T, 3, H, W)."""
@@ -282,8 +331,9 @@ class EgoDanceModule(BackboneModule):
             self.head_estimator.train(was_training)
 
     def head_targets(self, batch: dict, source: str | None = None) -> torch.Tensor | None:
-        """Head guidance targets (B, T, 3) of ``source`` (default ``head_source``), or None for ``none``."""
-        source = source or self.hparams.head_source
+        """Head guidance targets (B, T, 3) of ``source`` (default ``head_guidance.source``), or None for
+        ``none``."""
+        source = source or self.head_guidance.source
         if source == "none":
             return None
         if source == "oracle":
@@ -305,9 +355,8 @@ class EgoDanceModule(BackboneModule):
         head: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Motion tokens (B, T, 24, 10) for a batch's music and frames, head guidance from ``head_source``
-        (default: the module's ``head_source``) or the given ``head`` targets (B, T, 3)."""
+        (default: ``head_guidance.source``) or the given ``head`` targets (B, T, 3)."""
         model = self.ema.module if use_ema else self.model
-        hp = self.hparams
         if head is None:
             head = self.head_targets(batch, head_source)
         return sample_dance(
@@ -317,14 +366,14 @@ class EgoDanceModule(BackboneModule):
             batch.get("frames"),
             head,
             **dataclasses.asdict(self.sampling),
-            head_guidance_weight=hp.head_guidance_weight,
-            head_guidance_steps=hp.head_guidance_steps,
-            generator=torch.Generator().manual_seed(hp.seed + batch_idx),
+            head_guidance_weight=self.head_guidance.weight,
+            head_guidance_steps=self.head_guidance.steps,
+            generator=torch.Generator().manual_seed(self.evaluation.seed + batch_idx),
         )
 
     def _test_sources(self, batch: dict) -> list[str]:
-        sources = [self.hparams.head_source]
-        if self.hparams.test_oracle_head and "oracle" not in sources and batch.get("head") is not None:
+        sources = [self.head_guidance.source]
+        if self.head_guidance.test_oracle and "oracle" not in sources and batch.get("head") is not None:
             sources.append("oracle")
         return sources
 
@@ -347,7 +396,8 @@ class EgoDanceModule(BackboneModule):
                 b = len(pos_err)
                 self.log("test/head_estimator/position_mm", self.test_head_position, batch_size=b)
                 self.log("test/head_estimator/rotation_deg", self.test_head_rotation, batch_size=b)
-        protocol, cache = next(iter(self.test_evaluations.values())).protocol, _music_cache_dir(self)
+        protocol = next(iter(self.test_evaluations.values())).protocol
+        cache = None if self.contract is None else self.contract.music_cache_dir  # the data's feature cache
         fps = self.hparams.fps
         duration = true.shape[1] / fps
         music_beats = [
@@ -384,11 +434,12 @@ class EgoDanceModule(BackboneModule):
             "sample_id": batch.get("sample_id"),
             "tokens": tokens,
             "joints": motion_joints(tokens),
-            "head_source": self.hparams.head_source,
+            "head_source": self.head_guidance.source,
         }
 
     def configure_optimizers(self):
         params = [p for p in self.model.parameters() if p.requires_grad]
         if self.head_estimator is not None:
             params += list(self.head_estimator.parameters())
-        return torch.optim.AdamW(params, lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+        options = self.optimizer_options
+        return torch.optim.AdamW(params, lr=options.lr, weight_decay=options.weight_decay)

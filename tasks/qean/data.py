@@ -176,6 +176,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         self.batch_size = batch_size
         self.seed_frames, self.music_frames = seed_frames, music_frames  # linked to the model
         self.music_dim = NUM_MUSIC_FEATURES  # the width of the 60 fps librosa features, linked too
+        self.music_cache_dir = music_cache_dir  # the test loop's beats read the same cache (DataContract)
         self.predict_frames, self.generate_frames = predict_frames, generate_frames
         self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.datasets: dict[str, Dataset] = {}

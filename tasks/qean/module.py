@@ -111,7 +111,7 @@ class QEANModule(BackboneModule):
         """The window lengths must be the data's (:class:`DataContract`; ``sm`` links them, a module built
         by hand may differ)."""
         super().setup(stage)
-        contract = self.data_contract()
+        contract = self.contract
         lengths = ("seed_frames", "music_frames", "predict_frames")
         ours = {key: getattr(self.model.config, key) for key in lengths}
         ours["generate_frames"] = self.hparams.generate_frames
@@ -164,11 +164,11 @@ class QEANModule(BackboneModule):
         full = self.generate(batch["seed"], batch["music"])
         joints = features_to_joints(full.double())  # (B, 120 + G, 24, 3)
         protocol = self.test_evaluation.protocol
+        cache = None if self.contract is None else self.contract.music_cache_dir  # the data's feature cache
         for i in range(full.shape[0]):
             if protocol.name == "fact":  # the data module's features are FACT's: beats of the whole window
                 beats = np.flatnonzero(batch["music"][i, :, BEAT].cpu().numpy() > 0.5)
             else:
-                cache = getattr(self.trainer.datamodule, "hparams", {}).get("music_cache_dir")
                 beats = protocol.music_beats(batch["music_path"][i], cache_dir=cache)
             self.test_evaluation.add(joints[i].cpu(), FPS, beats)
         self._generated_count += full.shape[0]

@@ -10,8 +10,9 @@ rates fixed when the data module is built (``music_dim``, ``fps``, ``skeleton``,
 to the model's argument of that name,
 :data:`~skeleton_mamba.tasks.training.lightning_cli.DATA_TO_MODEL_LINKS`)
 and the per-channel statistics of the training split (:meth:`SplitDataModule.training_statistics`, set once
-the split is read; :meth:`~skeleton_mamba.tasks.training.base_module.BackboneModule.setup` hands them to the
-model).
+the split is read). :meth:`~skeleton_mamba.tasks.training.base_module.BackboneModule.setup` hands the contract
+to the model at every stage (``module.contract``: e.g. the music cache of the test loop's beats) and its
+statistics at ``fit``.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ class DataContract:
         num_classes: action classes. in_channels: channels per joint.
         image_size: side of the egocentric frames (pixels).
         seed_frames, music_frames, predict_frames, generate_frames: window lengths (frames).
+        music_cache_dir: where the data module caches music features (None: the toolkit's default); the test
+            loops compute their protocol's music beats through the same cache.
         statistics: per-channel statistics of the training split, by name (empty before ``setup("fit")``;
             the names are the task's: ``motion`` / ``music`` training frames, ``feature_mean`` ...).
     """
@@ -52,16 +55,18 @@ class DataContract:
     music_frames: int | None = None
     predict_frames: int | None = None
     generate_frames: int | None = None
+    music_cache_dir: str | None = None
     statistics: Mapping[str, torch.Tensor] = dataclasses.field(default_factory=dict)
 
 
 _CONTRACT_SIZES = tuple(f.name for f in dataclasses.fields(DataContract) if f.name != "statistics")
 
 
-def data_contract(datamodule: LightningDataModule) -> DataContract:
-    """The :class:`DataContract` of any data module: its attributes of the contract's names, and its
-    ``training_statistics()`` where it has them (a data module not built on :class:`SplitDataModule`)."""
-    statistics = getattr(datamodule, "training_statistics", None)
+def data_contract(datamodule: LightningDataModule, include_statistics: bool = True) -> DataContract:
+    """The :class:`DataContract` of any data module: its attributes of the contract's names, and (with
+    ``include_statistics``) its ``training_statistics()`` where it has them (a data module not built on
+    :class:`SplitDataModule`)."""
+    statistics = getattr(datamodule, "training_statistics", None) if include_statistics else None
     return DataContract(
         **{name: getattr(datamodule, name, None) for name in _CONTRACT_SIZES},
         statistics=dict(statistics()) if callable(statistics) else {},

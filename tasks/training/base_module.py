@@ -6,9 +6,10 @@ so that they load with ``weights_only=True`` (:mod:`skeleton_mamba.tasks.trainin
 
 What follows from the data reaches a task module in two ways only, both from the data module's
 :class:`~skeleton_mamba.tasks.training.base_data.DataContract`: its sizes and rates as ``__init__`` arguments
-(LightningCLI links them), and its training statistics through :meth:`BackboneModule.setup`, which hands them
-to the module's :meth:`~BackboneModule.set_data_statistics` once, at ``fit`` (a resumed run then restores the
-checkpoint's copy over them).
+(LightningCLI links them), and the contract itself through :meth:`BackboneModule.setup`, which keeps it as
+:attr:`BackboneModule.contract` (what the test loops read, e.g. ``music_cache_dir``) and hands its training
+statistics to the module's :meth:`~BackboneModule.set_data_statistics` once, at ``fit`` (a resumed run then
+restores the checkpoint's copy over them). A module never reads its data module's hyper-parameters.
 """
 
 from __future__ import annotations
@@ -42,7 +43,14 @@ def attached_trainer(module: LightningModule) -> pl.Trainer | None:
 
 
 class BackboneModule(LightningModule):
-    """A LightningModule built on a SkeletonMamba backbone (recipes: ``backbones/skeleton_mamba.yaml``)."""
+    """A LightningModule built on a SkeletonMamba backbone (recipes: ``backbones/skeleton_mamba.yaml``).
+
+    Attributes:
+        contract: the data module's :class:`DataContract` as :meth:`setup` received it (None before ``setup``,
+            outside a Trainer or without a data module; its ``statistics`` are filled at ``fit`` only).
+    """
+
+    contract: DataContract | None = None
 
     def save_backbone_hyperparameters(
         self,
@@ -60,16 +68,17 @@ class BackboneModule(LightningModule):
         self.hparams["backbone"] = None if config is None else plain_backbone_config(config)
         return config
 
-    def data_contract(self) -> DataContract | None:
+    def data_contract(self, include_statistics: bool = True) -> DataContract | None:
         """The :class:`DataContract` of the Trainer's data module (None outside a Trainer or without one)."""
         datamodule = getattr(attached_trainer(self), "datamodule", None)
-        return None if datamodule is None else data_contract(datamodule)
+        return None if datamodule is None else data_contract(datamodule, include_statistics)
 
     def setup(self, stage: str) -> None:
-        """Fit: the data module's training statistics to :meth:`set_data_statistics` (when it has any)."""
-        contract = self.data_contract() if stage == "fit" else None
-        if contract is not None and contract.statistics:
-            self.set_data_statistics(contract.statistics)
+        """The data module's contract to :attr:`contract`; at fit its training statistics to
+        :meth:`set_data_statistics` (when it has any)."""
+        self.contract = self.data_contract(include_statistics=stage == "fit")
+        if self.contract is not None and self.contract.statistics:
+            self.set_data_statistics(self.contract.statistics)
 
     def set_data_statistics(self, statistics: Mapping[str, torch.Tensor]) -> None:
         """Take the training split's statistics (:attr:`DataContract.statistics`); a task with
