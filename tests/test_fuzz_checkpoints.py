@@ -160,6 +160,12 @@ def _inf_weight(c: dict, cmd: str) -> str:
     return f"weights are not finite ({key}: 2 of {tensor.numel()} values NaN or Inf)"
 
 
+def _old_settings(c: dict, cmd: str) -> str:
+    # A setting an earlier version of the task took (EgoDance's flat ``lambda_vel``): refused, not dropped.
+    c["hyper_parameters"]["lambda_vel"] = 0.1
+    return f"settings lambda_vel are not {CLASS[cmd].rsplit('.', 1)[-1]} arguments"
+
+
 def _no_state_dict(c: dict, cmd: str) -> str:
     del c["state_dict"]
     return "not a Lightning checkpoint (no 'state_dict')"
@@ -178,6 +184,7 @@ MUTATIONS: dict[str, Callable[[dict, str], str]] = {
     "nan_weight": _nan_weight,
     "inf_weight": _inf_weight,
     "no_state_dict": _no_state_dict,
+    "old_settings": _old_settings,
 }
 FILES = {
     "empty": "not a readable PyTorch checkpoint",

@@ -28,6 +28,7 @@ reads through :func:`load_checkpoint`, writes through a temporary file in the ch
 
 from __future__ import annotations
 
+import inspect
 import io
 import os
 import pickle
@@ -53,6 +54,7 @@ __all__ = [
     "check_class_paths",
     "check_finite_state",
     "check_finite_tensors",
+    "check_settings_known",
     "check_state_fits",
     "checked_state_shapes",
     "load_checkpoint",
@@ -288,6 +290,30 @@ def check_state_fits(
             )
 
 
+def check_settings_known(cls: type, hparams: Mapping[str, Any], source: str) -> None:
+    """Refuse hyper-parameters that ``cls.__init__`` does not take (a checkpoint of an earlier version of
+    the task, whose settings would otherwise be dropped for the defaults without a word).
+
+    Keys starting with ``_`` (Lightning's ``_class_path``, ``_instantiator``) are not settings; a class
+    whose ``__init__`` takes ``**kwargs`` accepts any.
+
+    Raises:
+        CheckpointError: naming ``source``, the unknown settings and the class.
+    """
+    parameters = inspect.signature(cls.__init__).parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
+        return
+    names = {p.name for p in parameters}
+    unknown = sorted(k for k in hparams if not str(k).startswith("_") and k not in names)
+    if unknown:
+        more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+        shown = ", ".join(map(str, unknown[:5])) + more
+        raise CheckpointError(
+            f"{source}: settings {shown} are not {cls.__name__} arguments: the checkpoint was written by "
+            "another version of the task (train it again with this version)"
+        )
+
+
 def load_module(cls: type[ModuleT], path: str | PathLike[str], map_location: Any = "cpu") -> ModuleT:
     """``cls.load_from_checkpoint`` on a checked checkpoint: read once, checked, then built ``weights_only``.
 
@@ -312,6 +338,7 @@ def load_module_and_checkpoint(
             f"{p}: holds a {stored}, not a {cls.__name__} (this is {_a(_task_of(str(stored)))} checkpoint, "
             f"not {_a(_task_of(f'{cls.__module__}.{cls.__qualname__}'))} one)"
         )
+    check_settings_known(cls, checkpoint.get("hyper_parameters", {}), str(p))
     state = checkpoint["state_dict"]
     check_finite_tensors(state, str(p))
     # The module as Lightning builds it from the hyper-parameters (its instantiator, old hparams keys),
