@@ -43,7 +43,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "generate": ("skeleton_mamba.tasks.text2motion.generate_cli:main", "generate motion from text"),
     "export-onnx": (
         "skeleton_mamba.tasks.training.onnx_export:main",
-        "the backbone's sequence forward and streaming step as ONNX",
+        "a backbone or task network as ONNX (sequence forward, streaming step)",
     ),
     "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
     "export-pretrained": (
