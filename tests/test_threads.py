@@ -1,4 +1,5 @@
-"""``sm``'s thread defaults (one intra-op thread, a passive OpenMP wait policy, unless the user set them)
+"""``sm``'s thread defaults (one intra-op thread on a small machine, a passive OpenMP wait policy, unless the
+user set them)
 and the real-time hint naming the fix."""
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import pytest
 import torch
 
 from skeleton_mamba.tasks.training.frame_timing import realtime_hint
-from skeleton_mamba.tasks.training.threads import apply_thread_defaults
+from skeleton_mamba.tasks.training.threads import SMALL_MACHINE_CORES, apply_thread_defaults
 
 LATE = {"median_ms": 20.0, "p99_ms": 371.0, "max_ms": 500.0}  # the p99 reported under load
 ON_TIME = {"median_ms": 3.0, "p99_ms": 19.0, "max_ms": 25.0}
@@ -28,16 +29,26 @@ def torch_threads():
 def test_defaults_fill_only_what_the_environment_lacks(torch_threads):
     torch.set_num_threads(2)
     env: dict[str, str] = {}
-    assert apply_thread_defaults(env) == 1 == torch.get_num_threads()
+    assert apply_thread_defaults(env, cores=2) == 1 == torch.get_num_threads()
     assert env == {"OMP_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
 
     torch.set_num_threads(2)
     env = {"OMP_NUM_THREADS": "2", "OMP_WAIT_POLICY": "ACTIVE"}
-    assert apply_thread_defaults(env) == 2  # the user's count: torch left as it was
+    assert apply_thread_defaults(env, cores=2) == 2  # the user's count: torch left as it was
     assert env == {"OMP_NUM_THREADS": "2", "OMP_WAIT_POLICY": "ACTIVE"}
 
     env = {"OMP_WAIT_POLICY": "ACTIVE"}  # only the count is sm's
-    assert apply_thread_defaults(env) == 1 and env == {"OMP_WAIT_POLICY": "ACTIVE", "OMP_NUM_THREADS": "1"}
+    assert apply_thread_defaults(env, cores=2) == 1
+    assert env == {"OMP_WAIT_POLICY": "ACTIVE", "OMP_NUM_THREADS": "1"}
+
+
+def test_a_large_machine_keeps_torchs_thread_count(torch_threads):
+    torch.set_num_threads(3)
+    env: dict[str, str] = {}
+    assert apply_thread_defaults(env, cores=SMALL_MACHINE_CORES + 1) == 3  # a paper-size model uses its cores
+    assert env == {"OMP_WAIT_POLICY": "PASSIVE"}
+    env = {}
+    assert apply_thread_defaults(env, cores=SMALL_MACHINE_CORES) == 1 and env["OMP_NUM_THREADS"] == "1"
 
 
 PROBE = (

@@ -102,7 +102,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if command not in commands:
         print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
         return 2
-    apply_thread_defaults()  # one intra-op thread unless OMP_NUM_THREADS is set (.threads)
+    apply_thread_defaults()  # one intra-op thread on a small machine unless OMP_NUM_THREADS is set
     module_name, func_name = _target(command, rest, commands[command][0]).split(":")
     if command in LIGHTNING_SUBCOMMANDS:
         rest = [command, *rest]

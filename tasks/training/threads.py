@@ -1,12 +1,15 @@
-"""The CPU thread defaults of every ``sm`` command: one intra-op thread unless the user says otherwise.
+"""The CPU thread defaults of every ``sm`` command: one intra-op thread on a small machine unless the user
+says otherwise.
 
 The project's CPU work is many small kernels (a tiny demo backbone, one pose per frame in ``sm stream``):
 split over several OpenMP threads, each kernel waits for the slowest thread, and on a machine that is also
 running other jobs a descheduled thread stalls every kernel while the others spin. One thread does not
-wait for anyone. So, unless ``OMP_NUM_THREADS`` is set, ``sm`` runs torch on one intra-op thread and passes
-``OMP_NUM_THREADS=1`` and ``OMP_WAIT_POLICY=PASSIVE`` (idle OpenMP threads sleep instead of spinning) on
-to the processes it starts. A user's own ``OMP_NUM_THREADS`` / ``OMP_WAIT_POLICY`` wins, as does
-``sm stream --threads N``.
+wait for anyone. On a machine of at most :data:`SMALL_MACHINE_CORES` cores, where a second thread gains at
+most a few tens of percent on a quiet machine and one busy neighbour costs several times that, ``sm`` runs
+torch on one intra-op thread and passes ``OMP_NUM_THREADS=1`` on to the processes it starts, unless
+``OMP_NUM_THREADS`` is set; on a larger machine torch's own count stays (a paper-size model gains from its
+cores). Everywhere it passes ``OMP_WAIT_POLICY=PASSIVE`` (idle OpenMP threads sleep instead of spinning).
+A user's own ``OMP_NUM_THREADS`` / ``OMP_WAIT_POLICY`` wins, as does ``sm stream --threads N``.
 
 ``import torch`` starts OpenMP and reads these variables then; ``sm`` has imported torch by the time its
 entry runs (the package's ``__init__`` imports the backbone), so the thread count is set through
@@ -20,17 +23,27 @@ from collections.abc import MutableMapping
 
 import torch
 
-__all__ = ["DEFAULT_ENV", "apply_thread_defaults"]
+__all__ = ["DEFAULT_ENV", "SMALL_MACHINE_CORES", "apply_thread_defaults", "available_cores"]
 
 DEFAULT_ENV = {"OMP_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
+SMALL_MACHINE_CORES = 4
 
 
-def apply_thread_defaults(environ: MutableMapping[str, str] | None = None) -> int:
-    """Set :data:`DEFAULT_ENV` where ``environ`` (default ``os.environ``) lacks it, and torch's intra-op
-    threads to ``OMP_NUM_THREADS`` when ``sm`` chose it; returns torch's thread count."""
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS tells it, else ``os.cpu_count()``)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def apply_thread_defaults(environ: MutableMapping[str, str] | None = None, cores: int | None = None) -> int:
+    """Set ``OMP_WAIT_POLICY=PASSIVE`` where ``environ`` (default ``os.environ``) lacks it, and on a machine
+    of ``cores`` (default :func:`available_cores`) <= :data:`SMALL_MACHINE_CORES` without ``OMP_NUM_THREADS``
+    one thread (torch's and ``OMP_NUM_THREADS=1``); returns torch's thread count."""
     environ = os.environ if environ is None else environ
-    if "OMP_NUM_THREADS" not in environ:
+    cores = available_cores() if cores is None else cores
+    if "OMP_NUM_THREADS" not in environ and cores <= SMALL_MACHINE_CORES:
         torch.set_num_threads(int(DEFAULT_ENV["OMP_NUM_THREADS"]))
-    for name, value in DEFAULT_ENV.items():
-        environ.setdefault(name, value)
+        environ["OMP_NUM_THREADS"] = DEFAULT_ENV["OMP_NUM_THREADS"]
+    environ.setdefault("OMP_WAIT_POLICY", DEFAULT_ENV["OMP_WAIT_POLICY"])
     return torch.get_num_threads()
