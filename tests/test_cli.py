@@ -303,9 +303,12 @@ def test_overlay_recipes_are_their_base_with_their_own_keys(capsys):
     assert mamba["model"]["init_args"]["network"]["hidden"] == 800 and mamba["trainer"]["max_steps"] == 500000
     paper = print_config(["fit", "--recipe", "egodance.yaml"], capsys)
     fast = print_config(["fit", "--recipe", "egodance_fast.yaml"], capsys)
-    sampling = {"cond_drop_prob": 0.25, "sampler": "ddim", "sampling_steps": 50, "guidance_weight": 2.0}
-    assert {k: paper["model"]["init_args"][k] for k in sampling} != sampling
-    paper["model"]["init_args"] |= sampling
+    own = {"loss": {"cond_drop_prob": 0.25}, "sampling": {"sampler": "ddim", "sampling_steps": 50}}
+    own["sampling"]["guidance_weight"] = 2.0
+    model = paper["model"]["init_args"]
+    assert all({k: model[group][k] for k in keys} != keys for group, keys in own.items())
+    for group, keys in own.items():
+        model[group] |= keys
     assert [logger["init_args"]["name"] for logger in fast["trainer"].pop("logger")] == ["egodance_fast"] * 2
     assert [logger["init_args"]["name"] for logger in paper["trainer"].pop("logger")] == ["egodance"] * 2
     assert fast == paper  # the rest of the model, the trainer (callbacks, clipping), the data: the base's
