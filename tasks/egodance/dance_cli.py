@@ -49,6 +49,7 @@ from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.value_checks import load_npz
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
@@ -136,8 +137,7 @@ def _conditions(
         folder = Path(args.sample)
         num_frames = len(read_frames(folder)) if vision else None
         if num_frames is None:
-            with np.load(folder / "camera.npz", allow_pickle=False) as cam:
-                num_frames = len(cam["positions"])
+            num_frames = len(load_npz(folder / "camera.npz")["positions"])
         item = EgoDanceDataset(
             [folder], window=num_frames, load_frames=vision, image_size=size, canonicalize_init_head=canonical
         )[0]

@@ -50,7 +50,7 @@ from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
-from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npz
 from skeleton_mamba.tasks.training.base_data import SplitDataModule
 
 FPS = 30
@@ -152,10 +152,10 @@ class EgoDanceDataset(Dataset):
             )
         t = self.window
         root = motion.trans[:t] / motion.scaling
-        with np.load(folder / "camera.npz", allow_pickle=False) as cam:
-            source = str(folder / "camera.npz")
-            positions = check_finite(cam["positions"][:t], source, "positions", ("frame",))
-            rotations = check_finite(cam["rotations"][:t], source, "rotations", ("frame",))
+        cam = load_npz(folder / "camera.npz")
+        source = str(folder / "camera.npz")
+        positions = check_finite(cam["positions"][:t], source, "positions", ("frame",))
+        rotations = check_finite(cam["rotations"][:t], source, "rotations", ("frame",))
         head, head_rotation = head_pose_from_camera(positions, rotations)
         poses = torch.from_numpy(np.asarray(motion.poses[:t], dtype=np.float32))
         if self.canonicalize_init_head:  # turn about +y (through the origin) so the head faces +z in frame 0

@@ -201,5 +201,5 @@ def read_kinetics_labels(path: str | PathLike[str]) -> dict[str, dict]:
         label = entry["label_index"]
         if isinstance(label, bool) or not isinstance(label, int) or not 0 <= label < MAX_LABEL_INDEX:
             raise KineticsFileError(f"{path}: entry {str(video_id)[:40]!r}: 'label_index' must be a 0-based "
-                                    f"integer below {MAX_LABEL_INDEX}, got {str(label)[:20]}")  # fmt: skip
+                                    f"integer below {MAX_LABEL_INDEX}, got {repr(label)[:20]}")  # fmt: skip
     return labels

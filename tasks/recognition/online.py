@@ -26,6 +26,7 @@ import torch
 
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
+from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.training.frame_timing import (
@@ -85,7 +86,7 @@ def _load_keypoints(path: Path) -> np.ndarray:
         raise ValueError(f"{path}: expected a .npy of keypoints (T, J, C) or (M, T, J, C)")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: skeleton file not found")
-    x = np.load(path, allow_pickle=False)
+    x = load_npy(path)
     if x.ndim == 3:
         x = x[None]
     if x.ndim != 4:

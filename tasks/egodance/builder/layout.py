@@ -56,7 +56,7 @@ import numpy as np
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.mp4 import write_mp4
-from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, read_npy_header
+from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header
 
 __all__ = [
     "COMPLETE",
@@ -256,14 +256,12 @@ def read_sample(folder: str | Path, load_frames: bool = True) -> EgoSample:
     if not is_complete(folder):
         raise ValueError(f"{folder}: not a complete sample (no {COMPLETE} marker)")
     meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
-    with np.load(folder / "camera.npz", allow_pickle=False) as data:
-        camera = {k: data[k] for k in data.files}
+    camera = load_npz(folder / "camera.npz")
     for key in ("width", "height"):
         camera[key] = int(camera[key])
     camera["fps"] = float(camera["fps"])
     sample = EgoSample(meta=meta, motion=load_motion(folder / "motion.npz"), camera=camera)
     if load_frames:
         sample.rgb = read_frames(folder)
-        with np.load(folder / "depth.npz", allow_pickle=False) as data:
-            sample.depth = data["depth"].astype(np.float32) / 1000.0
+        sample.depth = load_npz(folder / "depth.npz")["depth"].astype(np.float32) / 1000.0
     return sample
