@@ -44,7 +44,7 @@ from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
@@ -141,13 +141,13 @@ class EgoDanceDataset(Dataset):
         meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
         motion = load_motion(folder / "motion.npz")
         if motion.poses is None or motion.trans is None:
-            raise ValueError(f"{folder / 'motion.npz'}: needs smpl_poses and smpl_trans")
+            raise DataFileError(f"{folder / 'motion.npz'}: needs smpl_poses and smpl_trans")
         if abs(motion.fps - fps) > 1e-6:
-            raise ValueError(
+            raise DataFileError(
                 f"{folder / 'motion.npz'}: motion at {motion.fps} fps, the data module expects {fps}"
             )
         if motion.poses.shape[0] < self.window:
-            raise ValueError(
+            raise DataFileError(
                 f"{folder}: {motion.poses.shape[0]} frames, shorter than the window of {self.window}"
             )
         t = self.window
@@ -379,7 +379,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         if motions.is_dir() and any(motions.glob("*.npz")):
             found = json.loads(record.read_text(encoding="utf-8")) if record.is_file() else None
             if found != settings:
-                raise ValueError(
+                raise DataFileError(
                     f"{motions} holds dances generated with {found or 'unrecorded settings'}, "
                     f"not {settings}; "
                     f"remove {self.source_root} to generate them again, or choose another data root"

@@ -40,7 +40,7 @@ from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
@@ -77,7 +77,7 @@ class DanceWindowDataset(Dataset):
             last = min(len(motion) - seed_frames - predict_frames, len(music) - music_frames)
             self.index.extend((name, s) for s in range(0, last + 1, stride))
         if not self.index:
-            raise ValueError(
+            raise DataFileError(
                 f"no training window fits: every sequence needs >= {seed_frames + predict_frames} motion "
                 f"frames and >= {music_frames} music frames ({len(sequences)} sequences)"
             )
@@ -220,7 +220,7 @@ class AISTPPDanceDataModule(LightningDataModule):
             ignored = ignore_list()
             names = [n for n in names if n not in ignored]
         if not names:
-            raise ValueError(f"split {split!r} holds no sequence names")
+            raise DataFileError(f"split {split!r} holds no sequence names")
         return names
 
     def music_file(self, name: str) -> Path:
@@ -261,14 +261,14 @@ class AISTPPDanceDataModule(LightningDataModule):
     def _generation_item(self, name: str, seed: torch.Tensor, music: torch.Tensor, music_path: Path) -> dict:
         h = self.hparams
         if len(seed) < h.seed_frames:
-            raise ValueError(f"{name}: the seed motion has {len(seed)} frames, QEAN needs {h.seed_frames}")
+            raise DataFileError(f"{name}: the seed motion has {len(seed)} frames, QEAN needs {h.seed_frames}")
         padded = pad_music(music[None], h.generate_frames, h.music_frames)[0]
         return {"seed": seed[: h.seed_frames], "music": padded, "name": name, "music_path": str(music_path)}
 
     def _predict_items(self) -> list[dict]:
         h = self.hparams
         if not h.predict_seed or not h.predict_music:
-            raise ValueError(
+            raise InputError(
                 "sm predict needs --data.init_args.predict_seed MOTION (.pkl or .npz) and "
                 "--data.init_args.predict_music AUDIO"
             )

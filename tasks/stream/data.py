@@ -26,7 +26,7 @@ from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.audio_io import probe_audio
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
 from skeleton_mamba.tasks.motion.synthetic.dance import STYLES
@@ -103,7 +103,7 @@ class WindowDataset(Dataset):
             for s in range(0, len(motion) - window + 1, stride)
         ]
         if not self.index:
-            raise ValueError(f"no sequence holds a window of {window} frames ({len(sequences)} sequences)")
+            raise DataFileError(f"no sequence holds a window of {window} frames ({len(sequences)} sequences)")
 
     def __len__(self) -> int:
         return len(self.index)

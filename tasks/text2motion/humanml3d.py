@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, NonFiniteFeaturesError, read_features
 
 __all__ = [
@@ -120,7 +120,7 @@ def read_split(root: str | PathLike[str], split: str) -> list[str]:
         if not name:
             continue
         if not _ID.match(name):
-            raise ValueError(f"{path}:{number}: malformed HumanML3D id {name!r} (6 digits, optional M)")
+            raise DataFileError(f"{path}:{number}: malformed HumanML3D id {name!r} (6 digits, optional M)")
         ids.append(name)
     return ids
 
@@ -144,15 +144,15 @@ def read_captions(root: str | PathLike[str], motion_id: str) -> list[Caption]:
             continue
         fields = line.strip().split("#")
         if len(fields) != 4:
-            raise ValueError(f"{path}:{number}: want 'caption#tokens#start#end', got {len(fields)} fields")
+            raise DataFileError(f"{path}:{number}: want 'caption#tokens#start#end', got {len(fields)} fields")
         text, tokens, start, end = fields
         try:
             start_s, end_s = _seconds(start), _seconds(end)
         except ValueError as error:
-            raise ValueError(f"{path}:{number}: start/end are not numbers: {start!r}, {end!r}") from error
+            raise DataFileError(f"{path}:{number}: start/end are not numbers: {start!r}, {end!r}") from error
         captions.append(Caption(text.strip(), tuple(tokens.split()), start_s, end_s))
     if not captions:
-        raise ValueError(f"{path}: no captions")
+        raise DataFileError(f"{path}: no captions")
     return captions
 
 
