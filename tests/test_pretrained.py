@@ -322,7 +322,8 @@ def test_export_writes_the_inference_network_and_the_module(dance_inputs):
     assert checkpoint["datamodule_hyper_parameters"] == {"canonicalize_init_head": False}
     assert dict(rebuilt.hparams)["backbone"] == dict(module.hparams)["backbone"]
     card = (folder / "README.md").read_text()
-    assert "Recipe: `demo`." in card and "epoch 3, global_step 12." in card and '"lambda_vel": 0.1' in card
+    assert "Recipe: `demo`." in card and "epoch 3, global_step 12." in card
+    assert '"kinematic"' in card and '"vel": 0.1' in card  # the module's settings, its config groups
 
 
 def test_sm_dance_from_the_folder_and_from_a_hub_id_equals_the_checkpoint(
