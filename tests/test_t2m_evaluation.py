@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.text2motion.evaluation import GROUND_TRUTH, MODEL, T2MEvaluation, T2MProtocol
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     NOT_COMPARABLE,
@@ -124,7 +125,7 @@ def test_an_evaluator_trained_here_loads_from_its_lightning_checkpoint(tmp_path)
     assert not loaded.comparable
     torch.testing.assert_close(loaded.text_encoder.hidden, trained.text_encoder.hidden)
     torch.save({"state_dict": {"denoiser.w": torch.zeros(1)}}, tmp_path / "other.ckpt")
-    with pytest.raises(KeyError, match="other.ckpt: no 'evaluator"):
+    with pytest.raises(CheckpointError, match="other.ckpt: no 'evaluator"):
         T2MEvaluator.from_lightning_checkpoint(tmp_path / "other.ckpt", **SIZES)
     first, second = load_evaluator(None, seed=3), load_evaluator(None, seed=3)
     torch.testing.assert_close(first.motion_encoder.hidden, second.motion_encoder.hidden)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import torch
 from scipy import linalg
 
+from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.text2motion.metrics import (
     Diversity,
     EmbeddingFID,
@@ -121,8 +124,20 @@ def test_evaluator_parameter_names_match_the_official_checkpoint_layout(tmp_path
     assert loaded.comparable and not model.comparable
     torch.testing.assert_close(loaded.motion_encoder.hidden, model.motion_encoder.hidden)
     torch.save({"text_encoder": state["text_encoder"]}, tmp_path / "bad.tar")
-    with pytest.raises(KeyError, match="bad.tar: no 'movement_encoder'"):
+    with pytest.raises(CheckpointError, match="bad.tar: no 'movement_encoder'"):
         T2MEvaluator.from_checkpoint(tmp_path / "bad.tar", **sizes)
+    # Wrong shapes and non-finite weights: one line naming the file, the part and the first mismatch.
+    wrong = {**state, "motion_encoder": {**state["motion_encoder"], "hidden": torch.zeros(3, 5)}}
+    torch.save(wrong, tmp_path / "wrong.tar")
+    shape = tuple(state["motion_encoder"]["hidden"].shape)
+    message = r"wrong.tar \[motion_encoder\]: does not fit .*hidden has shape \(3, 5\) in the checkpoint, "
+    with pytest.raises(CheckpointError, match=message + rf"{re.escape(str(shape))} in the model"):
+        T2MEvaluator.from_checkpoint(tmp_path / "wrong.tar", **sizes)
+    nan = {k: dict(v) for k, v in state.items()}
+    nan["text_encoder"]["hidden"] = torch.full_like(state["text_encoder"]["hidden"], float("nan"))
+    torch.save(nan, tmp_path / "nan.tar")
+    with pytest.raises(CheckpointError, match=r"nan.tar \[text_encoder\]: .*not finite \(hidden"):
+        T2MEvaluator.from_checkpoint(tmp_path / "nan.tar", **sizes)
 
 
 def test_evaluator_embeddings_ignore_extra_padding_and_keep_input_order():

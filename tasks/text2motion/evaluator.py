@@ -24,8 +24,14 @@ import torch
 from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
 
+from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
-from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
+from skeleton_mamba.tasks.training.checkpoints import (
+    check_finite_tensors,
+    check_state_fits,
+    load_checkpoint,
+    state_shapes,
+)
 
 __all__ = [
     "TextEncoderBiGRUCo",
@@ -126,6 +132,17 @@ class MotionEncoderBiGRUCo(nn.Module):
         return self.output_net(_last_states(self.gru, self.input_emb(inputs), m_lens, self.hidden))
 
 
+def _load_checked(module: nn.Module, state: dict, source: str) -> None:
+    """``module.load_state_dict(state)`` once its tensors are finite and their names and shapes fit (one line
+    naming ``source`` and the first mismatch otherwise)."""
+    bad = next((k for k, v in state.items() if not isinstance(v, torch.Tensor)), None)
+    if bad is not None:
+        raise CheckpointError(f"{source}: {bad!r} is a {type(state[bad]).__name__}, not a tensor")
+    check_finite_tensors(state, source)
+    check_state_fits(module, state_shapes(state), source)
+    module.load_state_dict(state)
+
+
 class T2MEvaluator(nn.Module):
     """Text and motion encoders of the T2M evaluation protocol.
 
@@ -168,9 +185,9 @@ class T2MEvaluator(nn.Module):
         checkpoint = load_checkpoint(path)
         model = cls(feature_dim, comparable=True, **sizes)
         for key in ("text_encoder", "movement_encoder", "motion_encoder"):
-            if key not in checkpoint:
-                raise KeyError(f"{path}: no {key!r} state dict (keys: {sorted(checkpoint)})")
-            getattr(model, key).load_state_dict(checkpoint[key])
+            if not isinstance(checkpoint.get(key), dict):
+                raise CheckpointError(f"{path}: no {key!r} state dict (keys: {sorted(map(str, checkpoint))})")
+            _load_checked(getattr(model, key), checkpoint[key], f"{path} [{key}]")
         return model.eval()
 
     @classmethod
@@ -189,11 +206,11 @@ class T2MEvaluator(nn.Module):
         prefix = "evaluator."
         weights = {k[len(prefix) :]: v for k, v in state.items() if k.startswith(prefix)}
         if not weights:
-            raise KeyError(
+            raise CheckpointError(
                 f"{path}: no 'evaluator.*' weights in its state_dict (not a T2MEvaluatorModule file)"
             )
         model = cls(feature_dim, comparable=False, **sizes)
-        model.load_state_dict(weights)
+        _load_checked(model, weights, str(path))
         return model.eval()
 
     def embed_text(
