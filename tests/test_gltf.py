@@ -150,9 +150,12 @@ def test_humanml3d_features_export_as_their_joints(tmp_path):
 @pytest.mark.parametrize(
     "bad, message",
     [
-        (np.ones((5, 263), np.complex64), "expected real-valued features, got dtype complex64"),
-        (np.full((5, 263), 1e30, np.float32), "beyond +-10000"),
-        (np.ones((5, 263), bool), "expected real-valued features, got dtype bool"),
+        (np.ones((5, 263), np.complex64), "'features' must hold real numbers, got dtype complex64"),
+        (
+            np.full((5, 263), 1e30, np.float32),
+            "features: 1e+30 at frame 0, column 0 (0-based) is beyond the plausible 10000",
+        ),
+        (np.ones((5, 263), bool), "'features' must hold real numbers, got dtype bool"),
     ],
 )
 def test_hostile_humanml3d_features_refused(tmp_path, capsys, bad, message):
@@ -166,5 +169,7 @@ def test_hostile_humanml3d_features_refused(tmp_path, capsys, bad, message):
 def test_humanml3d_statistics_of_absurd_size_refused(tmp_path):
     np.save(tmp_path / "Mean.npy", np.zeros(263, np.float32))
     np.save(tmp_path / "Std.npy", np.full(263, 1e30, np.float32))
-    with pytest.raises(ValueError, match=r"Std\.npy: Std value 1e\+30 at column 0 \(0-based\) is beyond"):
+    with pytest.raises(
+        ValueError, match=r"Std\.npy: Std: 1e\+30 at column 0 \(0-based\) is beyond the plausible 10000"
+    ):
         read_statistics(tmp_path)

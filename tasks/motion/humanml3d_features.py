@@ -28,7 +28,7 @@ import torch
 
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
-from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
+from skeleton_mamba.tasks.motion.value_checks import check_finite, check_magnitude, check_real, load_npy
 
 __all__ = [
     "NUM_JOINTS",
@@ -262,21 +262,15 @@ class NonFiniteFeaturesError(DataFileError):
 
 
 def _real_float32(array: np.ndarray, path: Path, what: str, axes: tuple[str, ...], error=DataFileError):
-    """``array`` as float32 when it holds real numbers, all finite and within the magnitude limit."""
-    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
-        raise DataFileError(f"{path}: expected real-valued {what}, got dtype {array.dtype}")
+    """``array`` as float32 when it holds real numbers (not bool flags), all finite and within
+    :data:`FEATURE_MAGNITUDE_LIMIT`."""
+    if array.dtype.kind == "b":
+        raise DataFileError(f"{path}: {what!r} must hold real numbers, got dtype {array.dtype}")
+    check_real(array, str(path), what)
     with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
         array = array.astype(np.float32)
     check_finite(array, str(path), what, axes, error)
-    magnitude = np.abs(array)
-    if array.size and float(magnitude.max()) > FEATURE_MAGNITUDE_LIMIT:
-        where = np.unravel_index(int(np.argmax(magnitude)), array.shape)
-        named = ", ".join(f"{name} {i}" for name, i in zip(axes, where))
-        raise DataFileError(
-            f"{path}: {what} value {array[where]:.3g} at {named} (0-based) is beyond "
-            f"+-{FEATURE_MAGNITUDE_LIMIT:g}: not HumanML3D features"
-        )
-    return array
+    return check_magnitude(array, FEATURE_MAGNITUDE_LIMIT, str(path), what, axes)
 
 
 def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
