@@ -42,10 +42,10 @@ from skeleton_mamba.tasks.egodance.data import (
     SyntheticEgoDanceDataModule,
 )
 from skeleton_mamba.tasks.egodance.export import write_dance
-from skeleton_mamba.tasks.egodance.frames import read_video_frames
 from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
+from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.render import RenderStyle
@@ -126,10 +126,20 @@ def _music_source(args) -> tuple[str | None, float]:
     return music.get("path"), float(music.get("start_s", 0.0))
 
 
+def _denoiser(args, module) -> torch.nn.Module:
+    """The EMM the dance is sampled with: the EMA weights, or the raw ones (``--no-ema``)."""
+    return module.model if args.no_ema else module.ema.module
+
+
+def _head_source(args, module) -> str:
+    return args.head or ("estimate" if module.head_estimator is not None else "none")
+
+
 def _conditions(
     args, module, canonical: bool = False
-) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
-    """music (T, L), frames (T, 3, S, S) or None, ground-truth head targets (T, 3) (--sample) or None."""
+) -> tuple[torch.Tensor, torch.Tensor | VideoFeatures | None, torch.Tensor | None]:
+    """music (T, L); frames (T, 3, S, S) (--sample), the video's per-frame features (--music --video) or
+    None; ground-truth head targets (T, 3) (--sample) or None."""
 
     size = module.hparams.image_size
     vision = module.model.config.use_vision
@@ -145,28 +155,39 @@ def _conditions(
 
     fps = module.hparams.get("fps", 30)  # the frame rate the model was trained at
     music = torch.from_numpy(extract_music_features(args.music, fps=fps).features.astype(np.float32))
-    frames = None
-    if vision:
-        if not args.video:
-            raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
-        # decoded as a stream at the model's resolution, and only as far as the music goes
-        frames = read_video_frames(Path(args.video), size, max_frames=len(music) + 2)
-        n = min(len(frames), len(music))
-        if len(music) - len(frames) > 1:  # one frame of rounding between the two lengths is no news
-            video_s, music_s = len(frames) / fps, len(music) / fps
-            print(
-                f"sm dance: warning: the video has {len(frames)} frames ({video_s:.1f} s at {fps:g} fps), "
-                f"the music {len(music)} ({music_s:.1f} s); the dance covers the first {n / fps:.1f} s, "
-                "where both are (pass a video as long as the music for the whole track)",
-                file=sys.stderr,
-            )
-        music, frames = music[:n], frames[:n]
-    return music, frames, None
+    if not vision:
+        return music, None, None
+    if not args.video:
+        raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
+    estimate = _head_source(args, module) == "estimate" and module.head_estimator is not None
+    # decoded as a stream at the model's resolution, only as far as the music goes, and reduced to the
+    # per-frame features of the vision encoder and the head estimator as it is read (in the dance's
+    # precision, as the encoders would run inside the sampler)
+    with inference_precision(args.precision):
+        video = encode_video(
+            Path(args.video),
+            size,
+            _denoiser(args, module).vision_encoder,
+            module.head_estimator if estimate else None,
+            window=args.window,
+            max_frames=len(music),
+            progress=args.progress,
+        )
+    n = video.num_frames  # at most len(music)
+    if len(music) - n > 1:  # one frame of rounding between the two lengths is no news
+        video_s, music_s = n / fps, len(music) / fps
+        print(
+            f"sm dance: warning: the video has {n} frames ({video_s:.1f} s at {fps:g} fps), "
+            f"the music {len(music)} ({music_s:.1f} s); the dance covers the first {n / fps:.1f} s, "
+            "where both are (pass a video as long as the music for the whole track)",
+            file=sys.stderr,
+        )
+    return music[:n], video, None
 
 
-def _head_targets(args, module, frames: torch.Tensor | None, oracle: torch.Tensor | None):
+def _head_targets(args, module, frames: torch.Tensor | VideoFeatures | None, oracle: torch.Tensor | None):
     """(head source, targets (T, 3) or None) as ``--head`` asks; exits with a message when impossible."""
-    source = args.head or ("estimate" if module.head_estimator is not None else "none")
+    source = _head_source(args, module)
     if source == "oracle":
         if oracle is None:
             raise SystemExit("sm dance: --head oracle needs the ground-truth camera path of a --sample")
@@ -176,24 +197,28 @@ def _head_targets(args, module, frames: torch.Tensor | None, oracle: torch.Tenso
             raise SystemExit(
                 f"sm dance: {args.ckpt} has no head-trajectory estimator (music-only); use --head none"
             )
-
-        return source, estimate_long_trajectory(module.head_estimator.eval(), frames, args.window)[0]
+        video = frames.head if isinstance(frames, VideoFeatures) else frames
+        return source, estimate_long_trajectory(module.head_estimator.eval(), video, args.window)[0]
     return source, None
 
 
 def _dance(args, module, music, frames, oracle) -> tuple[torch.Tensor, str]:
-    """The dance tokens (T, 24, C) in fp32 and the head source, in the caller's precision region."""
+    """The dance tokens (T, 24, C) in fp32 and the head source, in the caller's precision region;
+    ``frames`` (T, 3, S, S) or the video's :class:`VideoFeatures` (its z_v go to the sampler)."""
     head_source, head = _head_targets(args, module, frames, oracle)
-    model = module.model if args.no_ema else module.ema.module
+    vision = None
+    if isinstance(frames, VideoFeatures):
+        frames, vision = None, frames.vision
     sampling = module.sampling.override(**sampling_overrides(args))
     tokens = sample_long_dance(
-        model,
+        _denoiser(args, module),
         module.diffusion,
         music,
         frames,
         head,
         window=args.window,
         overlap=args.overlap,
+        vision=vision,
         **dataclasses.asdict(sampling),
         head_guidance_weight=module.head_guidance.weight if args.head_weight is None else args.head_weight,
         head_guidance_steps=module.head_guidance.steps,

@@ -11,11 +11,12 @@ One function, used wherever frames change size (the data set, ``sm dance``, :cla
   is channels-last in memory, and on torch 2.13's CPU build oneDNN's convolution backward on such input
   corrupted the heap ("double free or corruption" while training the vision encoder).
 
-Reading (``sm dance --video``): :func:`iter_video_frames` decodes a video file (ffmpeg, one frame at a time)
-or a folder of images and resizes chunks of :data:`DECODE_CHUNK` frames as they are read, so memory holds one
-chunk at the source resolution plus the frames at the model's resolution, whatever the video's length or
-size. Images and video frames larger than :data:`MAX_IMAGE_PIXELS` are refused from their header, before
-anything is decoded.
+Reading: :func:`iter_video_frames` decodes a video file (ffmpeg, one frame at a time) or a folder of images
+and resizes chunks of :data:`DECODE_CHUNK` frames as they are read, so memory holds one chunk at the source
+resolution, whatever the video's size; :func:`read_video_frames` keeps every frame at the model's resolution
+(short clips, tests), while ``sm dance --video`` keeps only per-frame features (:mod:`.video_features`), in
+memory that does not grow with the video's length. Images and video frames larger than
+:data:`MAX_IMAGE_PIXELS` are refused from their header, before anything is decoded.
 """
 
 from __future__ import annotations
@@ -162,7 +163,9 @@ def read_video_frames(
     path: str | Path, size: int | tuple[int, int], max_frames: int | None = None
 ) -> torch.Tensor:
     """(T, 3, S_h, S_w) float frames of a video file or image folder at the model's resolution, decoded
-    as a stream (:func:`iter_video_frames`); memory beyond the result is one chunk of source frames."""
+    as a stream (:func:`iter_video_frames`); memory beyond the result is one chunk of source frames. The
+    result grows with the video (600 KB a frame at 224 px): whole tracks go through
+    :func:`.video_features.encode_video` instead."""
     chunks = list(iter_video_frames(path, size, max_frames))
     if not chunks:
         raise InputError(f"{Path(path)}: holds no frames")

@@ -38,6 +38,7 @@ mean geodesic angle (deg).
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import torch
@@ -52,6 +53,9 @@ __all__ = [
     "head_trajectory_loss",
     "head_trajectory_errors",
     "estimate_long_trajectory",
+    "long_window_starts",
+    "HeadFrameFeatures",
+    "HeadFeatureStream",
 ]
 
 
@@ -95,23 +99,137 @@ class HeadTrajectoryEstimator(nn.Module):
             self.head.weight.mul_(0.01)
             self.head.bias.copy_(torch.tensor([0.0, 1.6, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]))
 
+    def small_frames(self, frames: torch.Tensor) -> torch.Tensor:
+        """(N, 3, H, W) -> (N, 3, s, s) float, s = ``input_size``: what the CNN sees of each frame."""
+        return resize_frames(frames.float(), (self.config.input_size,) * 2)
+
+    def cnn_features(self, small: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
+        """Small frames (N, 3, s, s) and their differences to the previous frame (N, 3, s, s) -> (N, dim),
+        in calls of at most ``chunk`` frames (each frame's feature depends on that frame's pair only)."""
+        x = torch.cat([small - 0.5, diff], dim=1)
+        feats = [self.cnn(x[i : i + self.config.chunk]) for i in range(0, x.shape[0], self.config.chunk)]
+        return torch.cat(feats)
+
     def frame_features(self, frames: torch.Tensor) -> torch.Tensor:
-        """(B, T, 3, H, W) -> (B, T, dim): CNN of [frame_t, frame_t - frame_(t-1)]."""
+        """(B, T, 3, H, W) -> (B, T, dim): CNN of [frame_t, frame_t - frame_(t-1)] (zero difference at
+        t = 0)."""
         if frames.ndim != 5 or frames.shape[2] != 3:
             raise ValueError(f"expected frames (B, T, 3, H, W), got {tuple(frames.shape)}")
         b, t = frames.shape[:2]
-        size = (self.config.input_size,) * 2
-        small = resize_frames(frames.flatten(0, 1).float(), size).reshape(b, t, 3, *size)
+        small = self.small_frames(frames.flatten(0, 1)).unflatten(0, (b, t))
         diff = torch.cat([torch.zeros_like(small[:, :1]), small[:, 1:] - small[:, :-1]], dim=1)
-        x = torch.cat([small - 0.5, diff], dim=2).flatten(0, 1)
-        feats = [self.cnn(x[i : i + self.config.chunk]) for i in range(0, x.shape[0], self.config.chunk)]
-        return torch.cat(feats).reshape(b, t, -1)
+        return self.cnn_features(small.flatten(0, 1), diff.flatten(0, 1)).reshape(b, t, -1)
+
+    def trajectory(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-frame features (B, T, dim) (:meth:`frame_features`) -> positions (B, T, 3) in metres,
+        rotations (B, T, 3, 3) (head-to-world): the bidirectional GRU and the output layer."""
+        h, _ = self.gru(features)
+        out = self.head(h)
+        return out[..., :3], rotation_6d_to_matrix(out[..., 3:])
 
     def forward(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Frames (B, T, 3, H, W) -> positions (B, T, 3) in metres, rotations (B, T, 3, 3) (head-to-world)."""
-        h, _ = self.gru(self.frame_features(frames))
-        out = self.head(h)
-        return out[..., :3], rotation_6d_to_matrix(out[..., 3:])
+        return self.trajectory(self.frame_features(frames))
+
+
+def long_window_starts(total: int, window: int) -> list[int]:
+    """Start frames of the windows :func:`estimate_long_trajectory` estimates a ``total``-frame video in:
+    every ``window - 1`` frames, the last one ending at the last frame (one window if ``total <= window``)."""
+    if window < 2 and total > window:
+        raise ValueError(f"long videos need a window of at least 2 frames, got {window}")
+    starts = [0]
+    while starts[-1] + window < total:
+        starts.append(min(starts[-1] + window - 1, total - window))
+    return starts
+
+
+@dataclass
+class HeadFrameFeatures:
+    """A video's per-frame CNN features for :func:`estimate_long_trajectory`, without its frames.
+
+    The CNN of frame t sees [frame_t, frame_t - frame_(t-1)], except at the first frame of an estimation
+    window, where the difference is zero (:meth:`HeadTrajectoryEstimator.frame_features` of the window).
+
+    Attributes:
+        features: (T, dim): frame t with its difference to frame t - 1 (zero for frame 0).
+        window_first: {start: (dim,)} frame ``start`` with a zero difference, for every window start of
+            :func:`long_window_starts` (``window``) but 0.
+        window: the estimation window the features were prepared for.
+    """
+
+    features: torch.Tensor
+    window_first: dict[int, torch.Tensor]
+    window: int
+
+    def __len__(self) -> int:
+        return self.features.shape[0]
+
+    def window_features(self, start: int, length: int) -> torch.Tensor:
+        """(length, dim): what :meth:`HeadTrajectoryEstimator.frame_features` gives frames
+        ``start:start + length`` estimated as one window."""
+        feats = self.features[start : start + length]
+        if start > 0:
+            feats = torch.cat([self.window_first[start][None].to(feats.dtype), feats[1:]])
+        return feats
+
+
+class HeadFeatureStream:
+    """Builds :class:`HeadFrameFeatures` from a video's frames pushed chunk by chunk, in memory bounded by
+    the window: it keeps the features (dim floats per frame) and the last ``window`` small frames (for the
+    last window's start, known once the video ends), never the video.
+
+    Args:
+        estimator: the head-trajectory estimator (in eval mode).
+        window: the window of the later :func:`estimate_long_trajectory` call.
+    """
+
+    def __init__(self, estimator: HeadTrajectoryEstimator, window: int = 150):
+        self.estimator = estimator
+        self.window = window
+        self.count = 0
+        self.features: list[torch.Tensor] = []
+        self.window_first: dict[int, torch.Tensor] = {}
+        self.recent: deque[torch.Tensor] = deque(maxlen=window)  # small frames (3, s, s)
+
+    def _alone(self, small: torch.Tensor) -> torch.Tensor:
+        """(N, 3, s, s) -> (N, dim): the CNN feature of frames with a zero difference."""
+        return self.estimator.cnn_features(small, torch.zeros_like(small))
+
+    @torch.no_grad()
+    def push(self, frames: torch.Tensor) -> None:
+        """The next frames (N, 3, H, W) of the video, in order."""
+        if len(frames) == 0:
+            return
+        small = self.estimator.small_frames(frames)
+        previous = small[:1] if not self.recent else self.recent[-1][None].to(small.dtype)
+        diff = small - torch.cat([previous, small[:-1]])
+        if self.count == 0:
+            diff[0] = 0.0
+        self.features.append(self.estimator.cnn_features(small, diff))
+        hop = self.window - 1
+        if hop > 0:  # the starts k * (window - 1), k >= 1, that fall in this chunk
+            first = -(-max(self.count, 1) // hop) * hop
+            starts = list(range(first, self.count + len(small), hop))
+            if starts:
+                alone = self._alone(small[[s - self.count for s in starts]])
+                self.window_first.update(zip(starts, alone, strict=True))
+        self.recent.extend(small)
+        self.count += len(small)
+
+    @torch.no_grad()
+    def finish(self) -> HeadFrameFeatures:
+        """The features of all the frames pushed (at least one)."""
+        if self.count == 0:
+            raise ValueError("no frames were pushed")
+        total = self.count
+        starts = long_window_starts(total, self.window)[1:]
+        missing = [s for s in starts if s not in self.window_first]
+        if missing:  # the last window's start, total - window: among the last `window` frames, held
+            held = list(self.recent)
+            alone = self._alone(torch.stack([held[s - (total - len(held))] for s in missing]))
+            self.window_first.update(zip(missing, alone, strict=True))
+        window_first = {s: self.window_first[s] for s in starts}
+        return HeadFrameFeatures(torch.cat(self.features), window_first, self.window)
 
 
 def head_trajectory_loss(
@@ -146,30 +264,42 @@ def head_trajectory_errors(
 
 @torch.no_grad()
 def estimate_long_trajectory(
-    estimator: HeadTrajectoryEstimator, frames: torch.Tensor, window: int = 150
+    estimator: HeadTrajectoryEstimator, frames: torch.Tensor | HeadFrameFeatures, window: int = 150
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """A whole video (T, 3, H, W) -> positions (T, 3), rotations (T, 3, 3) in its first window's frame.
+    """A whole video (T, 3, H, W), or its :class:`HeadFrameFeatures` (streamed, :class:`HeadFeatureStream`)
+    -> positions (T, 3), rotations (T, 3, 3) in its first window's frame.
 
-    Windows of ``window`` frames start every ``window - 1`` frames (the last one ends at the last frame) and
-    are estimated independently, each in its own canonical frame; window k is then moved horizontally so that
-    its first frame lands where window k - 1 put that frame (heights above the floor and world rotations need
-    no chaining).
+    Windows of ``window`` frames start every ``window - 1`` frames (the last one ends at the last frame;
+    :func:`long_window_starts`) and are estimated independently, each in its own canonical frame; window k
+    is then moved horizontally so that its first frame lands where window k - 1 put that frame (heights
+    above the floor and world rotations need no chaining). Features and frames give the same trajectory.
     """
-    total = frames.shape[0]
+    if isinstance(frames, HeadFrameFeatures):
+        if frames.window != window:
+            raise ValueError(
+                f"the features were prepared for windows of {frames.window} frames, not {window}"
+            )
+        total, dtype = len(frames), torch.float32
+
+        def estimate(start: int, length: int) -> tuple[torch.Tensor, torch.Tensor]:
+            return estimator.trajectory(frames.window_features(start, length)[None])
+
+    else:
+        total, dtype = frames.shape[0], frames.dtype
+
+        def estimate(start: int, length: int) -> tuple[torch.Tensor, torch.Tensor]:
+            return estimator(frames[None, start : start + length])
+
     if total <= window:
-        positions, rotations = estimator(frames[None])
+        positions, rotations = estimate(0, total)
         return positions[0], rotations[0]
-    positions = frames.new_zeros(total, 3)
-    rotations = frames.new_zeros(total, 3, 3)
-    start = 0
-    while True:
-        start = min(start, total - window)
-        pos, rot = estimator(frames[None, start : start + window])
+    positions = torch.zeros(total, 3, dtype=dtype)
+    rotations = torch.zeros(total, 3, 3, dtype=dtype)
+    for start in long_window_starts(total, window):
+        pos, rot = estimate(start, window)
         pos, rot = pos[0], rot[0]
         if start > 0:  # continue from the previous window's estimate of this window's first frame
             pos[:, [0, 2]] += positions[start, [0, 2]] - pos[0, [0, 2]]
         positions[start : start + window] = pos
         rotations[start : start + window] = rot
-        if start + window >= total:
-            return positions, rotations
-        start += window - 1
+    return positions, rotations

@@ -78,8 +78,12 @@ def sample_dance(
     generator: torch.Generator | None = None,
     progress: bool = False,
     compile: bool = False,
+    vision: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
+
+    ``vision``: instead of ``frames``, their vision features z_v (B, T, Dc), what the model's vision
+    encoder gives them (:func:`.video_features.encode_video` computes them from a decoded stream).
 
     ``sampler``, ``sampling_steps``, ``eta`` and ``guidance_weight`` are the options of
     :class:`~skeleton_mamba.tasks.training.diffusion.SamplingOptions`; ``head_guidance_weight`` and
@@ -88,7 +92,7 @@ def sample_dance(
     :class:`CompiledDenoiser` (same samples to float32 rounding; worth it for many steps on a CPU).
     """
     b, t = music.shape[:2]
-    context = model.encode_condition(music, frames)
+    context = _condition(model, music, frames, vision)
     guidance = []
     if head is not None and head_guidance_weight > 0:
         guidance.append(
@@ -112,6 +116,24 @@ def sample_dance(
     )
 
 
+def _condition(
+    model: EMM, music: torch.Tensor, frames: torch.Tensor | None, vision: torch.Tensor | None
+) -> torch.Tensor:
+    """The fused condition (B, T, Dc) from music and frames, or music and precomputed z_v (B, T, Dc)."""
+    if vision is None:
+        return model.encode_condition(music, frames)
+    if frames is not None:
+        raise ValueError("give frames or their vision features, not both")
+    if model.vision_encoder is None:
+        raise ValueError("this EMM is music-only (use_vision=False) but vision features were given")
+    if vision.shape[:2] != music.shape[:2] or vision.shape[-1] != model.context_dim:
+        raise ValueError(
+            f"vision features {tuple(vision.shape)} do not fit music {tuple(music.shape[:2])} and "
+            f"Dc = {model.context_dim}"
+        )
+    return model.fuse(model.music_encoder(music), vision)
+
+
 def sample_long_dance(
     model: EMM,
     diffusion: GaussianDiffusion,
@@ -120,9 +142,12 @@ def sample_long_dance(
     head: torch.Tensor | None = None,
     window: int = 150,
     overlap: int = 75,
+    vision: torch.Tensor | None = None,
     **kwargs,
 ) -> torch.Tensor:
-    """A whole track: music (T, L), frames (T, 3, S, S), head (T, 3) -> tokens (T, 24, 10).
+    """A whole track: music (T, L), frames (T, 3, S, S) or their vision features ``vision`` (T, Dc) (the
+    vision encoder is per frame, so windows of features are the features of windows of frames; a long
+    video need not be held), head (T, 3) -> tokens (T, 24, 10).
 
     The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75; one padded
     window when the track is shorter), sampled as one batch by
@@ -135,6 +160,7 @@ def sample_long_dance(
     total = music.shape[0]
     music_w = split_windows(music, window, overlap)
     frames_w = None if frames is None else split_windows(frames, window, overlap)
+    vision_w = None if vision is None else split_windows(vision, window, overlap)
     head_w = None
     if head is not None:
         head_w = split_windows(head, window, overlap)
@@ -144,7 +170,9 @@ def sample_long_dance(
         head_w = head_w - shift[:, None]
 
     def windows(post_step) -> torch.Tensor:
-        return sample_dance(model, diffusion, music_w, frames_w, head_w, post_step=post_step, **kwargs)
+        return sample_dance(
+            model, diffusion, music_w, frames_w, head_w, post_step=post_step, vision=vision_w, **kwargs
+        )
 
     return sample_long(windows, overlap, total, relative=root_xz_mask())
 

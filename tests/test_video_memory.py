@@ -1,0 +1,209 @@
+"""``sm dance --video`` from per-frame features decoded as a stream (issue 33): the same dance as from all
+the frames held at once, in memory that does not grow with the video's length."""
+
+import dataclasses
+import subprocess
+import sys
+import textwrap
+
+import imageio_ffmpeg
+import lightning
+import numpy as np
+import pytest
+import torch
+
+from skeleton_mamba.tasks.egodance import dance_cli
+from skeleton_mamba.tasks.egodance.frames import read_video_frames
+from skeleton_mamba.tasks.egodance.head_estimator import (
+    HeadEstimatorConfig,
+    HeadFeatureStream,
+    HeadTrajectoryEstimator,
+    estimate_long_trajectory,
+    long_window_starts,
+)
+from skeleton_mamba.tasks.egodance.representation import motion_joints
+from skeleton_mamba.tasks.egodance.video_features import encode_video
+from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music import extract_music_features
+
+
+def _old_estimate_long_trajectory(estimator, frames, window):
+    """estimate_long_trajectory before features (verbatim): the estimator on windows of the held frames."""
+    total = frames.shape[0]
+    if total <= window:
+        positions, rotations = estimator(frames[None])
+        return positions[0], rotations[0]
+    positions = frames.new_zeros(total, 3)
+    rotations = frames.new_zeros(total, 3, 3)
+    start = 0
+    while True:
+        start = min(start, total - window)
+        pos, rot = estimator(frames[None, start : start + window])
+        pos, rot = pos[0], rot[0]
+        if start > 0:
+            pos[:, [0, 2]] += positions[start, [0, 2]] - pos[0, [0, 2]]
+        positions[start : start + window] = pos
+        rotations[start : start + window] = rot
+        if start + window >= total:
+            return positions, rotations
+        start += window - 1
+
+
+def _video(path, num_frames: int, width: int, height: int, seed: int = 0):
+    """A random 8-pixel-block texture drifting a pixel a frame (ego-motion for the head estimator)."""
+    rng = np.random.default_rng(seed)
+    blocks = rng.integers(0, 256, (-(-height // 8), (width + num_frames) // 8 + 1, 3), dtype=np.uint8)
+    texture = np.repeat(np.repeat(blocks, 8, axis=0), 8, axis=1)[:height]
+    writer = imageio_ffmpeg.write_frames(str(path), (width, height), fps=30, macro_block_size=16)
+    writer.send(None)
+    for t in range(num_frames):
+        writer.send(np.ascontiguousarray(texture[:, t : t + width]))
+    writer.close()
+    return path
+
+
+def test_long_window_starts_by_hand():
+    assert long_window_starts(8, 10) == [0]
+    assert long_window_starts(10, 10) == [0]
+    assert long_window_starts(11, 10) == [0, 1]
+    assert long_window_starts(37, 10) == [0, 9, 18, 27]  # 27 + 10 = 37: the last one ends at the end
+    assert long_window_starts(30, 10) == [0, 9, 18, 20]  # the last one moved back to end at frame 29
+    with pytest.raises(ValueError, match="at least 2"):
+        long_window_starts(5, 1)
+
+
+@pytest.mark.parametrize("total", [8, 10, 30, 37, 49])
+@pytest.mark.parametrize("chunk", [1, 7, 16])
+def test_streamed_head_features_give_the_trajectory_of_the_held_frames(total, chunk):
+    torch.manual_seed(0)
+    estimator = HeadTrajectoryEstimator(HeadEstimatorConfig(input_size=16, channels=(8, 8), dim=8, layers=1))
+    estimator.eval()
+    frames = torch.rand(total, 3, 24, 24)
+    stream = HeadFeatureStream(estimator, window=10)
+    for i in range(0, total, chunk):
+        stream.push(frames[i : i + chunk])
+    features = stream.finish()
+    assert len(features) == total and sorted(features.window_first) == long_window_starts(total, 10)[1:]
+    got = estimate_long_trajectory(estimator, features, window=10)
+    expected = _old_estimate_long_trajectory(estimator, frames, window=10)
+    for a, b in zip(got, expected, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)
+    raw = estimate_long_trajectory(estimator, frames, window=10)  # the frames API is kept
+    torch.testing.assert_close(raw[0], expected[0], rtol=0, atol=0)
+    with pytest.raises(ValueError, match="windows of 10 frames, not 12"):
+        estimate_long_trajectory(estimator, features, window=12)
+
+
+@pytest.fixture(scope="module")
+def dance_inputs(tmp_path_factory, tiny_egodance_module):
+    """A tiny EMM checkpoint (vision + head estimator), a 100-frame 48x40 video and a 3.4 s song."""
+    from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
+
+    tmp = tmp_path_factory.mktemp("video_dance")
+    torch.manual_seed(0)
+    module = tiny_egodance_module().eval()
+    ckpt = tmp / "emm.ckpt"
+    torch.save(
+        {
+            "state_dict": module.state_dict(),
+            "hyper_parameters": dict(module.hparams),
+            "pytorch-lightning_version": lightning.__version__,
+        },
+        ckpt,
+    )
+    wav = write_music(tmp / "song.wav", synthesize_music(120.0, 3.4))
+    video = _video(tmp / "ego.mp4", 100, 48, 40)
+    return tmp, module, ckpt, wav, video
+
+
+def test_sm_dance_from_streamed_features_equals_the_all_frames_dance(dance_inputs, capsys):
+    """The CLI's dance (features) against the dance of all the frames held, as ``sm dance`` did it: frames
+    read at the model's size, the verbatim old head estimate, sampling on windows of frames; same seed."""
+    tmp, module, ckpt, wav, video = dance_inputs
+    argv = ["--ckpt", str(ckpt), "--music", str(wav), "--video", str(video), "--steps", "2", "--seed", "3"]
+    argv += ["--window", "40", "--overlap", "20", "--head-weight", "0.5", "--no-render"]
+    assert dance_cli.main([*argv, "--out", str(tmp / "new.npz")]) == 0
+    assert "head trajectory estimated from the video" in capsys.readouterr().out
+
+    music = torch.from_numpy(extract_music_features(wav, fps=30).features.astype(np.float32))
+    frames = read_video_frames(video, module.hparams.image_size, max_frames=len(music) + 2)
+    n = min(len(frames), len(music))
+    assert n == 100
+    music, frames = music[:n], frames[:n]
+    head = _old_estimate_long_trajectory(module.head_estimator, frames, 40)[0]
+    old = dance_cli.sample_long_dance(
+        module.ema.module, module.diffusion, music, frames, head, window=40, overlap=20,
+        **dataclasses.asdict(module.sampling.override(sampling_steps=2)),
+        head_guidance_weight=0.5, head_guidance_steps=module.head_guidance.steps,
+        generator=torch.Generator().manual_seed(3),
+    )  # fmt: skip
+    got = load_motion(tmp / "new.npz").joints
+    np.testing.assert_allclose(got, motion_joints(old.float()).numpy(), rtol=1e-4, atol=1e-5)
+
+
+def test_video_features_are_those_of_the_held_frames(dance_inputs):
+    """z_v (T, Dc) and the dance tokens from features equal the frames path's (EMA and raw weights)."""
+    tmp, module, ckpt, wav, video = dance_inputs
+    size = module.hparams.image_size
+    frames = read_video_frames(video, size)
+    for model in (module.ema.module, module.model):
+        features = encode_video(video, size, model.vision_encoder, module.head_estimator, window=40, chunk=7)
+        assert features.num_frames == 100 and features.vision.shape == (100, model.context_dim)
+        with torch.no_grad():
+            held = model.vision_encoder(frames[None])[0]
+        torch.testing.assert_close(features.vision, held, rtol=1e-5, atol=1e-6)
+        music = torch.randn(100, model.config.music_dim)
+        kwargs = dict(window=40, overlap=20, sampling_steps=2, head_guidance_weight=0.0)
+        old = dance_cli.sample_long_dance(
+            model, module.diffusion, music, frames, generator=torch.Generator().manual_seed(1), **kwargs
+        )
+        new = dance_cli.sample_long_dance(
+            model, module.diffusion, music, vision=features.vision,
+            generator=torch.Generator().manual_seed(1), **kwargs,
+        )  # fmt: skip
+        torch.testing.assert_close(new, old, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="not both"):
+        dance_cli.sample_long_dance(model, module.diffusion, music, frames, vision=features.vision, **kwargs)
+    with pytest.raises(ValueError, match="eval mode"):
+        encode_video(video, size, module.model.vision_encoder.train())
+    module.eval()
+
+
+_PEAK_RSS = textwrap.dedent(
+    """
+    import resource, sys, warnings
+    import torch
+    from transformers import ResNetConfig
+    from skeleton_mamba.tasks.egodance.encoders import VisionEncoder
+    from skeleton_mamba.tasks.egodance.head_estimator import HeadEstimatorConfig, HeadTrajectoryEstimator
+    from skeleton_mamba.tasks.egodance.video_features import encode_video
+    torch.set_num_threads(1)
+    warnings.simplefilter("ignore")
+    torch.manual_seed(0)
+    layers = ResNetConfig(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
+    vision = VisionEncoder(16, resnet_config=layers, image_size=int(sys.argv[2])).eval()
+    head = HeadTrajectoryEstimator(HeadEstimatorConfig(input_size=16, channels=(8, 8), dim=8, layers=1))
+    head.eval()
+    encode_video(sys.argv[1], int(sys.argv[2]), vision, head, window=150, max_frames=48)  # warm up
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    features = encode_video(sys.argv[1], int(sys.argv[2]), vision, head, window=150)
+    print(features.num_frames, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)
+    """
+)
+
+
+@pytest.mark.slow  # about 40 s: two interpreters, 990 frames of 640x480 written and decoded
+def test_video_feature_memory_does_not_grow_with_the_length(tmp_path):
+    """Peak RSS growth (KiB, fresh interpreter, after a warm-up pass) of encoding 3 s and 30 s of 640x480
+    video at a 112 px model size: holding the frames as the old path did would add 810 * 3 * 112^2 * 4 B
+    = 122 MB for the 27 s more; the features add 810 * (16 + 8) floats = 78 KB."""
+    peaks = {}
+    for frames in (90, 900):
+        path = _video(tmp_path / f"v{frames}.mp4", frames, 640, 480)
+        proc = subprocess.run([sys.executable, "-c", _PEAK_RSS, str(path), "112"], capture_output=True,
+                              text=True, timeout=600, check=True)  # fmt: skip
+        count, peak_kib = (int(v) for v in proc.stdout.split())
+        assert count == frames
+        peaks[frames] = peak_kib
+    held_kib = (900 - 90) * 3 * 112 * 112 * 4 // 1024
+    assert peaks[900] - peaks[90] < 12 * 1024 < held_kib // 10, peaks  # under a tenth of the frames held
