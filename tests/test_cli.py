@@ -145,7 +145,7 @@ def test_config_files_and_dotted_overrides_merge_left_to_right(tmp_path, capsys)
 def test_unknown_recipe_is_a_parser_error_listing_the_recipes(capsys):
     assert sm_main(["fit", "--recipe", "no_such_recipe.yaml"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("sm fit: --recipe 'no_such_recipe.yaml': no such file"), err
+    assert err.startswith("sm fit: error: --recipe 'no_such_recipe.yaml': no such file"), err
     assert err.count("\n") == 1, err
     assert "Available recipes" in err and "usage:" not in err
     assert all(name in err for name in EXPECTED_RECIPES)

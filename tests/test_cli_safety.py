@@ -156,8 +156,8 @@ def test_missing_and_directory_checkpoints_are_one_line_errors(tmp_path, capsys)
     assert sm_main(["dance", "--ckpt", str(tmp_path), "--music", "x.wav", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
-        f"sm test: {tmp_path / 'none.ckpt'}: No such checkpoint file",
-        f"sm dance: {tmp_path / 'config.json'}: missing (not a from_pretrained folder)",
+        f"sm test: error: {tmp_path / 'none.ckpt'}: No such checkpoint file",
+        f"sm dance: error: {tmp_path / 'config.json'}: missing (not a from_pretrained folder)",
     ]
 
 
@@ -471,7 +471,7 @@ def test_undecodable_audio_unreadable_arrays_and_files_in_the_way_are_one_line_e
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines[0].startswith(f"sm render: error: {tmp_path / 'bad.wav'}: cannot decode audio (")
     assert lines[1].startswith(f"sm convert: error: {tmp_path / 'bad.npy'}: not a readable .npy file (")
-    assert lines[2] == f"sm make-ego: {tmp_path / 'afile'}: is a file (a folder is expected)"
+    assert lines[2] == f"sm make-ego: error: {tmp_path / 'afile'}: is a file (a folder is expected)"
     assert not video.exists() and len(lines) == 3
 
 
@@ -488,8 +488,8 @@ def test_sm_dance_bad_inputs_are_one_line_errors(tmp_path, tiny_egodance_module,
     assert sm_main([*base, "--video", str(tmp_path / "none.mp4")]) == 2
     assert sm_main([*base, "--render-size", "100x100"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines[0].startswith(f"sm dance: {tmp_path / 'bad.wav'}: cannot decode audio")
-    assert lines[1] == "sm dance: --render-size 100x100: use multiples of 16"
+    assert lines[0].startswith(f"sm dance: error: {tmp_path / 'bad.wav'}: cannot decode audio")
+    assert lines[1] == "sm dance: error: --render-size 100x100: use multiples of 16"
     assert len(lines) == 2 and not (tmp_path / "o").exists()
 
 
@@ -535,7 +535,7 @@ def test_a_yaml_syntax_error_names_the_recipe_file_and_line(tmp_path, capsys):
     recipe.write_text("trainer:\n  max_epochs: [1\nmodel: x\n")
     assert sm_main(["fit", "--recipe", str(recipe)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"sm fit: {recipe}:3:6: YAML syntax error in the recipe"), err
+    assert err.startswith(f"sm fit: error: {recipe}:3:6: YAML syntax error in the recipe"), err
     assert err.count("\n") == 1, err
 
 
@@ -552,7 +552,7 @@ def test_a_recipe_stopping_for_missing_data_leaves_no_run_folder(
     monkeypatch.chdir(tmp_path)
     assert sm_main(["fit", "--recipe", recipe, *options]) == 2
     err = capsys.readouterr().err
-    assert "sm fit: " in err and "data/" in err and "Traceback" not in err
+    assert "sm fit: error: " in err and "data/" in err and "Traceback" not in err
     assert not list(tmp_path.glob("runs/*/version_*"))
 
 
@@ -633,7 +633,7 @@ def test_fit_without_a_training_batch_is_an_error(tmp_path, monkeypatch, capsys)
     assert sm_main([*args, "--trainer.max_epochs", "1", "--trainer.enable_progress_bar", "false"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == (
-        "sm fit: the training data gives no batch (3 training samples, batch_size 8 with drop_last); "
+        "sm fit: error: the training data gives no batch (3 training samples, batch_size 8 with drop_last); "
         "nothing was trained"
     ), err
     assert not any(p.is_dir() and any(p.iterdir()) for p in (tmp_path / "runs").glob("*/*"))

@@ -41,9 +41,9 @@ CLASS = {
 OTHER = {"stream": "dance", "generate": "dance", "dance": "stream"}  # whose class path each one gets
 PROGRESS = re.compile(r"\| *\d+/\d+ \[")  # a tqdm frame: "|███| 2/10 [00:00<00:00, 12.48it/s]"
 HOLDS = {
-    "stream": "(this is an egodance checkpoint, not a stream one)",
-    "generate": "(this is an egodance checkpoint, not a text2motion one)",
-    "dance": "(this is a stream checkpoint, not an egodance one)",
+    "stream": "(this is an EgoDance checkpoint, not a streaming one)",
+    "generate": "(this is an EgoDance checkpoint, not a text-to-motion one)",
+    "dance": "(this is a streaming checkpoint, not an EgoDance one)",
 }
 
 
@@ -252,7 +252,7 @@ def _refused(cmd: str, ckpt: str, wav: Path, out: Path, capsys) -> str:
     # progress bars (the text encoder's loading, the sampler's steps) are not messages
     lines = [line for line in captured.err.splitlines() if line.strip() and not PROGRESS.search(line)]
     assert len(lines) == 1, captured.err
-    assert lines[0].startswith(f"sm {cmd}: "), lines
+    assert lines[0].startswith(f"sm {cmd}: error: "), lines
     assert not out.exists(), f"sm {cmd} wrote {sorted(out.rglob('*')) if out.is_dir() else out}"
     return lines[0]
 
@@ -392,5 +392,6 @@ def test_ckpt_path_is_checked_against_the_instantiated_model(tmp_path, monkeypat
         assert sm_main([*args, "--trainer.enable_progress_bar", "false"]) == 2
         err = capsys.readouterr().err
         assert "Traceback" not in err
-        assert err.strip().splitlines()[-1] == f"sm {subcommand}: {path}: {expected[name]}", err[-2000:]
+        last = err.strip().splitlines()[-1]
+        assert last == f"sm {subcommand}: error: {path}: {expected[name]}", err[-2000:]
     assert not list(tmp_path.glob("runs/*/version_*"))  # no run folder left behind

@@ -214,7 +214,7 @@ def test_a_foreign_class_path_is_refused_before_import(where, tmp_path, monkeypa
     assert f"--allow-import {name} or SM_ALLOW_IMPORT={name}" in line
     assert ", ".join(TRUSTED_MODULES) in line
     if where == "recipe":
-        assert line.startswith(f"sm fit: {tmp_path / 'foreign.yaml'}: ")
+        assert line.startswith(f"sm fit: error: {tmp_path / 'foreign.yaml'}: ")
     assert not marker.exists() and name not in sys.modules
 
 
@@ -346,7 +346,7 @@ def test_jsonargparse_refusals_of_a_recipe_are_one_short_line_naming_it(
     recipe = tmp_path / "bad.yaml"
     recipe.write_text(content, encoding="utf-8")
     line = _refused(["fit", "--recipe", str(recipe)], capsys, work, expected)
-    assert line.startswith(f"sm fit: {recipe}: ") and len(line) <= 500, line
+    assert line.startswith(f"sm fit: error: {recipe}: ") and len(line) <= 500, line
     assert "usage:" not in line and "Subtypes" not in line
 
 

@@ -26,6 +26,7 @@ from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.render_cli import load_joints
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 from skeleton_mamba.tasks.text2motion.convert_cli import convert_file
+from skeleton_mamba.tasks.training.cli import main as sm_main
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 NPM = Path(os.environ.get("SM_NPM_CACHE", Path.home() / ".cache" / "skeleton_mamba" / "npm"))
@@ -160,7 +161,7 @@ def test_humanml3d_features_export_as_their_joints(tmp_path):
 )
 def test_hostile_humanml3d_features_refused(tmp_path, capsys, bad, message):
     np.save(tmp_path / "f.npy", bad)
-    assert export_main([str(tmp_path / "f.npy"), "--out", str(tmp_path / "f.glb")]) == 2
+    assert sm_main(["export", str(tmp_path / "f.npy"), "--out", str(tmp_path / "f.glb")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("sm export: error: ") and str(tmp_path / "f.npy") in err and message in err, err
     assert len(err.splitlines()) == 1 and not (tmp_path / "f.glb").exists()

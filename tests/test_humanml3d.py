@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion import humanml3d_features as F
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 from skeleton_mamba.tasks.text2motion.convert_cli import main as convert_main
@@ -196,7 +196,8 @@ def test_convert_cli_and_render_the_sample(shared_data, sample, tmp_path):
     args = [str(tmp_path / "norm.npy"), "--out", str(tmp_path / "j2.npy"), "--normalized"]
     assert convert_main([*args, "--stats", str(shared_data / "humanml3d")]) == 0
     np.testing.assert_allclose(np.load(tmp_path / "j2.npy"), joints, atol=1e-4)
-    assert convert_main(args) == 2  # --normalized without --stats
+    with pytest.raises(InputError, match=r"^--normalized needs --stats DIR \(Mean.npy, Std.npy\)$"):
+        convert_main(args)  # sm prints it as one line, exit 2
     gif = render_motion(
         joints[:30],
         HUMANML3D22.parents,

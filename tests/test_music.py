@@ -25,6 +25,7 @@ from skeleton_mamba.tasks.motion.music import (
     fold_tempo,
     load_audio,
 )
+from skeleton_mamba.tasks.training.cli import main as sm_main
 
 REAL_TRACKS = {  # file stem -> listed tempo (shared/data/music/LICENSE-MUSIC.txt)
     "energetic_acoustic_1": 132.0,
@@ -201,7 +202,7 @@ def test_bad_audio_inputs_name_the_file(tmp_path, capsys):
     bad.write_bytes(b"not audio at all")
     with pytest.raises(ValueError, match="bad.wav: cannot decode audio"):
         load_audio(bad, 22050)
-    assert analyze_main([str(bad), "--no-cache"]) == 2
+    assert sm_main(["analyze-music", str(bad), "--no-cache"]) == 2
     assert "bad.wav" in capsys.readouterr().err
 
 
@@ -250,16 +251,16 @@ def test_analyze_music_out_of_range_samples_and_out_paths(tmp_path, capsys):
     sr = 22050
     huge = tmp_path / "huge.wav"
     sf.write(huge, np.full(2 * sr, 1e30, np.float32), sr, subtype="FLOAT")
-    assert analyze_main([str(huge), "--no-cache"]) == 2
+    assert sm_main(["analyze-music", str(huge), "--no-cache"]) == 2
     err = capsys.readouterr().err
     assert "huge.wav: samples out of range" in err and len(err.strip().splitlines()) == 1
     wav = tmp_path / "clicks.wav"
     click_track(wav, seconds=4.0)
     folder = tmp_path / "adir"
     folder.mkdir()
-    assert analyze_main([str(wav), "--no-cache", "--out", str(folder)]) == 2
+    assert sm_main(["analyze-music", str(wav), "--no-cache", "--out", str(folder)]) == 2
     assert "is a folder" in capsys.readouterr().err
-    assert analyze_main([str(wav), "--no-cache", "--out", str(tmp_path / "feats")]) == 2
+    assert sm_main(["analyze-music", str(wav), "--no-cache", "--out", str(tmp_path / "feats")]) == 2
     assert "must end in .npy" in capsys.readouterr().err
     assert not (tmp_path / "adir.npy").exists() and not (tmp_path / "feats.npy").exists()
     out = tmp_path / "sub" / "f.npy"

@@ -409,7 +409,7 @@ def test_export_refuses_a_checkpoint_naming_no_module(tmp_path, capsys, tiny_ego
     err = capsys.readouterr().err.strip()
     assert (
         err
-        == f"sm export-pretrained: {path}: its hyper-parameters name no module class (_class_path); "
+        == f"sm export-pretrained: error: {path}: its hyper-parameters name no module class (_class_path); "
         + ("pass --module")
     )
 

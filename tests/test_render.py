@@ -21,6 +21,7 @@ from skeleton_mamba.tasks.motion.render import (
 )
 from skeleton_mamba.tasks.motion.render_cli import load_joints, main
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.training.cli import main as sm_main
 
 
 def dancing_smpl(frames: int, fps: float, seed: int = 0) -> MotionData:
@@ -175,10 +176,10 @@ def test_inputs_of_every_kind(tmp_path, shared_data):
 
 
 def test_cli_errors_return_2(tmp_path, capsys):
-    assert main([str(tmp_path / "missing.npz"), "--out", str(tmp_path / "a.mp4")]) == 2
+    assert sm_main(["render", str(tmp_path / "missing.npz"), "--out", str(tmp_path / "a.mp4")]) == 2
     assert "missing.npz: no such motion file" in capsys.readouterr().err
     np.save(tmp_path / "j.npy", np.zeros((4, 24, 3)))
-    assert main([str(tmp_path / "j.npy"), "--out", str(tmp_path / "a.avi")]) == 2
+    assert sm_main(["render", str(tmp_path / "j.npy"), "--out", str(tmp_path / "a.avi")]) == 2
     assert "output must end in .mp4 or .gif" in capsys.readouterr().err
 
 

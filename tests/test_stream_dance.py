@@ -169,41 +169,49 @@ def test_standard_input_as_wav_stream_or_raw_pcm_gives_the_file_samples(tmp_path
 
 
 def test_sm_stream_explains_missing_inputs(checkpoint, tmp_path, capsys):
-    from skeleton_mamba.tasks.stream.cli import main
+    from skeleton_mamba.tasks.training.cli import main
 
-    assert main(["--ckpt", str(tmp_path / "none.ckpt"), "--music", "x.wav", "--out", str(tmp_path)]) == 2
-    assert "none.ckpt not found" in capsys.readouterr().err
+    none = tmp_path / "none.ckpt"
+    assert main(["stream", "--ckpt", str(none), "--music", "x.wav", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"sm stream: error: {none}: No such checkpoint file\n"  # named once
     missing = str(tmp_path / "none.wav")
-    assert main(["--ckpt", str(checkpoint), "--music", missing, "--out", str(tmp_path)]) == 2
-    assert "none.wav: music file not found" in capsys.readouterr().err
-    assert main(["--ckpt", str(checkpoint), "--out", str(tmp_path)]) == 2
-    assert "--music" in capsys.readouterr().err
+    assert main(["stream", "--ckpt", str(checkpoint), "--music", missing, "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"sm stream: error: {missing}: music file not found\n"
+    assert main(["stream", "--ckpt", str(checkpoint), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == "sm stream: error: --music FILE (or -) is required for --task dance\n"
 
 
 def test_sm_stream_checks_checkpoints_like_every_command(tmp_path, capsys, tiny_egodance_module):
     """URLs, text files and checkpoints of another task: one line each, exit 2, nothing written."""
     import lightning
 
-    from skeleton_mamba.tasks.stream.cli import main
+    from skeleton_mamba.tasks.training.cli import main
 
     out = tmp_path / "out"
     wav = tmp_path / "song.wav"
     sf.write(wav, np.zeros(22050, dtype=np.float32), 22050)
     base = ["--music", str(wav), "--out", str(out)]
-    assert main(["--ckpt", "https://example.org/last.ckpt", *base]) == 2
-    assert "remote checkpoints are refused" in capsys.readouterr().err
+    assert main(["stream", "--ckpt", "https://example.org/last.ckpt", *base]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sm stream: error: https://example.org/last.ckpt: remote checkpoints are refused")
+    assert err.count("https://example.org/last.ckpt") == 1 and err.count("\n") == 1, err
     text = tmp_path / "notes.ckpt"
     text.write_text("not a checkpoint")
-    assert main(["--ckpt", str(text), *base]) == 2
-    assert "notes.ckpt: not a plain-data checkpoint, refused" in capsys.readouterr().err
+    assert main(["stream", "--ckpt", str(text), *base]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"sm stream: error: {text}: not a plain-data checkpoint, refused"), err
+    assert err.count(str(text)) == 1 and err.count("\n") == 1, err
     module = tiny_egodance_module()
     hparams = {**module.hparams, "_class_path": "skeleton_mamba.tasks.egodance.module.EgoDanceModule"}
     ego = tmp_path / "emm.ckpt"
     state = {"state_dict": module.state_dict(), "hyper_parameters": hparams}
     torch.save({**state, "pytorch-lightning_version": lightning.__version__}, ego)
-    assert main(["--ckpt", str(ego), *base]) == 2
+    assert main(["stream", "--ckpt", str(ego), *base]) == 2
     err = capsys.readouterr().err.strip()
-    assert "holds a skeleton_mamba.tasks.egodance.module.EgoDanceModule, not a StreamDanceModule" in err
+    assert err == (
+        f"sm stream: error: {ego}: holds a skeleton_mamba.tasks.egodance.module.EgoDanceModule, not a "
+        "StreamDanceModule (this is an EgoDance checkpoint, not a streaming one)"
+    ), err
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert not out.exists() or not any(out.iterdir())
 

@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack, extract_music_features
 
 __all__ = ["main"]
@@ -58,7 +58,11 @@ def _check_out(out: Path) -> str | None:
 
 
 def _analyse(args: argparse.Namespace):
-    """The analysis, or a one-line reason naming the file when the audio cannot be analysed."""
+    """The analysis of ``args.file``.
+
+    Raises:
+        InputError: the audio cannot be analysed (the one-line message names the file).
+    """
     import librosa  # lazy: librosa's import is slow (numba)
 
     try:
@@ -73,28 +77,27 @@ def _analyse(args: argparse.Namespace):
                 use_cache=not args.no_cache,
             )
     except (FileNotFoundError, ValueError) as err:  # messages name the file
-        return str(err)
+        raise InputError(str(err)) from err
     except librosa.util.exceptions.ParameterError as err:
         # decoded, then overflowed inside the analysis: samples far outside [-1, 1] (e.g. 1e30)
-        return f"{args.file}: samples out of range, the analysis overflows ({err}); audio lies in [-1, 1]"
+        raise InputError(
+            f"{args.file}: samples out of range, the analysis overflows ({err}); audio lies in [-1, 1]"
+        ) from err
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``sm analyze-music``; returns the process exit code."""
     args = _parser().parse_args(argv)
     problem = None if args.out is None else _check_out(args.out)
-    analysis = _analyse(args) if problem is None else problem
-    if isinstance(analysis, str):
-        print(f"sm analyze-music: error: {analysis}", file=sys.stderr)
-        return 2
+    if problem is not None:
+        raise InputError(problem)
+    analysis = _analyse(args)
     if args.out is not None:
         try:
             with atomic_open(args.out, "wb") as f:  # exactly args.out: np.save on a handle adds no suffix
                 np.save(f, np.ascontiguousarray(analysis.features), allow_pickle=False)
         except OSError as err:
-            reason = err.strerror or err
-            print(f"sm analyze-music: error: {args.out}: cannot write ({reason})", file=sys.stderr)
-            return 2
+            raise InputError(f"{args.out}: cannot write ({err.strerror or err})") from err
     beats = [round(float(t), 4) for t in analysis.beat_times]
     tempo, dance = analysis.tempo_bpm, analysis.dance_tempo_bpm
     if args.json:

@@ -3,8 +3,9 @@
 Policy (applied by ``skeleton_mamba.tasks.training.cli.main`` to every command):
 
 - an expected failure (a :class:`SkeletonMambaError`, or an :class:`OSError` such as a missing or
-  unwritable path, or a directory where a file belongs) prints one line ``sm COMMAND: message`` naming
-  the file and exits with status 2;
+  unwritable path, or a directory where a file belongs) prints one line ``sm COMMAND: error: message``
+  naming the file (argparse's form for a bad argument) and exits with status 2; one raised in a DataLoader
+  worker process (which torch re-raises with the worker's traceback as its text) prints the same line;
 - Ctrl-C prints ``sm COMMAND: interrupted`` and exits with status 130;
 - anything else is a bug and keeps its traceback. ``SM_TRACEBACK=1`` shows the traceback of expected
   failures too.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import signal
 
 __all__ = [
@@ -101,7 +103,35 @@ def one_line_message(err: BaseException) -> str:
             reason = "permission denied (not writable or not readable)"
         names = [os.fspath(n) for n in (err.filename, err.filename2) if n is not None]
         return f"{' -> '.join(map(str, names))}: {reason}" if names else reason
-    return str(err) or type(err).__name__
+    text = str(err)
+    original = _worker_original(text, type(err).__name__)
+    if original is not None and isinstance(err, OSError) and not isinstance(err, SkeletonMambaError):
+        parts = re.fullmatch(r"\[Errno (\d+)\] (.+?)(?:: '(.*)')?", original)  # str() of an OSError
+        if parts is not None:  # rebuilt, for the ``path: reason`` form above
+            return one_line_message(type(err)(int(parts[1]), parts[2], parts[3]))
+    return original or text or type(err).__name__
+
+
+# torch's ExceptionWrapper.reraise: "Caught DataFileError in DataLoader worker process 0.\nOriginal Traceback
+# (most recent call last):\n ... \nskeleton_mamba.tasks.motion.errors.DataFileError: MESSAGE\n"
+_RERAISED = re.compile(r"Caught \w+ in [^\n]*\.\nOriginal Traceback \(most recent call last\):\n")
+
+
+def _worker_original(text: str, type_name: str) -> str | None:
+    """The original message of an exception torch re-raised from a DataLoader worker (or its pin-memory
+    thread) with the worker's traceback as its text; None when ``text`` is not such a message.
+
+    The traceback ends with the line ``package.module.TypeName: MESSAGE`` (the message may span lines);
+    the last such line of the re-raised type is taken, else the traceback's last line.
+    """
+    if not _RERAISED.match(text):
+        return None
+    header = re.compile(rf"^(?:[\w.]+\.)?{re.escape(type_name)}: ", re.MULTILINE)
+    starts = list(header.finditer(text))
+    if starts:
+        return text[starts[-1].end() :].strip() or type_name
+    last = text.strip().splitlines()[-1]
+    return re.sub(r"^[\w.]+: ", "", last, count=1) or type_name
 
 
 def worker_ignores_ctrl_c() -> None:

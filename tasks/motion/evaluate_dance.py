@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from tqdm import tqdm
 
 from skeleton_mamba.tasks.motion.aistpp import music_id
+from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
 from skeleton_mamba.tasks.motion.music import audio_stack
@@ -39,8 +39,8 @@ AUDIO_SUFFIXES = (".wav", ".mp3", ".flac", ".ogg", ".opus", ".m4a")
 _ROWS = ("FID_k", "FID_g", "Div_k", "Div_g", "BeatAlign", "PFC")
 
 
-class EvaluateDanceError(ValueError):
-    """An input folder or file cannot be evaluated (the message names it)."""
+class EvaluateDanceError(InputError):
+    """An input folder or file cannot be evaluated (the message names it; ``sm`` prints it, exit 2)."""
 
 
 def _motion_files(folder: Path) -> list[Path]:
@@ -158,13 +158,9 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm evaluate-dance``; returns the exit code."""
     args = _parser().parse_args(argv)
-    try:
-        result = evaluate_folders(
-            args.generated, args.real, args.protocol, args.music_dir, args.cache_dir, not args.quiet
-        )
-    except EvaluateDanceError as err:
-        print(f"sm evaluate-dance: error: {err}", file=sys.stderr)
-        return 2
+    result = evaluate_folders(
+        args.generated, args.real, args.protocol, args.music_dir, args.cache_dir, not args.quiet
+    )
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 

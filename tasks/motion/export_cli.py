@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion, write_glb
 
@@ -40,14 +40,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.out)
     try:
         if out.suffix.lower() != ".glb":
-            raise ValueError(f"{out}: the output must be a .glb file")
+            raise InputError(f"{out}: the output must be a .glb file")
         motion = load_skeleton_motion(args.motion, skeleton=args.skeleton, motion_fps=args.motion_fps)
         write_glb(motion, out, name=Path(args.motion).stem)
         print(f"wrote {out} ({len(motion.names)} joints, {motion.num_frames} frames at {motion.fps:g} fps)")
         if args.music is not None:
             wav = write_music_slice(args.music, 0.0, motion.num_frames / motion.fps, out.with_suffix(".wav"))
             print(f"wrote {wav}")
-    except (OSError, ValueError, KeyError) as e:
-        print(f"sm export: error: {one_line_message(e)}", file=sys.stderr)
-        return 2
+    except (ValueError, KeyError) as e:  # the readers' argument checks name the file too: one line, exit 2
+        raise InputError(one_line_message(e)) from e
     return 0

@@ -30,7 +30,7 @@ import torch
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
 from skeleton_mamba.tasks.motion.bvh import load_bvh
-from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, check_features, recover_from_ric
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS as HUMANML3D_FPS
 from skeleton_mamba.tasks.motion.motion_file import load_motion
@@ -164,8 +164,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             title=args.title if args.title is not None else Path(args.motion).name,
             progress=not args.quiet,
         )
-    except (OSError, ValueError, KeyError) as e:
-        print(f"sm render: error: {one_line_message(e)}", file=sys.stderr)
-        return 2
+    except (ValueError, KeyError) as e:  # the readers' argument checks name the file too: one line, exit 2
+        raise InputError(one_line_message(e)) from e
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0

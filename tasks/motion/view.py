@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, load_skeleton_motion, write_glb
 
 __all__ = ["write_view", "main"]
@@ -147,8 +147,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             for m in args.motions
         ]
         out = write_view(motions, args.out, music=args.music, metrics=args.metrics, overlay=args.overlay)
-    except (OSError, ValueError, KeyError) as e:
-        print(f"sm view: error: {one_line_message(e)}", file=sys.stderr)
-        return 2
+    except (ValueError, KeyError) as e:  # the readers' argument checks name the file too: one line, exit 2
+        raise InputError(one_line_message(e)) from e
     print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB)")
     return 0

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import sys
 import time
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import torch
 
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
+from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
@@ -139,13 +139,11 @@ ONLINE_BF16_ERROR = "Measured on a tiny causal recognizer: probabilities within 
 def main(argv: list[str] | None = None) -> int:
     """``sm stream --task recognition`` (see the module docstring); returns the exit code."""
     args = build_parser().parse_args(argv)
-    if (code := prepare_live(args.ckpt, args.threads)) is not None:
-        return code
+    prepare_live(args.ckpt, args.threads)
     try:
         return stream_recognition(args)
-    except (FileNotFoundError, ValueError) as err:  # bad input files: one line, no traceback
-        print(f"sm stream: {err}", file=sys.stderr)
-        return 2
+    except ValueError as err:  # the keypoint readers' checks name the file: one line, exit 2
+        raise InputError(one_line_message(err)) from err
 
 
 def stream_recognition(args: argparse.Namespace) -> int:

@@ -41,7 +41,7 @@ from skeleton_mamba.tasks.recognition.kinetics import (
     read_kinetics_clip,
     read_kinetics_labels,
 )
-from skeleton_mamba.tasks.recognition.pyskl import KEYPOINT_DTYPES, AnnotationFileError, save_annotations
+from skeleton_mamba.tasks.recognition.pyskl import KEYPOINT_DTYPES, save_annotations
 from skeleton_mamba.tasks.recognition.splits import benchmark_splits, in_dataset, load_missing_samples
 
 __all__ = ["main", "prepare_kinetics", "prepare_ntu"]
@@ -259,20 +259,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``sm prepare`` entry point; returns the exit code."""
     args = _parser().parse_args(argv)
     if args.workers < 1:
-        print("sm prepare: --workers must be >= 1", file=sys.stderr)
-        return 2
-    try:
-        if args.dataset == "kinetics":
-            summary = prepare_kinetics(
-                args.raw, args.out, args.labels, args.workers, args.skip_bad, args.dtype
-            )
-        else:
-            summary = prepare_ntu(
-                args.dataset, args.raw, args.out, args.workers, args.skip_bad, args.max_bodies, args.dtype
-            )
-    except (PrepareError, AnnotationFileError) as e:
-        print(f"sm prepare {args.dataset}: error: {e}", file=sys.stderr)
-        return 2
+        raise PrepareError(f"--workers {args.workers}: must be >= 1")
+    if args.dataset == "kinetics":  # PrepareError, AnnotationFileError: sm prints one line, exit 2
+        summary = prepare_kinetics(args.raw, args.out, args.labels, args.workers, args.skip_bad, args.dtype)
+    else:
+        summary = prepare_ntu(
+            args.dataset, args.raw, args.out, args.workers, args.skip_bad, args.max_bodies, args.dtype
+        )
     splits = ", ".join(f"{k} {v}" for k, v in summary.pop("splits").items())
     print(f"wrote {summary.pop('written')} samples to {args.out} ({splits})")
     print("; ".join(f"{k.replace('_', ' ')}: {v}" for k, v in summary.items()))

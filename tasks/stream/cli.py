@@ -33,6 +33,7 @@ import numpy as np
 import soundfile as sf
 
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
+from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
@@ -106,12 +107,9 @@ def _load_dancer(ckpt: str):
 def stream_dance(args: argparse.Namespace) -> int:
 
     if not args.music:
-        print("sm stream: --music FILE (or -) is required for --task dance", file=sys.stderr)
-        return 2
+        raise InputError("--music FILE (or -) is required for --task dance")
     if args.compile and args.precision != "fp32":
-        print(f"sm stream: --compile steps in fp32 only: drop --compile or --precision {args.precision}",
-              file=sys.stderr)  # fmt: skip
-        return 2
+        raise InputError(f"--compile steps in fp32 only: drop --compile or --precision {args.precision}")
     source = AudioSource(args.music, args.chunk_ms / 1e3, args.realtime, args.raw_rate)
     model = _load_dancer(args.ckpt)
     with inference_precision(args.precision):  # the warm-up frame too
@@ -143,11 +141,11 @@ def stream_dance(args: argparse.Namespace) -> int:
             writer.close()
     try:
         if dancer.num_frames == 0:
-            print(
-                "sm stream: the music ended before one frame (33 ms) was complete; nothing written",
-                file=sys.stderr,
-            )
-            return 130 if interrupted else 2
+            message = f"{args.music}: the music ended before one frame (33 ms) was complete; nothing written"
+            if not interrupted:
+                raise InputError(message)
+            print(f"sm stream: {message}", file=sys.stderr)
+            return 130
         width, height = (int(v) for v in args.render_size.lower().split("x"))
         files = write_motion(
             tokens_to_motion(dancer.tokens().float(), FPS),
@@ -193,15 +191,9 @@ def stream_dance(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.task == "recognition":  # sm routes it to skeleton_mamba.tasks.recognition.online
-        print(
-            "sm stream: --task recognition runs through sm (sm stream --task recognition ...)",
-            file=sys.stderr,
-        )
-        return 2
-    if (code := prepare_live(args.ckpt, args.threads)) is not None:
-        return code
+        raise InputError("--task recognition runs through sm (sm stream --task recognition ...)")
+    prepare_live(args.ckpt, args.threads)
     try:
         return stream_dance(args)
-    except (FileNotFoundError, ValueError) as err:  # bad input files: one line, no traceback
-        print(f"sm stream: {err}", file=sys.stderr)
-        return 2
+    except ValueError as err:  # the audio readers' checks name the file: one line, exit 2
+        raise InputError(one_line_message(err)) from err

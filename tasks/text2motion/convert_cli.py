@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import one_line_message
+from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.humanml3d_features import (
     denormalize,
     read_features,
@@ -64,12 +64,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm convert``; returns 0 on success, 2 on a bad file or argument."""
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.normalized and args.stats is None:
-        print("sm convert: error: --normalized needs --stats DIR (Mean.npy, Std.npy)", file=sys.stderr)
-        return 2
+        raise InputError("--normalized needs --stats DIR (Mean.npy, Std.npy)")
     try:
         out = convert_file(args.features, args.out, stats=args.stats if args.normalized else None)
-    except (OSError, ValueError) as e:
-        print(f"sm convert: error: {one_line_message(e)}", file=sys.stderr)
-        return 2
+    except ValueError as e:  # the feature checks name the file: one line, exit 2
+        raise InputError(one_line_message(e)) from e
     print(f"wrote {out}")
     return 0

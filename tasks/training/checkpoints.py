@@ -241,11 +241,15 @@ def _checked(checkpoint: Any, source: str) -> dict:
     return checkpoint
 
 
+_TASK_NAMES = {"egodance": "EgoDance", "stream": "streaming", "text2motion": "text-to-motion", "qean": "QEAN"}
+
+
 def _task_of(class_path: str) -> str:
-    """``"egodance"`` for ``skeleton_mamba.tasks.egodance.module.EgoDanceModule``; else the class name."""
+    """``"EgoDance"`` for ``skeleton_mamba.tasks.egodance.module.EgoDanceModule`` (the task's name as the
+    docs write it, else its folder's); the class name outside ``skeleton_mamba.tasks``."""
     parts = class_path.split(".")
     if len(parts) > 3 and parts[:2] == ["skeleton_mamba", "tasks"]:
-        return parts[2]
+        return _TASK_NAMES.get(parts[2], parts[2])
     return parts[-1]
 
 

@@ -4,8 +4,10 @@
 commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the task or toolkit code
 that implements them and are named here as strings, imported only when their command runs (lazy for
 start-up time: ``sm --help`` imports neither Lightning nor a task). Every command shares one error policy:
-an expected failure (:func:`~skeleton_mamba.tasks.motion.errors.expected_failure`) prints one line and exits
-2, Ctrl-C prints one line and exits 130, anything else keeps its traceback.
+an expected failure (:func:`~skeleton_mamba.tasks.motion.errors.expected_failure`) prints one line
+``sm COMMAND: error: MESSAGE`` (argparse's own form for a bad argument, so every refusal reads alike) and
+exits 2, Ctrl-C prints one line and exits 130, anything else keeps its traceback. The commands raise; they
+print no error line of their own.
 """
 
 from __future__ import annotations
@@ -116,9 +118,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = _expected_failure_message(err)
         if message is None or os.environ.get("SM_TRACEBACK"):
             raise
-        print(f"sm {command}: {message}", file=sys.stderr)
+        print(error_line(command, message), file=sys.stderr)
         return EXIT_BAD_INPUT
     return int(result or 0)
+
+
+def error_line(command: str, message: str) -> str:
+    """The line ``sm`` prints for an expected failure of ``command``: argparse's ``prog: error: message``."""
+    return f"sm {command}: error: {message}"
 
 
 def _target(command: str, args: list[str], default: str) -> str:

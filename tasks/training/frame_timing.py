@@ -16,24 +16,20 @@ from skeleton_mamba.tasks.training.pretrained import check_model_source
 __all__ = ["announce_compile", "latency_summary", "prepare_live", "realtime_hint", "report_compile"]
 
 
-def prepare_live(ckpt: str, threads: int | None, prog: str = "sm stream") -> int | None:
-    """Check the checkpoint, set the CPU threads and keep freed memory; an exit code on failure, else None.
+def prepare_live(ckpt: str, threads: int | None) -> None:
+    """Check the checkpoint, set the CPU threads and keep freed memory.
 
     A URL or a missing checkpoint is refused before any work; ``threads`` (None: torch's default) sets
     ``torch.set_num_threads``; the allocator keeps freed memory so that the per-frame path has no page faults.
+
+    Raises:
+        CheckpointError, OSError: the checkpoint is refused or missing (the message names it once; ``sm``
+            prints it as one line, exit 2).
     """
-    try:
-        check_model_source(ckpt)  # a checkpoint file, a from_pretrained folder or a Hub id
-    except FileNotFoundError:
-        print(f"{prog}: checkpoint {ckpt} not found", file=sys.stderr)
-        return 2
-    except (OSError, ValueError) as err:
-        print(f"{prog}: checkpoint {ckpt}: {err}", file=sys.stderr)
-        return 2
+    check_model_source(ckpt)  # a checkpoint file, a from_pretrained folder or a Hub id
     if threads:
         torch.set_num_threads(threads)
     keep_freed_memory()
-    return None
 
 
 def latency_summary(values_ms: np.ndarray) -> dict[str, float]:

@@ -204,7 +204,7 @@ def plan_windows(
         except (ValueError, OSError, EOFError) as e:  # DataFileError, UnsafePickleError, unreadable files
             message = str(e) if str(path) in str(e) else f"{path}: {e}"
             if not cfg.skip_bad:
-                raise DataFileError(f"{message}\n(--skip-bad goes on past corrupt motion files)") from e
+                raise DataFileError(f"{message} (--skip-bad goes on past corrupt motion files)") from e
             log.warning("skipping corrupt motion file: %s", message)
             if bad_inputs is not None:
                 bad_inputs.append(message)
