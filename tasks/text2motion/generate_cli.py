@@ -16,9 +16,10 @@ selects DDIM), ``--eta`` or ``--guidance`` (the classifier-free guidance scale) 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,7 @@ import torch
 
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError, one_line_message
+from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.render import render_motion
@@ -116,27 +117,45 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+@contextlib.contextmanager
+def _no_loading_bar() -> Iterator[None]:
+    """Hide transformers' weight-loading bar while the text encoder is built (it loads in well under a
+    second from a local folder; the bar would stand above a refusal's one line)."""
+    from transformers.utils import logging as transformers_logging  # lazy: transformers' import is slow
+
+    shown = transformers_logging.is_progress_bar_enabled()
+    transformers_logging.disable_progress_bar()
+    try:
+        yield
+    finally:
+        if shown:
+            transformers_logging.enable_progress_bar()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm generate``; returns 0 on success, 2 on a bad file or argument."""
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    # everything cheap is refused before the checkpoint and the text encoder are loaded
     try:
         frames = parse_length(args.length)
-        check_model_source(args.checkpoint)  # the text as given: a URL is refused as one
-    except FileNotFoundError:
-        print(f"sm generate: error: {args.checkpoint}: no such checkpoint", file=sys.stderr)
-        return 2
-    except (OSError, ValueError) as e:
-        print(f"sm generate: error: {one_line_message(e)}", file=sys.stderr)
-        return 2
+    except ValueError as e:
+        raise InputError(str(e)) from e  # names the text given
+    if args.num < 1:
+        raise InputError(f"--num {args.num}: need at least one sample per caption")
+    if Path(args.out).is_file():
+        raise InputError(f"{args.out}: is a file (a folder is expected)")
+    overrides = sampling_overrides(args)
+    check_model_source(args.checkpoint)  # the text as given: a URL is refused as one
 
-    module = load_module_from(TextToMotionModule, args.checkpoint).eval()
+    with _no_loading_bar():  # a refused checkpoint leaves one line on stderr, not a bar above it
+        module = load_module_from(TextToMotionModule, args.checkpoint).eval()
     captions = [c for c in args.text for _ in range(args.num)]
     features, _ = module.generate(
         captions,
         [frames] * len(captions),
         generator=torch.Generator().manual_seed(args.seed),
         progress=True,
-        **sampling_overrides(args),
+        **overrides,
     )
     for i, caption in enumerate(captions):  # every motion checked before the first is written
         message = non_finite_message(features[i].float().numpy(), "features", ("frame",))
