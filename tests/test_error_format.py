@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sys
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -283,3 +284,24 @@ def test_generate_refuses_a_checkpoint_that_does_not_fit_on_one_line(tmp_path, c
         capsys.readouterr().err
         == f"sm generate: error: {tmp_path / 'afile.npy'}: is a file (a folder is expected)\n"
     )
+
+
+def test_sm_fit_prints_a_data_error_raised_in_a_worker_process_as_one_line(tmp_path, monkeypatch, capsys):
+    """``sm fit --data.num_workers 1`` on training samples that are a malformed file: torch re-raises the
+    worker's DataFileError with its whole traceback as text; ``sm fit`` prints the worker's message."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))  # worker_error_data, beside this file
+    bad = tmp_path / "s007.npy"
+    args = [
+        "fit", "--recipe", "recognition_synthetic.yaml", "--allow-import", "worker_error_data",
+        "--data", "worker_error_data.MalformedTrainingFileDataModule", "--data.bad_file", str(bad),
+        "--data.num_workers", "1", "--trainer.max_epochs", "1", "--trainer.logger", "false",
+        "--trainer.enable_progress_bar", "false",
+    ]  # fmt: skip
+    assert sm_main(args) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "DataLoader worker" not in err, err[-2000:]
+    assert [line for line in err.splitlines() if line.startswith("sm ")] == [
+        f"sm fit: error: {bad}: frame 0: NaN in the joint positions"
+    ], err[-2000:]
+    assert err.strip().splitlines()[-1].startswith("sm fit: error: ")
