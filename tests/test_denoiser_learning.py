@@ -18,6 +18,7 @@ from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.egodance.losses import reconstruction_loss
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
+from skeleton_mamba.tasks.motion.temporal_filter import smooth_over_time
 
 STEPS = 200
 MIDDLE_T = 10  # of 20 diffusion steps
@@ -156,3 +157,49 @@ def test_text_to_motion_overfits_two_clips_and_beats_x_t_at_small_t(precision):
         return (x0_hat - x0).pow(2).mean().item(), (x_t - x0).pow(2).mean().item()
 
     _fit_and_check(module, batch, x0_mse, small_t, precision)
+
+
+def test_emm_output_smoothing_filters_x0_and_still_learns(tiny_egodance_module):
+    """``output_smoothing``: the denoiser's x0 is the unsmoothed x0 low-passed over time (the same weights),
+    it trains through the filter, and its x0 is smoother than the unfiltered model's at a middle t."""
+    torch.manual_seed(0)
+    x0 = _dance_windows(32)
+    gen = torch.Generator().manual_seed(0)
+    batch = {
+        "motion": x0,
+        "music": torch.randn(2, 32, 35, generator=gen),
+        "frames": torch.rand(2, 32, 3, 32, 32, generator=gen),
+    }
+    plain = tiny_egodance_module(lr=1e-3, ema_every=10**9)
+    network = {**plain.hparams["network"], "output_smoothing": 2.0}
+    module = tiny_egodance_module(network=network, lr=1e-3, ema_every=10**9)
+    module.model.load_state_dict(plain.model.state_dict())
+    module.model.set_data_statistics(x0)
+    plain.model.set_data_statistics(x0)
+    x_t, steps = _x_t(module.diffusion, x0, MIDDLE_T)
+    with torch.no_grad():
+        context = module.model.encode_condition(batch["music"], batch["frames"])
+        unfiltered = plain.model.eval()(x_t, steps, context)
+        filtered = module.model.eval()(x_t, steps, context)
+    torch.testing.assert_close(filtered, smooth_over_time(unfiltered, 2.0))
+
+    def x0_mse(t: int) -> tuple[float, float]:
+        with torch.no_grad():
+            context = module.model.encode_condition(batch["music"], batch["frames"])
+            x_t, steps = _x_t(module.diffusion, x0, t)
+            return reconstruction_loss(module.model(x_t, steps, context), x0).item(), reconstruction_loss(
+                x_t, x0
+            ).item()
+
+    before = x0_mse(MIDDLE_T)[0]
+    _fit(module, batch)
+    after = x0_mse(MIDDLE_T)[0]
+    assert after < 0.7 * before, (before, after)
+    with torch.no_grad():
+        x_t, steps = _x_t(module.diffusion, x0, MIDDLE_T)
+        pred = module.model(x_t, steps, module.model.encode_condition(batch["music"], batch["frames"]))
+
+    def accel(x: torch.Tensor) -> float:
+        return float((x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2]).square().mean())
+
+    assert accel(pred) < 2.0 * accel(x0), (accel(pred), accel(x0))
