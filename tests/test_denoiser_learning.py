@@ -70,17 +70,22 @@ def _dance_windows(frames: int) -> torch.Tensor:
     return torch.stack(windows)
 
 
+def _dance_batch() -> dict:
+    """Two 32-frame dance windows with random music features and egocentric frames (fixed seed)."""
+    gen = torch.Generator().manual_seed(0)
+    return {
+        "motion": _dance_windows(32),
+        "music": torch.randn(2, 32, 35, generator=gen),
+        "frames": torch.rand(2, 32, 3, 32, 32, generator=gen),
+    }
+
+
 @pytest.mark.parametrize("precision", TRAINING_PRECISIONS)
 def test_emm_overfits_two_windows_and_beats_x_t_at_small_t(tiny_egodance_module, precision):
     torch.manual_seed(0)
     module = tiny_egodance_module(lr=1e-3, ema_every=10**9)
-    x0 = _dance_windows(32)
-    gen = torch.Generator().manual_seed(0)
-    batch = {
-        "motion": x0,
-        "music": torch.randn(2, 32, 35, generator=gen),
-        "frames": torch.rand(2, 32, 3, 32, 32, generator=gen),
-    }
+    batch = _dance_batch()
+    x0 = batch["motion"]
     module.model.set_data_statistics(x0)  # what EgoDanceModule.setup does with the training windows
     small_t = 1
 
@@ -161,15 +166,11 @@ def test_text_to_motion_overfits_two_clips_and_beats_x_t_at_small_t(precision):
 
 def test_emm_output_smoothing_filters_x0_and_still_learns(tiny_egodance_module):
     """``output_smoothing``: the denoiser's x0 is the unsmoothed x0 low-passed over time (the same weights),
-    it trains through the filter, and its x0 is smoother than the unfiltered model's at a middle t."""
+    it trains through the filter, and after training its x0 at a middle t accelerates at most twice as much as
+    the data (mean squared second difference)."""
     torch.manual_seed(0)
-    x0 = _dance_windows(32)
-    gen = torch.Generator().manual_seed(0)
-    batch = {
-        "motion": x0,
-        "music": torch.randn(2, 32, 35, generator=gen),
-        "frames": torch.rand(2, 32, 3, 32, 32, generator=gen),
-    }
+    batch = _dance_batch()
+    x0 = batch["motion"]
     plain = tiny_egodance_module(lr=1e-3, ema_every=10**9)
     network = {**plain.hparams["network"], "output_smoothing": 2.0}
     module = tiny_egodance_module(network=network, lr=1e-3, ema_every=10**9)
