@@ -16,6 +16,7 @@ import importlib
 import importlib.util
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 from skeleton_mamba import __version__
@@ -105,6 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     apply_thread_defaults()  # one intra-op thread on a small machine unless OMP_NUM_THREADS is set
+    silence_library_deprecations()
     module_name, func_name = _target(command, rest, commands[command][0]).split(":")
     if command in LIGHTNING_SUBCOMMANDS:
         rest = [command, *rest]
@@ -126,6 +128,24 @@ def main(argv: Sequence[str] | None = None) -> int:
 def error_line(command: str, message: str) -> str:
     """The line ``sm`` prints for an expected failure of ``command``: argparse's ``prog: error: message``."""
     return f"sm {command}: error: {message}"
+
+
+# Warnings a library raises about its own use of another library's API: nothing a user of `sm` can act on.
+# (message, category, module) as for warnings.filterwarnings; each names the versions it was seen with.
+LIBRARY_DEPRECATIONS = (
+    # lightning 2.6.6 (utilities/_pytree.py) with torch 2.13, on every fit
+    (
+        r"`isinstance\(treespec, LeafSpec\)` is deprecated",
+        FutureWarning,
+        r"lightning\.pytorch\.utilities\._pytree",
+    ),
+)
+
+
+def silence_library_deprecations() -> None:
+    """Ignore :data:`LIBRARY_DEPRECATIONS` (only those: every other warning still shows)."""
+    for message, category, module in LIBRARY_DEPRECATIONS:
+        warnings.filterwarnings("ignore", message=message, category=category, module=module)
 
 
 def _target(command: str, args: list[str], default: str) -> str:
