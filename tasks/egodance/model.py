@@ -177,12 +177,26 @@ class EMM(PretrainedMixin, nn.Module):
             self.music_encoder.set_statistics(music)
 
     def encode_modalities(
-        self, music: torch.Tensor, frames: torch.Tensor | None = None
+        self, music: torch.Tensor, frames: torch.Tensor | None = None, vision: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """Music (B, T, L), frames (B, T, 3, H, W) in [0, 1] -> z_a (B, T, Dc), z_v (B, T, Dc) or None."""
+        """Music (B, T, L), frames (B, T, 3, H, W) in [0, 1] -> z_a (B, T, Dc), z_v (B, T, Dc) or None.
+
+        ``vision``: instead of ``frames``, their z_v (B, T, Dc) already computed (the vision encoder is per
+        frame: :func:`~skeleton_mamba.tasks.egodance.video_features.encode_video` streams a long video).
+        """
+        if vision is not None:
+            if frames is not None:
+                raise ValueError("give frames or their vision features, not both")
+            if self.vision_encoder is None:
+                raise ValueError("this EMM is music-only (use_vision=False) but vision features were given")
+            if vision.shape[:2] != music.shape[:2] or vision.shape[-1] != self.context_dim:
+                raise ValueError(
+                    f"vision features {tuple(vision.shape)} do not fit music {tuple(music.shape[:2])} and "
+                    f"Dc = {self.context_dim}"
+                )
         z_a = self.music_encoder(music)
-        if self.vision_encoder is None:
-            return z_a, None
+        if vision is not None or self.vision_encoder is None:
+            return z_a, vision
         if frames is None:
             raise ValueError("this EMM encodes egocentric frames (use_vision=True) but none were given")
         if frames.shape[:2] != music.shape[:2]:
@@ -195,9 +209,12 @@ class EMM(PretrainedMixin, nn.Module):
         """The fusion module (music only: z_a unchanged) -> condition c (B, T, Dc)."""
         return z_a if z_v is None else self.fusion(z_a, z_v)
 
-    def encode_condition(self, music: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
-        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] -> fused condition c (B, T, Dc)."""
-        return self.fuse(*self.encode_modalities(music, frames))
+    def encode_condition(
+        self, music: torch.Tensor, frames: torch.Tensor | None = None, vision: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] (or their z_v ``vision`` (B, T, Dc)) ->
+        fused condition c (B, T, Dc)."""
+        return self.fuse(*self.encode_modalities(music, frames, vision))
 
     def null_condition(self, context: torch.Tensor) -> torch.Tensor:
         """The learned null condition shaped like ``context`` (B, S, Dc)

@@ -92,7 +92,7 @@ def sample_dance(
     :class:`CompiledDenoiser` (same samples to float32 rounding; worth it for many steps on a CPU).
     """
     b, t = music.shape[:2]
-    context = _condition(model, music, frames, vision)
+    context = model.encode_condition(music, frames, vision)
     guidance = []
     if head is not None and head_guidance_weight > 0:
         guidance.append(
@@ -114,24 +114,6 @@ def sample_dance(
         dtype=music.dtype,
         progress=progress,
     )
-
-
-def _condition(
-    model: EMM, music: torch.Tensor, frames: torch.Tensor | None, vision: torch.Tensor | None
-) -> torch.Tensor:
-    """The fused condition (B, T, Dc) from music and frames, or music and precomputed z_v (B, T, Dc)."""
-    if vision is None:
-        return model.encode_condition(music, frames)
-    if frames is not None:
-        raise ValueError("give frames or their vision features, not both")
-    if model.vision_encoder is None:
-        raise ValueError("this EMM is music-only (use_vision=False) but vision features were given")
-    if vision.shape[:2] != music.shape[:2] or vision.shape[-1] != model.context_dim:
-        raise ValueError(
-            f"vision features {tuple(vision.shape)} do not fit music {tuple(music.shape[:2])} and "
-            f"Dc = {model.context_dim}"
-        )
-    return model.fuse(model.music_encoder(music), vision)
 
 
 def sample_long_dance(
