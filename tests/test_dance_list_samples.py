@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-import lightning
 import pytest
 import torch
+from checkpoint_files import save_module_checkpoint
 
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule
 from skeleton_mamba.tasks.training.cli import main as sm_main
@@ -30,15 +30,7 @@ def test_list_samples_prints_the_held_out_folders_only(tmp_path, tiny_egodance_m
     module = tiny_egodance_module()
     data = {"root": str(root), "val_fraction": 0.2, "test_fraction": 0.2, "window": 150}
     ckpt = tmp_path / "emm.ckpt"
-    torch.save(
-        {
-            "state_dict": module.state_dict(),
-            "hyper_parameters": dict(module.hparams),
-            "datamodule_hyper_parameters": data,
-            "pytorch-lightning_version": lightning.__version__,
-        },
-        ckpt,
-    )
+    save_module_checkpoint(module, ckpt, datamodule_hyper_parameters=data)
     assert sm_main(["dance", "--ckpt", str(ckpt), "--list-samples"]) == 0
     out = capsys.readouterr().out.splitlines()
     listed = {line for line in out if not line.startswith("#")}

@@ -2,10 +2,10 @@
 
 import subprocess
 
-import lightning
 import numpy as np
 import pytest
 import torch
+from checkpoint_files import save_module_checkpoint
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.model import EMM
@@ -37,14 +37,7 @@ def inputs(tmp_path_factory, tiny_egodance_module):
     torch.manual_seed(0)
     module = tiny_egodance_module()
     ckpt = tmp / "emm.ckpt"
-    torch.save(
-        {
-            "state_dict": module.state_dict(),
-            "hyper_parameters": dict(module.hparams),
-            "pytorch-lightning_version": lightning.__version__,
-        },
-        ckpt,
-    )
+    save_module_checkpoint(module, ckpt)
     wav = write_music(tmp / "song.wav", synthesize_music(120.0, 12.0))
     video = (np.random.default_rng(0).random((360, 32, 32, 3)) * 255).astype(np.uint8)
     iio.imwrite(tmp / "ego.mp4", video, fps=30)

@@ -5,10 +5,10 @@ import subprocess
 from pathlib import Path
 
 import imageio_ffmpeg
-import lightning
 import numpy as np
 import pytest
 import torch
+from checkpoint_files import save_module_checkpoint
 
 from skeleton_mamba.tasks.egodance.frames import iter_video_frames
 from skeleton_mamba.tasks.training.cli import main as sm_main
@@ -69,14 +69,7 @@ def ckpt(tmp_path_factory, tiny_egodance_module):
     torch.manual_seed(0)
     module = tiny_egodance_module()
     path = tmp / "emm.ckpt"
-    torch.save(
-        {
-            "state_dict": module.state_dict(),
-            "hyper_parameters": dict(module.hparams),
-            "pytorch-lightning_version": lightning.__version__,
-        },
-        path,
-    )
+    save_module_checkpoint(module, path)
     return path, write_music(tmp / "song.wav", synthesize_music(120.0, 2.0))
 
 

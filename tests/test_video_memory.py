@@ -7,10 +7,10 @@ import sys
 import textwrap
 
 import imageio_ffmpeg
-import lightning
 import numpy as np
 import pytest
 import torch
+from checkpoint_files import save_module_checkpoint
 
 from skeleton_mamba.tasks.egodance import dance_cli
 from skeleton_mamba.tasks.egodance.frames import read_video_frames
@@ -103,14 +103,7 @@ def dance_inputs(tmp_path_factory, tiny_egodance_module):
     torch.manual_seed(0)
     module = tiny_egodance_module().eval()
     ckpt = tmp / "emm.ckpt"
-    torch.save(
-        {
-            "state_dict": module.state_dict(),
-            "hyper_parameters": dict(module.hparams),
-            "pytorch-lightning_version": lightning.__version__,
-        },
-        ckpt,
-    )
+    save_module_checkpoint(module, ckpt)
     wav = write_music(tmp / "song.wav", synthesize_music(120.0, 3.4))
     video = _video(tmp / "ego.mp4", 100, 48, 40)
     return tmp, module, ckpt, wav, video
@@ -207,3 +200,20 @@ def test_video_feature_memory_does_not_grow_with_the_length(tmp_path):
         peaks[frames] = peak_kib
     held_kib = (900 - 90) * 3 * 112 * 112 * 4 // 1024
     assert peaks[900] - peaks[90] < 8 * 1024 < held_kib // 10, peaks  # under a tenth of the frames held
+
+
+def test_encode_condition_refuses_vision_features_that_do_not_fit(tiny_egodance_module):
+    model = tiny_egodance_module().model.eval()
+    music, frames = torch.randn(1, 6, 35), torch.rand(1, 6, 3, 32, 32)
+    vision = model.vision_encoder(frames)
+    from_features = model.encode_condition(music, vision=vision)
+    torch.testing.assert_close(from_features, model.encode_condition(music, frames))
+    with pytest.raises(ValueError, match="give frames or their vision features, not both"):
+        model.encode_condition(music, frames, vision)
+    misfit = r"vision features \(1, 5, 16\) do not fit music \(1, 6\) and Dc = 16"
+    with pytest.raises(ValueError, match=misfit):
+        model.encode_condition(music, vision=vision[:, :5])
+    network = {**tiny_egodance_module().hparams["network"], "use_vision": False}
+    music_only = tiny_egodance_module(network=network, use_head_estimator=False, head_source="none").model
+    with pytest.raises(ValueError, match=r"music-only \(use_vision=False\) but vision features were given"):
+        music_only.encode_condition(music, vision=vision)
