@@ -150,7 +150,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``sm render``; returns 0 on success, 2 on a bad file or argument."""
+    """Entry point of ``sm render``; returns 0 on success (bad input raises: `sm` prints one line)."""
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     start = time.perf_counter()
     try:

@@ -61,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``sm convert``; returns 0 on success, 2 on a bad file or argument."""
+    """Entry point of ``sm convert``; returns 0 on success (bad input raises: `sm` prints one line)."""
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.normalized and args.stats is None:
         raise InputError("--normalized needs --stats DIR (Mean.npy, Std.npy)")

@@ -133,7 +133,7 @@ def _no_loading_bar() -> Iterator[None]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``sm generate``; returns 0 on success, 2 on a bad file or argument."""
+    """Entry point of ``sm generate``; returns 0 on success (bad input raises: `sm` prints one line)."""
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     # everything cheap is refused before the checkpoint and the text encoder are loaded
     try:
