@@ -1,13 +1,20 @@
 """The EgoMusic demo's training step (``recipes/egodance_demo.yaml``): steps per second and where they go.
 
 Builds the recipe's EgoDanceModule (tiny backbone, tiny random ResNet, head-trajectory estimator) and a
-batch of the recipe's shape (4 windows of 150 frames: motion tokens, 35 music features, 64 px frames, head
-targets; random values, which cost the same as real ones), then times, median over ``--repeats``:
+batch of the recipe's shape (4 windows of 150 frames: motion tokens, 35 music features, frames at the
+recipe's ``image_size`` (32 px), head targets; random values, which cost the same as real ones), with the
+process settings ``sm fit`` uses (one thread by default on a small machine, the training allocator
+settings of :mod:`skeleton_mamba.tasks.training.allocator` where the installed version has them), then
+times, median over ``--repeats``:
 
 - ``train_step_ms``: what Lightning runs per step: the module's ``training_step`` (EMM diffusion, kinematic
   and alignment losses + the estimator's loss), backward, AdamW; ``steps_per_s`` from it;
 - ``vision_encoder_ms``, ``head_estimator_ms``: forward + backward of each alone on the batch's frames;
-- ``--profile N``: the N operators with the most self CPU time over 3 steps.
+- ``--profile N``: the N operators with the most self CPU time over 3 steps;
+- ``page_faults_per_step``, ``system_ms_per_step``: minor page faults and kernel time per step.
+
+Before and after a change, side by side:
+``python benchmarks/side_by_side.py --before REV -- bench_demo_step.py``.
 
     flock /tmp/bench.lock python benchmarks/bench_demo_step.py --json
 """
@@ -16,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import sys
 import warnings
 from pathlib import Path
@@ -30,6 +38,12 @@ from skeleton_mamba.tasks.egodance.module import EgoDanceModule  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS  # noqa: E402
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES  # noqa: E402
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipe_dir  # noqa: E402
+from skeleton_mamba.tasks.training.threads import apply_thread_defaults  # noqa: E402
+
+try:  # what `sm fit` sets, where this version has it (a side-by-side run may time an older one)
+    from skeleton_mamba.tasks.training.allocator import keep_freed_memory
+except ImportError:
+    keep_freed_memory = None
 
 
 def build_module() -> tuple[EgoDanceModule, dict]:
@@ -65,12 +79,15 @@ def demo_batch(data: dict, frames: int = 150, generator: torch.Generator | None 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=10)
-    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--threads", type=int, default=None, help="default: as sm (threads.py)")
     ap.add_argument("--profile", type=int, default=0, metavar="N")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
+    else:
+        apply_thread_defaults()
+    allocator = bool(keep_freed_memory and keep_freed_memory())
     torch.manual_seed(0)
     module, data = build_module()
     batch = demo_batch(data)
@@ -88,13 +105,20 @@ def main(argv: list[str] | None = None) -> int:
         positions, rotations = module.head_estimator(batch["frames"])
         (positions.square().mean() + rotations.square().mean()).backward()
 
-    step_ms = median_ms(train_step, args.repeats, warmup=2)
+    train_step()
+    train_step()
+    before = resource.getrusage(resource.RUSAGE_SELF)
+    step_ms = median_ms(train_step, args.repeats, warmup=0)
+    after = resource.getrusage(resource.RUSAGE_SELF)
     result = {
         "machine": machine_info(),
         "threads": torch.get_num_threads(),
+        "training_allocator": allocator,
         "batch": {k: list(v.shape) for k, v in batch.items()},
         "train_step_ms": round(step_ms, 1),
         "steps_per_s": round(1e3 / step_ms, 2),
+        "page_faults_per_step": round((after.ru_minflt - before.ru_minflt) / args.repeats),
+        "system_ms_per_step": round((after.ru_stime - before.ru_stime) * 1e3 / args.repeats, 1),
         "vision_encoder_ms": round(median_ms(vision, args.repeats), 1),
         "head_estimator_ms": round(median_ms(head, args.repeats), 1),
     }

@@ -34,3 +34,5 @@ def test_demo_step_benchmark_trains_the_recipes_module(capsys):
     result = json.loads(capsys.readouterr().out)
     assert result["train_step_ms"] > 0 and abs(result["steps_per_s"] - 1e3 / result["train_step_ms"]) < 0.01
     assert result["vision_encoder_ms"] > 0 and result["head_estimator_ms"] > 0
+    assert result["page_faults_per_step"] >= 0 and result["system_ms_per_step"] >= 0
+    assert isinstance(result["training_allocator"], bool)

@@ -52,7 +52,9 @@ def test_vision_encoder_feeds_its_resnet_contiguous_frames():
 
     config = ResNetConfig(embedding_size=8, hidden_sizes=[8], depths=[1], layer_type="basic")
     with pytest.warns(UserWarning, match="randomly initialised"):
-        encoder = VisionEncoder(16, resnet_config=config, image_size=16, freeze=False, chunk=4)
+        encoder = VisionEncoder(
+            16, resnet_config=config, image_size=16, freeze=False, chunk_pixels=4 * 16 * 16
+        )
     seen = []
     encoder.resnet.register_forward_pre_hook(
         lambda module, args, kwargs: seen.append(kwargs["pixel_values"].is_contiguous()), with_kwargs=True
@@ -64,6 +66,31 @@ def test_vision_encoder_feeds_its_resnet_contiguous_frames():
     assert features.shape == (2, 3, 16) and seen == [True, True]
     expected = encoder(frames.contiguous())
     torch.testing.assert_close(features, expected)
+
+
+def test_vision_encoder_calls_its_resnet_per_pixel_budget():
+    """64 frames of 224 px per ResNet call (the paper's size), a demo batch of 32 px frames in one call; in
+    training mode the output is the ResNet over all frames of the call at once (BatchNorm statistics)."""
+    from transformers import ResNetConfig
+
+    from skeleton_mamba.tasks.egodance.encoders import VisionEncoder
+
+    config = ResNetConfig(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
+    with pytest.warns(UserWarning, match="randomly initialised"):
+        paper = VisionEncoder(16, resnet_config=config, image_size=224)
+        demo = VisionEncoder(16, resnet_config=config, image_size=32, freeze=False)
+    assert paper.chunk == 64 and demo.chunk >= 4 * 150
+    frames = torch.rand(4, 150, 3, 32, 32)
+    calls = []
+    demo.resnet.register_forward_pre_hook(
+        lambda m, a, k: calls.append(len(k["pixel_values"])), with_kwargs=True
+    )
+    demo.train()
+    features = demo(frames)
+    assert calls == [600]
+    flat = demo.normalize(frames.flatten(0, 1))  # 32 px frames: no resize
+    pooled = demo.resnet(pixel_values=flat).pooler_output.flatten(1)  # every frame's BatchNorm statistics
+    torch.testing.assert_close(features, demo.mlp(pooled).reshape(4, 150, 16))
 
 
 def test_data_set_frames_are_contiguous(tmp_path):

@@ -99,6 +99,24 @@ def test_losses_against_hand_computation():
     assert terms["kin"].item() == pytest.approx(24 * 0.14 / 72)  # pos only (weights 1 / 0.1 / 1)
 
 
+def test_emm_losses_share_one_forward_kinematics_of_the_prediction():
+    """emm_losses runs FK on x0_hat once for L_pos and L_contact: its terms and their gradients are those of
+    the separate loss functions, each running its own FK."""
+    g = torch.Generator().manual_seed(3)
+    x0 = _rest_motion(6) + 0.1 * torch.randn(1, 6, 24, 10, generator=g, dtype=torch.float64)
+    x0_hat = (x0 + 0.2 * torch.randn(x0.shape, generator=g, dtype=torch.float64)).requires_grad_()
+    with torch.no_grad():
+        x0_hat[..., [7, 8, 10, 11], 9] = 1.0  # contacts predicted: L_contact is not zero
+    terms = emm_losses(x0_hat, x0)
+    (shared,) = torch.autograd.grad(terms["pos"] + terms["contact"], x0_hat)
+    separate = position_loss(x0_hat, x0), contact_loss(x0_hat)
+    (expected,) = torch.autograd.grad(separate[0] + separate[1], x0_hat)
+    assert separate[1].item() > 0
+    torch.testing.assert_close(terms["pos"], separate[0], rtol=1e-12, atol=0)
+    torch.testing.assert_close(terms["contact"], separate[1], rtol=1e-12, atol=0)
+    torch.testing.assert_close(shared, expected, rtol=1e-10, atol=1e-14)
+
+
 def test_head_targets_invert_the_builder_camera():
     rng = np.random.default_rng(1)
     heads = rng.normal(size=(5, 3))

@@ -251,6 +251,22 @@ def test_auto_dispatch_on_cpu():
         torch.testing.assert_close(ssd(**inp, impl=impl), ref, rtol=1e-10, atol=1e-10)
 
 
+def test_auto_dispatch_runs_small_heads_in_chunks():
+    """Heads with at most SMALL_STATE state entries (P·N) take chunks of at most half a quadratic block."""
+    small = torch.zeros(1, 150, 4, 8)  # P = 8
+    assert choose_impl(small, 16, stateful=False, state_size=16) == "chunked"  # the demo's Temporal Scan
+    assert choose_impl(small, 32, stateful=False, state_size=32) == "chunked"  # P·N = 256
+    assert choose_impl(small, 64, stateful=False, state_size=16) == "quadratic"  # chunks as long as a block
+    assert choose_impl(small, 16, stateful=False, state_size=64) == "quadratic"  # P·N = 512
+    assert choose_impl(torch.zeros(1, 16, 4, 8), 16, stateful=False, state_size=16) == "quadratic"  # L <= Q
+    assert choose_impl(small, 16, stateful=False) == "quadratic"  # state size not given: the length rule
+    inp = make_inputs(2, 70, 2, 8, 1, 16)
+    del inp["initial_state"]
+    ref = ssd_recurrence(**inp)
+    for impl in ("auto", "torch"):
+        torch.testing.assert_close(ssd(**inp, chunk_size=16, impl=impl), ref, rtol=1e-10, atol=1e-10)
+
+
 def install_fake_mamba_ssm(monkeypatch, calls):
     """Put a fake ``mamba_ssm.ops.triton.ssd_combined`` into sys.modules that records its arguments."""
     names = ["mamba_ssm", "mamba_ssm.ops", "mamba_ssm.ops.triton", "mamba_ssm.ops.triton.ssd_combined"]

@@ -3,12 +3,24 @@
 impl="auto": the mamba-ssm Triton kernel when installed and x is on CUDA; else the quadratic form
 (:func:`ssd_quadratic`: masked diagonal blocks of about ``quadratic.BLOCK_SIZE`` positions plus the
 factorised blocks below the diagonal, no chunk states) when L <= max(chunk_size, QUADRATIC_MAX_LEN)
-and no initial/final state is involved; else the chunked form. impl="torch": the same choice
-without the kernel. Under ``torch.export`` (and so ONNX export) both resolve to the exportable form
-(:func:`ssd_exportable`: no Python loop over sizes), so one graph serves every batch and length.
+and no initial/final state is involved, unless the heads are small on a CPU (below); else the chunked form.
+impl="torch": the same choice without the kernel. Under ``torch.export`` (and so ONNX export) both
+resolve to the exportable form (:func:`ssd_exportable`: no Python loop over sizes), so one graph serves
+every batch and length.
 
 QUADRATIC_MAX_LEN is where the quadratic form's O(L²) work starts to cost more than the chunked form's
 per-chunk states (on a 2-core CPU at 4 heads, P = N = 64).
+
+Small heads: the quadratic form's work per position grows with its block (about 64 positions) times
+P + N, the chunked form's with its chunk Q times P + N plus one state of P·N. With a state of at most
+SMALL_STATE entries per head and chunks of at most half a block, the chunked form won at every short
+length measured (forward + backward at L = 64, 150 and 256, 4 or 24 heads, one thread, AMD EPYC;
+``benchmarks/bench_ssd_dispatch.py``): 1.4x to 2.9x faster than the quadratic form with Q = 16. Larger
+heads keep the length rule: at P·N >= 1024 and L <= 150 the quadratic form was ahead or within 6 %
+(P = N = 64, L = 150: 1.8x ahead of Q = 32); at L = 256 it was up to 1.4x behind Q = 16 for P·N = 1024,
+and even with Q = 64 for P = N = 64. The EgoMusic demo's Temporal Scan (P = 8, N = 16, Q = 16, L = 150)
+has small heads. The rule was measured on CPUs only; on CUDA (without the kernel) the length rule decides
+alone.
 """
 
 from __future__ import annotations
@@ -20,15 +32,20 @@ from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
 from skeleton_mamba.ssd.exportable import ssd_exportable
 from skeleton_mamba.ssd.kernel import kernel_available, ssd_kernel
 from skeleton_mamba.ssd.precision import full_precision
+from skeleton_mamba.ssd.quadratic import BLOCK_SIZE as QUADRATIC_BLOCK_SIZE
 from skeleton_mamba.ssd.quadratic import ssd_quadratic
 from skeleton_mamba.ssd.recurrence import ssd_recurrence
 
 QUADRATIC_MAX_LEN = 256
+SMALL_STATE = 256  # P·N per head at or below which chunks of at most half a quadratic block are faster
 IMPLS = ("auto", "torch", "recurrence", "chunked", "quadratic", "kernel", "exportable")
 
 
-def choose_impl(x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "auto") -> str:
-    """The concrete implementation ``ssd`` runs for ``impl`` ("auto"/"torch" resolved)."""
+def choose_impl(
+    x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "auto", state_size: int | None = None
+) -> str:
+    """The concrete implementation ``ssd`` runs for ``impl`` ("auto"/"torch" resolved) on x (b, L, H, P)
+    with states of ``state_size`` N (None: treated as large)."""
     if impl not in IMPLS:
         raise ValueError(f"ssd: impl must be one of {IMPLS}, got {impl!r}")
     if impl in ("auto", "torch") and torch.compiler.is_exporting():
@@ -36,8 +53,13 @@ def choose_impl(x: torch.Tensor, chunk_size: int, stateful: bool, impl: str = "a
     if impl == "auto" and kernel_available(x):
         return "kernel"
     if impl in ("auto", "torch"):
-        short = x.shape[1] <= max(chunk_size, QUADRATIC_MAX_LEN)
-        return "quadratic" if short and not stateful else "chunked"
+        length = x.shape[1]
+        short = length <= max(chunk_size, QUADRATIC_MAX_LEN)
+        small_heads = (
+            x.device.type == "cpu" and state_size is not None and x.shape[-1] * state_size <= SMALL_STATE
+        )
+        chunks_pay = small_heads and chunk_size < length and chunk_size <= QUADRATIC_BLOCK_SIZE // 2
+        return "quadratic" if short and not stateful and not chunks_pay else "chunked"
     return impl
 
 
@@ -87,7 +109,7 @@ def ssd(
         return_final_state=return_final_state,
     )
     stateful = initial_state is not None or return_final_state
-    chosen = choose_impl(x, chunk_size, stateful, impl)
+    chosen = choose_impl(x, chunk_size, stateful, impl, state_size=B.shape[-1])
     if chosen == "kernel":
         return ssd_kernel(x, dt, A, B, C, chunk_size=chunk_size, **kwargs)
     if chosen == "chunked":

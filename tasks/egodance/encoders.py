@@ -130,7 +130,10 @@ class VisionEncoder(nn.Module):
         resnet_config: the architecture when no path is given (default: ResNet-50).
         image_size: frames are resized to (image_size, image_size).
         freeze: keep the ResNet weights fixed (the original code freezes its pretrained ResNet).
-        chunk: frames per ResNet call (bounds memory for long windows).
+        chunk_pixels: pixels per ResNet call, frames x image_size² (bounds memory for long windows): 64
+            frames at 224 px; the demo's 600 frames of a batch at 32 px go through in one call, as a
+            ResNet over the whole batch would see them. In training mode the ResNet's BatchNorm takes its
+            statistics over the frames of one call.
     """
 
     def __init__(
@@ -140,7 +143,7 @@ class VisionEncoder(nn.Module):
         resnet_config: ResNetConfig | None = None,
         image_size: int = 224,
         freeze: bool = True,
-        chunk: int = 64,
+        chunk_pixels: int = 64 * 224 * 224,
     ):
         super().__init__()
         if resnet_path is not None:
@@ -159,7 +162,7 @@ class VisionEncoder(nn.Module):
         self.normalize = kornia.enhance.Normalize(torch.tensor(IMAGENET_MEAN), torch.tensor(IMAGENET_STD))
         feat = self.resnet.config.hidden_sizes[-1]
         self.mlp = nn.Sequential(nn.Linear(feat, dim), nn.GELU(), nn.Linear(dim, dim))
-        self.chunk = chunk
+        self.chunk = max(1, chunk_pixels // (image_size * image_size))  # frames per ResNet call
 
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         if frames.ndim != 5 or frames.shape[2] != 3:

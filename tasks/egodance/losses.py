@@ -75,9 +75,12 @@ def reconstruction_loss(x0_hat: torch.Tensor, x0: torch.Tensor, kind: str = "l2"
     return per.sum() / (w.sum() * x0.shape[0] * x0.shape[1])
 
 
-def position_loss(x0_hat: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
-    """Eq. 26 (FK positions, metres^2 per coordinate)."""
-    return _frame_sq_norm(motion_joints(x0) - motion_joints(x0_hat)).mean()
+def position_loss(
+    x0_hat: torch.Tensor, x0: torch.Tensor, joints_hat: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Eq. 26 (FK positions, metres^2 per coordinate); ``joints_hat``: FK(x0_hat) when already computed."""
+    joints_hat = motion_joints(x0_hat) if joints_hat is None else joints_hat
+    return _frame_sq_norm(motion_joints(x0) - joints_hat).mean()
 
 
 def velocity_loss(x0_hat: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
@@ -88,11 +91,15 @@ def velocity_loss(x0_hat: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
     return _frame_sq_norm(d, w).mean()
 
 
-def contact_loss(x0_hat: torch.Tensor, threshold: float = 0.95) -> torch.Tensor:
-    """Eq. 28: foot velocity of the prediction where its own contact prediction exceeds ``threshold``."""
+def contact_loss(
+    x0_hat: torch.Tensor, threshold: float = 0.95, joints_hat: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Eq. 28: foot velocity of the prediction where its own contact prediction exceeds ``threshold``;
+    ``joints_hat``: FK(x0_hat) when already computed."""
     _, _, contacts = decode_motion(x0_hat)
     b = (contacts[:, :-1] > threshold).to(x0_hat.dtype)  # (B, T-1, 4), b_hat^i
-    feet = motion_joints(x0_hat)[..., list(FOOT_JOINTS), :]
+    joints_hat = motion_joints(x0_hat) if joints_hat is None else joints_hat
+    feet = joints_hat[..., list(FOOT_JOINTS), :]
     vel = (feet[:, 1:] - feet[:, :-1]) * b[..., None]
     return _frame_sq_norm(vel).mean()
 
@@ -136,11 +143,12 @@ def emm_losses(
 ) -> dict[str, torch.Tensor]:
     """All terms: ``recon``, ``pos``, ``vel``, ``contact``, ``kin`` (Eq. 29) and ``loss = recon + kin``."""
     weights = weights or KinematicLossWeights()
+    joints_hat = motion_joints(x0_hat)  # FK of the prediction once, for L_pos and L_contact
     out = {
         "recon": reconstruction_loss(x0_hat, x0, reconstruction),
-        "pos": position_loss(x0_hat, x0),
+        "pos": position_loss(x0_hat, x0, joints_hat),
         "vel": velocity_loss(x0_hat, x0),
-        "contact": contact_loss(x0_hat, contact_threshold),
+        "contact": contact_loss(x0_hat, contact_threshold, joints_hat),
     }
     out["kin"] = weights.pos * out["pos"] + weights.vel * out["vel"] + weights.contact * out["contact"]
     out["loss"] = out["recon"] + out["kin"]

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
+from skeleton_mamba.tasks.training.allocator import keep_freed_memory
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults
 
 # name -> ("module:function", one-line help). Each function takes the arguments after the
@@ -109,6 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     silence_library_deprecations()
     module_name, func_name = _target(command, rest, commands[command][0]).split(":")
     if command in LIGHTNING_SUBCOMMANDS:
+        keep_freed_memory()  # the next step reuses what this one freed, instead of faulting in new pages
         rest = [command, *rest]
     try:
         func = getattr(importlib.import_module(module_name), func_name)
