@@ -10,6 +10,7 @@ without running the package ``__init__``, which imports the Mamba-1 extension ea
 from __future__ import annotations
 
 import importlib
+import importlib.machinery
 import importlib.util
 import sys
 import types
@@ -19,6 +20,11 @@ import torch
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
 
 KERNEL_MODULE = "mamba_ssm.ops.triton.ssd_combined"
+KERNEL_TF32_ERROR = 1e-2
+"""Bound on the kernel's fp32 error, relative to the largest value: its Triton matrix products take fp32
+inputs in TF32 (``tl.dot``'s default on Ampere and later GPUs). On an H200 (mamba-ssm 2.3.2.post1, Triton
+3.6) the output was off from float64 by 2.0e-3 of its largest value and the gradients by up to 3.1e-3, where
+the pure-PyTorch SSD in fp32 is within 3e-7."""
 
 
 def is_cuda(t: torch.Tensor) -> bool:
@@ -27,7 +33,9 @@ def is_cuda(t: torch.Tensor) -> bool:
 
 
 def mamba_ssm_installed() -> bool:
-    """Whether the ``mamba_ssm`` package can be imported (without importing it)."""
+    """Whether the ``mamba_ssm`` package can be imported (without importing it), or already is."""
+    if sys.modules.get("mamba_ssm") is not None:
+        return True
     try:
         return importlib.util.find_spec("mamba_ssm") is not None
     except (ImportError, ValueError):
@@ -49,6 +57,10 @@ def import_triton_ssd() -> types.ModuleType:
     spec = importlib.util.find_spec("mamba_ssm")
     package = types.ModuleType("mamba_ssm")
     package.__path__ = list(spec.submodule_search_locations)
+    # A spec of its own (a namespace: no loader), so that find_spec and mamba_ssm_installed still see the
+    # package once it is registered; without it every later ``ssd(impl="auto")`` fell back to PyTorch.
+    package.__spec__ = importlib.machinery.ModuleSpec("mamba_ssm", None, is_package=True)
+    package.__spec__.submodule_search_locations = package.__path__
     for name in [m for m in sys.modules if m == "mamba_ssm" or m.startswith("mamba_ssm.")]:
         del sys.modules[name]  # partial modules left by the failed import
     sys.modules["mamba_ssm"] = package
