@@ -15,9 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import statistics
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -26,7 +24,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_egodance import SIZES, build  # noqa: E402
 from bench_stream import build as build_dancer  # noqa: E402
-from common import machine_info  # noqa: E402
+from common import alternate_ms, machine_info  # noqa: E402
 
 from skeleton_mamba.ssd.precision import inference_precision  # noqa: E402
 from skeleton_mamba.tasks.training.diffusion.samplers import guided_x0  # noqa: E402
@@ -41,23 +39,11 @@ def cpu_bf16_flags() -> list[str]:
     return sorted(set(re.findall(r"\b(avx512_bf16|amx_[a-z0-9_]+)\b", text)))
 
 
-def alternate(fns: dict[str, callable], repeats: int) -> dict[str, float]:
-    """Median ms of each function, called in turn ``repeats`` times after one untimed round."""
-    times = {k: [] for k in fns}
-    for i in range(repeats + 1):
-        for k, fn in fns.items():
-            start = time.perf_counter()
-            fn()
-            if i:
-                times[k].append(1e3 * (time.perf_counter() - start))
-    return {k: statistics.median(v) for k, v in times.items()}
-
-
 def gemm_rates(n: int, repeats: int) -> dict[str, float]:
     """GFLOP/s of an n x n x n product in fp32 and bf16."""
     a32, b32 = torch.randn(n, n), torch.randn(n, n)
     a16, b16 = a32.bfloat16(), b32.bfloat16()
-    ms = alternate({"fp32": lambda: a32 @ b32, "bf16": lambda: a16 @ b16}, repeats)
+    ms = alternate_ms({"fp32": lambda: a32 @ b32, "bf16": lambda: a16 @ b16}, repeats)
     return {k: 2 * n**3 / (v * 1e-3) / 1e9 for k, v in ms.items()}
 
 
@@ -80,7 +66,7 @@ def emm_step(size: str, repeats: int) -> dict:
             return guided_x0(emm, x, t, context, 2.0)
 
     out = {p: run(p) for p in ("fp32", "bf16")}
-    ms = alternate({p: (lambda p=p: run(p)) for p in ("fp32", "bf16")}, repeats)
+    ms = alternate_ms({p: (lambda p=p: run(p)) for p in ("fp32", "bf16")}, repeats)
     return {"ms": ms, "speedup": ms["fp32"] / ms["bf16"], "rel_diff": relative_diff(out["bf16"], out["fp32"])}
 
 
@@ -97,7 +83,7 @@ def stream_step(width: str, repeats: int, frames: int = 30) -> dict:
         return pose
 
     out = {p: run(p) for p in ("fp32", "bf16")}
-    ms = alternate({p: (lambda p=p: run(p)) for p in ("fp32", "bf16")}, repeats)
+    ms = alternate_ms({p: (lambda p=p: run(p)) for p in ("fp32", "bf16")}, repeats)
     ms = {p: v / frames for p, v in ms.items()}  # per frame
     return {"ms": ms, "speedup": ms["fp32"] / ms["bf16"], "rel_diff": relative_diff(out["bf16"], out["fp32"])}
 

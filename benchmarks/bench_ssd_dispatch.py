@@ -16,15 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine_info  # noqa: E402
+from common import alternate_ms, machine_info  # noqa: E402
 
 from skeleton_mamba.ssd.chunked import ssd_chunked  # noqa: E402
 from skeleton_mamba.ssd.dispatch import choose_impl  # noqa: E402
@@ -47,19 +45,6 @@ def inputs(batch: int, length: int, heads: int, headdim: int, state: int) -> dic
     return dict(leaves, A=-torch.linspace(1.0, 16.0, heads), D=torch.ones(heads))
 
 
-def alternate(fns: dict[str, callable], repeats: int) -> dict[str, float]:
-    """Median ms of each function, called in turn ``repeats`` times after one untimed call each."""
-    times: dict[str, list[float]] = {name: [] for name in fns}
-    for fn in fns.values():
-        fn()
-    for _ in range(repeats):
-        for name, fn in fns.items():
-            start = time.perf_counter()
-            fn()
-            times[name].append((time.perf_counter() - start) * 1e3)
-    return {name: round(statistics.median(t), 2) for name, t in times.items()}
-
-
 def row(length: int, shape: str, tokens: int, chunks: list[int], chunk_size: int, repeats: int) -> dict:
     heads, headdim, state = (int(v) for v in shape.split("x"))
     batch = max(1, tokens // length)
@@ -77,7 +62,7 @@ def row(length: int, shape: str, tokens: int, chunks: list[int], chunk_size: int
     forms.update({f"chunked_{q}": run(ssd_chunked, chunk_size=q) for q in chunks if q < length})
     if f"chunked_{chunk_size}" not in forms and chunk_size < length:
         forms[f"chunked_{chunk_size}"] = run(ssd_chunked, chunk_size=chunk_size)
-    ms = alternate(forms, repeats)
+    ms = {name: round(v, 2) for name, v in alternate_ms(forms, repeats).items()}
     chosen = choose_impl(inp["x"], chunk_size, stateful=False, impl="torch", state_size=state)
     chosen_key = "quadratic" if chosen == "quadratic" else f"chunked_{chunk_size}"
     rivals = {k: v for k, v in ms.items() if k in ("quadratic", f"chunked_{chunk_size}")}
