@@ -34,8 +34,6 @@ def is_cuda(t: torch.Tensor) -> bool:
 
 def mamba_ssm_installed() -> bool:
     """Whether the ``mamba_ssm`` package can be imported (without importing it), or already is."""
-    if sys.modules.get("mamba_ssm") is not None:
-        return True
     try:
         return importlib.util.find_spec("mamba_ssm") is not None
     except (ImportError, ValueError):
