@@ -13,8 +13,9 @@ memory comes from changes.
 The cost: a process that went through a peak keeps that memory resident (it is reused, not returned),
 which a training run does anyway from its first step on. So ``sm fit|validate|test|predict`` set this
 (:func:`keep_freed_memory`), the other commands do not (``sm dance``'s memory must fall back after a long
-video). Nothing is changed where the user chose malloc settings (any ``MALLOC_*_`` variable or
-``GLIBC_TUNABLES``), nor off glibc (macOS, Windows, musl): there the call does nothing and returns False.
+video). Nothing is changed where the user chose these malloc settings (``MALLOC_MMAP_THRESHOLD_``,
+``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_TOP_PAD_`` or ``GLIBC_TUNABLES``), nor off glibc (macOS, Windows,
+musl): there the call does nothing and returns False.
 """
 
 from __future__ import annotations
