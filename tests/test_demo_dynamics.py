@@ -44,6 +44,14 @@ def _hand_jitter(joints: np.ndarray, fps: float) -> float:
     return float(np.sqrt((acc**2).sum(-1)).mean())
 
 
+def _hand_high_frequency(joints: np.ndarray, fps: float, cutoff: float = 6.0) -> float:
+    """Mean power above the cutoff from the full two-sided DFT (|f| > cutoff) of the velocities."""
+    v = np.diff(joints, axis=0) * fps
+    spectrum = np.abs(np.fft.fft(v, axis=0)) ** 2
+    band = np.abs(np.fft.fftfreq(v.shape[0], d=1.0 / fps)) > cutoff
+    return float((spectrum[band].sum(0) / v.shape[0] ** 2).sum(-1).mean())
+
+
 def test_held_out_dynamics_columns_against_hand_computed_ratios():
     truth, dance = _swing(0.4), _swing(0.2, noise=0.01)
     train = [_swing(0.3, frames=50), _swing(0.6, frames=70)]
@@ -52,8 +60,12 @@ def test_held_out_dynamics_columns_against_hand_computed_ratios():
     amp, jit = _hand_amplitude(t), _hand_jitter(t, 30.0)
     assert scores["dance"]["amplitude_ratio"] == pytest.approx(_hand_amplitude(d) / amp, rel=1e-12)
     assert scores["dance"]["jitter_ratio"] == pytest.approx(_hand_jitter(d, 30.0) / jit, rel=1e-12)
-    assert scores["ground_truth"] == pytest.approx({"amplitude_ratio": 1.0, "jitter_ratio": 1.0})
-    assert scores["mean_pose"] == pytest.approx({"amplitude_ratio": 0.0, "jitter_ratio": 0.0})
+    assert scores["dance"]["high_frequency_ratio"] == pytest.approx(
+        _hand_high_frequency(d, 30.0) / _hand_high_frequency(t, 30.0), rel=1e-9
+    )
+    ones = {"amplitude_ratio": 1.0, "jitter_ratio": 1.0, "high_frequency_ratio": 1.0}
+    assert scores["ground_truth"] == pytest.approx(ones)
+    assert scores["mean_pose"] == pytest.approx({k: 0.0 for k in ones})
     clips = [c.numpy() for c in train]
     assert scores["random_clip"]["amplitude_ratio"] == pytest.approx(
         np.mean([_hand_amplitude(c) / amp for c in clips]), rel=1e-12
@@ -63,7 +75,11 @@ def test_held_out_dynamics_columns_against_hand_computed_ratios():
     )
     # half the truth's swing: timid (0.5 < 0.7); the noise trembles (jitter far above the truth's)
     checks = held_out_dynamics_checks(scores)
-    assert checks == {"amplitude ratio >= 0.7": False, "jitter ratio <= 1.5": False}
+    assert checks == {
+        "amplitude ratio >= 0.7": False,
+        "jitter ratio <= 1.5": False,
+        "energy above 6 Hz within 2x of the ground truth's": False,
+    }
     table = format_dynamics(scores, checks)
     assert "NOT reached: amplitude ratio >= 0.7" in table and "ground_truth" in table
     with pytest.raises(ValueError, match="as many dances as truths"):
@@ -102,7 +118,9 @@ def test_two_seeded_text2motion_demo_runs_print_the_same_dynamics(tmp_path, monk
         demo = json.loads((folder / "demo.json").read_text())
         assert demo["global_step"] == 2
         dynamics = demo["scores"]["dynamics"]
-        assert dynamics["columns"]["ground_truth"] == pytest.approx({"amplitude_ratio": 1, "jitter_ratio": 1})
+        assert dynamics["columns"]["ground_truth"] == pytest.approx(
+            {"amplitude_ratio": 1, "jitter_ratio": 1, "high_frequency_ratio": 1}
+        )
         assert set(dynamics["checks"]) <= set(demo["checks"])
         scores.append(_columns(dynamics["columns"]))
         out = capsys.readouterr().out
@@ -139,8 +157,12 @@ def test_two_seeded_stream_demo_runs_print_the_same_dynamics(tmp_path, monkeypat
         assert demo["global_step"] == 3 and demo["synthetic"]
         columns = {c: m for c, m in demo["scores"].items() if isinstance(m, dict)}
         assert set(columns) == {"dance", "ground_truth", "mean_pose", "random_clip"}
-        assert columns["ground_truth"] == pytest.approx({"amplitude_ratio": 1, "jitter_ratio": 1})
-        assert columns["mean_pose"] == pytest.approx({"amplitude_ratio": 0, "jitter_ratio": 0})
+        assert columns["ground_truth"] == pytest.approx(
+            {"amplitude_ratio": 1, "jitter_ratio": 1, "high_frequency_ratio": 1}
+        )
+        assert columns["mean_pose"] == pytest.approx(
+            {"amplitude_ratio": 0, "jitter_ratio": 0, "high_frequency_ratio": 0}
+        )
         assert set(demo["checks"]) == {"amplitude ratio >= 0.7", "jitter ratio <= 1.5"}
         sample = demo["samples"][0]
         assert Path(sample["dance"]["npz"]).is_file() and Path(sample["reference"]["npz"]).is_file()

@@ -1,4 +1,5 @@
-"""Motion amplitude and jitter (tasks/motion/metrics/dynamics.py) against hand computations."""
+"""Motion amplitude, jitter and energy above 6 Hz (tasks/motion/metrics/dynamics.py) against hand
+computations."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import torch
 from skeleton_mamba.tasks.motion.metrics.dynamics import (
     dynamics_checks,
     dynamics_ratios,
+    high_frequency_energy,
     motion_amplitude,
     motion_jitter,
 )
@@ -66,7 +68,48 @@ def test_added_white_noise_raises_jitter_not_amplitude():
     n, a = 0.01, 0.3
     spread = (math.sqrt(a**2 / 2 + 6 * n**2) + 3 * math.sqrt(6 * n**2)) / 4
     assert ratios["amplitude_ratio"] == pytest.approx(spread / (a / math.sqrt(2) / 4), rel=0.05)
-    assert dynamics_checks(ratios) == {"amplitude ratio >= 0.7": True, "jitter ratio <= 1.5": False}
+    assert ratios["high_frequency_ratio"] > 10  # white noise spreads over every frequency; the swing has none
+    assert dynamics_checks(ratios) == {
+        "amplitude ratio >= 0.7": True,
+        "jitter ratio <= 1.5": False,
+        "energy above 6 Hz within 2x of the ground truth's": False,
+    }
+
+
+def test_energy_above_6_hz_is_the_mean_square_velocity_of_the_fast_swing_alone():
+    """A 2 Hz swing plus a 10 Hz one; 121 frames give 120 velocities, so both fall on DFT bins (0.25 Hz
+    apart) and nothing leaks. The sampled velocity of A sin(w t) is the tone 2 A fps sin(w / 2 fps)
+    cos(w (n + 1/2) / fps), of mean square (2 A fps sin(w / 2 fps))^2 / 2; only joint 1 of 5 moves."""
+    t = torch.arange(121, dtype=torch.float64) / FPS
+    motion = torch.zeros(121, 5, 3, dtype=torch.float64)
+    slow, fast = 0.3 * torch.sin(2 * math.pi * 2.0 * t), 0.01 * torch.sin(2 * math.pi * 10.0 * t)
+    motion[:, 1, 0] = slow
+    motion[:, 1, 2] = fast
+    tone = 2 * 0.01 * FPS * math.sin(2 * math.pi * 10.0 / (2 * FPS))
+    assert high_frequency_energy(motion, FPS).item() == pytest.approx(tone**2 / 2 / 5, rel=1e-9)
+    motion[:, 1, 2] = 0.0
+    assert high_frequency_energy(motion, FPS).item() == pytest.approx(0.0, abs=1e-20)
+    # the cutoff moves the band: below 2 Hz the slow swing counts as well
+    slow_tone = 2 * 0.3 * FPS * math.sin(2 * math.pi * 2.0 / (2 * FPS))
+    assert high_frequency_energy(motion, FPS, cutoff_hz=1.0).item() == pytest.approx(
+        slow_tone**2 / 2 / 5, rel=1e-9
+    )
+
+
+def test_a_smoothed_copy_loses_its_energy_above_6_hz():
+    """A 1.5 Hz swing with a 9 Hz accent; averaging each frame with its neighbours (a 3-tap box filter,
+    gain (1 + 2 cos(2 pi f / fps)) / 3: 0.97 at 1.5 Hz, 0.13 at 9 Hz) keeps the swing and flattens the
+    accent below half the truth's energy: the check fails although amplitude and jitter look fine."""
+    t = torch.arange(241, dtype=torch.float64) / FPS
+    motion = torch.zeros(241, 3, 3, dtype=torch.float64)
+    motion[:, 1, 0] = 0.3 * torch.sin(2 * math.pi * 1.5 * t) + 0.01 * torch.sin(2 * math.pi * 9.0 * t)
+    smooth = motion.clone()
+    smooth[1:-1] = (motion[:-2] + motion[1:-1] + motion[2:]) / 3
+    ratios = dynamics_ratios(smooth, motion, FPS)
+    gain = (1 + 2 * math.cos(2 * math.pi * 9.0 / FPS)) / 3
+    assert ratios["high_frequency_ratio"] == pytest.approx(gain**2, rel=0.1)  # the two end frames aside
+    assert ratios["amplitude_ratio"] > 0.7 and ratios["jitter_ratio"] < 1.5
+    assert dynamics_checks(ratios)["energy above 6 Hz within 2x of the ground truth's"] is False
 
 
 def test_a_timid_copy_has_the_amplitude_ratio_of_its_scale():
@@ -76,13 +119,18 @@ def test_a_timid_copy_has_the_amplitude_ratio_of_its_scale():
     ratios = dynamics_ratios(timid, motion, FPS)
     assert ratios["amplitude_ratio"] == pytest.approx(0.5, rel=1e-9)
     assert ratios["jitter_ratio"] == pytest.approx(0.5, rel=1e-9)
-    assert dynamics_checks(ratios) == {"amplitude ratio >= 0.7": False, "jitter ratio <= 1.5": True}
+    assert ratios["high_frequency_ratio"] == pytest.approx(0.25, rel=1e-9)  # power: the square of 0.5
+    assert dynamics_checks(ratios) == {
+        "amplitude ratio >= 0.7": False,
+        "jitter ratio <= 1.5": True,
+        "energy above 6 Hz within 2x of the ground truth's": False,
+    }
 
 
 def test_a_still_reference_gives_nan_ratios_that_reach_no_target():
     still = torch.zeros(10, 3, 3)
     ratios = dynamics_ratios(still, still, FPS)
-    assert math.isnan(ratios["amplitude_ratio"]) and math.isnan(ratios["jitter_ratio"])
+    assert all(math.isnan(value) for value in ratios.values()) and len(ratios) == 3
     assert not any(dynamics_checks(ratios).values())
 
 
@@ -91,3 +139,5 @@ def test_bad_shapes_are_refused():
         motion_jitter(torch.zeros(2, 4, 3), FPS)
     with pytest.raises(ValueError, match="J >= 2"):
         motion_amplitude(torch.zeros(5, 1, 3))
+    with pytest.raises(ValueError, match="T >= 3"):
+        high_frequency_energy(torch.zeros(2, 4, 3), FPS)

@@ -10,10 +10,14 @@ small (a figure held at the mean pose has low MPJPE and no foot skating):
 - :func:`motion_jitter`: the mean joint acceleration magnitude, ``|p_{t+1} - 2 p_t + p_{t-1}| fps^2``
   (the central second difference of the world positions), mean over the interior frames and every joint
   (m/s^2). Frame-to-frame noise of std ``n`` adds about ``sqrt 6 n fps^2`` to it, smooth motion little.
+- :func:`high_frequency_energy`: the joint velocities' mean power above :data:`HIGH_FREQUENCY_HZ` (6 Hz),
+  from their spectrum over time (m^2/s^2). A smoothed dance that lost the truth's sharp accents has less of
+  it than the truth, a trembling one more: the check that a cure for trembling did not flatten real motion.
 
 :func:`dynamics_ratios` states both as ratios to a reference motion (the ground truth): a dance that moves as
 much as its truth has amplitude ratio 1, one that trembles has a jitter ratio above 1. The demos hold their
-dances to :data:`AMPLITUDE_RATIO_TARGET` and :data:`JITTER_RATIO_TARGET` (:func:`dynamics_checks`).
+dances to :data:`AMPLITUDE_RATIO_TARGET`, :data:`JITTER_RATIO_TARGET` and, for the energy above 6 Hz,
+:data:`HIGH_FREQUENCY_RATIO_RANGE` (:func:`dynamics_checks`).
 """
 
 from __future__ import annotations
@@ -23,18 +27,24 @@ import torch
 __all__ = [
     "AMPLITUDE_RATIO_TARGET",
     "DYNAMICS_METRICS",
+    "HIGH_FREQUENCY_HZ",
+    "HIGH_FREQUENCY_RATIO_RANGE",
     "JITTER_RATIO_TARGET",
     "dynamics_checks",
     "dynamics_ratios",
+    "high_frequency_energy",
     "motion_amplitude",
     "motion_jitter",
 ]
 
 AMPLITUDE_RATIO_TARGET = 0.7  # at least 70 % of the reference's spread: not a timid dance
 JITTER_RATIO_TARGET = 1.5  # at most 1.5 times the reference's acceleration: not a trembling dance
+HIGH_FREQUENCY_HZ = 6.0  # above the beat rates of dance (1-3 Hz) and their first harmonics
+HIGH_FREQUENCY_RATIO_RANGE = (0.5, 2.0)  # within 2x of the reference's energy above 6 Hz, either way
 DYNAMICS_METRICS = {  # key -> printed name
     "amplitude_ratio": "motion amplitude / ground truth's",
     "jitter_ratio": "jitter (acceleration) / ground truth's",
+    "high_frequency_ratio": f"energy above {HIGH_FREQUENCY_HZ:g} Hz / ground truth's",
 }
 
 
@@ -57,6 +67,34 @@ def motion_jitter(joints: torch.Tensor, fps: float) -> torch.Tensor:
     return accel.norm(dim=-1).mean()
 
 
+def high_frequency_energy(
+    joints: torch.Tensor, fps: float, cutoff_hz: float = HIGH_FREQUENCY_HZ
+) -> torch.Tensor:
+    """Mean power (m^2/s^2, scalar) of the joint velocities of joints (T >= 3, J, 3) above ``cutoff_hz``.
+
+    The velocities ``v_t = (p_{t+1} - p_t) fps`` (T - 1 frames) are taken to the frequency domain per joint
+    and axis (``rfft`` over time); by Parseval's theorem the power of the bins above the cutoff,
+    ``sum_{f_k > cutoff} w_k |V_k|^2 / N^2`` (``w_k`` = 2 for the bins that stand for two of the full
+    spectrum, 1 for the Nyquist bin), is the mean square of the velocity's part above the cutoff. Summed
+    over the axes, mean over the joints.
+    """
+    if joints.ndim != 3 or joints.shape[-1] != 3 or joints.shape[0] < 3:
+        raise ValueError(f"joints must be (T >= 3, J, 3), got {tuple(joints.shape)}")
+    if not 0 < cutoff_hz:
+        raise ValueError(f"cutoff_hz must be > 0, got {cutoff_hz}")
+    velocity = (joints[1:] - joints[:-1]) * fps  # (N, J, 3)
+    n = velocity.shape[0]
+    spectrum = torch.fft.rfft(velocity, dim=0).abs().pow(2)  # (n // 2 + 1, J, 3)
+    freqs = torch.fft.rfftfreq(n, d=1.0 / fps).to(joints.device)
+    weight = torch.full_like(freqs, 2.0)
+    weight[0] = 1.0
+    if n % 2 == 0:
+        weight[-1] = 1.0  # the Nyquist bin stands for itself alone
+    weight = weight * (freqs > cutoff_hz)
+    power = (spectrum * weight[:, None, None].to(spectrum.dtype)).sum(0) / n**2  # (J, 3)
+    return power.sum(-1).mean()
+
+
 def _ratio(value: torch.Tensor, reference: torch.Tensor) -> float:
     """value / reference; NaN when the reference is 0 (a still reference has no scale to compare with)."""
     reference = float(reference)
@@ -64,17 +102,25 @@ def _ratio(value: torch.Tensor, reference: torch.Tensor) -> float:
 
 
 def dynamics_ratios(joints: torch.Tensor, reference: torch.Tensor, fps: float) -> dict[str, float]:
-    """``amplitude_ratio`` and ``jitter_ratio`` of joints (T, J, 3) to a reference motion (T', J, 3)."""
+    """``amplitude_ratio``, ``jitter_ratio`` and ``high_frequency_ratio`` of joints (T, J, 3) to a reference
+    motion (T', J, 3)."""
     joints, reference = joints.double(), reference.double()
     return {
         "amplitude_ratio": _ratio(motion_amplitude(joints), motion_amplitude(reference)),
         "jitter_ratio": _ratio(motion_jitter(joints, fps), motion_jitter(reference, fps)),
+        "high_frequency_ratio": _ratio(
+            high_frequency_energy(joints, fps), high_frequency_energy(reference, fps)
+        ),
     }
 
 
 def dynamics_checks(ratios: dict[str, float]) -> dict[str, bool]:
     """Whether :func:`dynamics_ratios` reach the targets (a NaN ratio reaches none)."""
+    low, high = HIGH_FREQUENCY_RATIO_RANGE
     return {
         f"amplitude ratio >= {AMPLITUDE_RATIO_TARGET}": ratios["amplitude_ratio"] >= AMPLITUDE_RATIO_TARGET,
         f"jitter ratio <= {JITTER_RATIO_TARGET}": ratios["jitter_ratio"] <= JITTER_RATIO_TARGET,
+        f"energy above {HIGH_FREQUENCY_HZ:g} Hz within {high:g}x of the ground truth's": (
+            low <= ratios["high_frequency_ratio"] <= high
+        ),
     }
