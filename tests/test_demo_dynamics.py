@@ -163,7 +163,11 @@ def test_two_seeded_stream_demo_runs_print_the_same_dynamics(tmp_path, monkeypat
         assert columns["mean_pose"] == pytest.approx(
             {"amplitude_ratio": 0, "jitter_ratio": 0, "high_frequency_ratio": 0}
         )
-        assert set(demo["checks"]) == {"amplitude ratio >= 0.7", "jitter ratio <= 1.5"}
+        assert set(demo["checks"]) == {
+            "amplitude ratio >= 0.7",
+            "jitter ratio <= 1.5",
+            "energy above 6 Hz within 2x of the ground truth's",
+        }
         sample = demo["samples"][0]
         assert Path(sample["dance"]["npz"]).is_file() and Path(sample["reference"]["npz"]).is_file()
         scores.append(_columns(columns))
