@@ -161,10 +161,11 @@ def test_stitched_sampling_windows_agree_on_overlaps():
     )
     torch.testing.assert_close(windows[1:, :overlap], windows[:-1, -overlap:], rtol=0, atol=0)
     long = sample_long(
-        lambda post: ddpm_sample(
+        lambda post, windows: ddpm_sample(
             diff, denoiser, (4, 8, 2), cond=cond, post_step=post, generator=torch.Generator().manual_seed(3)
         ),
         overlap,
+        num_windows=4,
     )
     assert long.shape == (8 + 3 * 5, 2)
 
@@ -190,17 +191,18 @@ def test_relative_channels_continue_across_window_seams(sampler):
     total = width + (windows - 1) * (width - overlap)
     relative = torch.tensor([1.0, 0.0])  # channel 0 is relative to each window's start, channel 1 absolute
 
-    def run(post):
+    def run(post, which):
         kwargs = dict(post_step=post, generator=torch.Generator().manual_seed(0))
+        shape = (len(range(windows)[which]), width, 2)
         if sampler == "ddim":
-            return ddim_sample(diff, _walking_denoiser(v), (windows, width, 2), sampling_steps=5, **kwargs)
-        return ddpm_sample(diff, _walking_denoiser(v), (windows, width, 2), **kwargs)
+            return ddim_sample(diff, _walking_denoiser(v), shape, sampling_steps=5, **kwargs)
+        return ddpm_sample(diff, _walking_denoiser(v), shape, **kwargs)
 
-    long = sample_long(run, overlap, relative=relative)
+    long = sample_long(run, overlap, relative=relative, num_windows=windows)
     # one continuous walk: x = v * frame over the whole sequence, the height untouched
     expected = torch.stack([v * torch.arange(total, dtype=torch.float32), torch.full((total,), 0.9)], -1)
     torch.testing.assert_close(long, expected, rtol=0, atol=1e-5)
     # without the relative channel every window restarts at the origin: a jump of v * (W - overlap) at seams
-    plain = sample_long(run, overlap)
+    plain = sample_long(run, overlap, num_windows=windows)
     steps = plain[1:, 0] - plain[:-1, 0]
     assert steps.min() < -0.5 * v * (width - overlap)

@@ -307,7 +307,8 @@ def test_old_egodance_checkpoint_without_eta_loads(tiny_egodance_module, tmp_pat
 # ------------------------------------------------------------------------------- long dances
 def _previous_sample_long_dance(model, diffusion, music, frames, head, window, overlap, **kwargs):
     """sample_long_dance before it used the shared sample_long (verbatim, sampler options renamed)."""
-    from skeleton_mamba.tasks.egodance.sampling import root_xz_mask, sample_dance
+    from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS, ROOT
+    from skeleton_mamba.tasks.egodance.sampling import sample_dance
     from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, stitch_windows, window_starts
 
     total = music.shape[0]
@@ -327,7 +328,9 @@ def _previous_sample_long_dance(model, diffusion, music, frames, head, window, o
         shift = head[[min(s, total - 1) for s in starts]] - head[:1]
         shift[:, 1] = 0.0
         head_w = head_w - shift[:, None]
-    consistency = WindowConsistency(overlap, root_xz_mask())
+    root_xz_mask = torch.zeros(NUM_JOINTS, NUM_CHANNELS)  # the root's horizontal position
+    root_xz_mask[0, ROOT.start] = root_xz_mask[0, ROOT.start + 2] = 1.0
+    consistency = WindowConsistency(overlap, root_xz_mask)
     windows = sample_dance(model, diffusion, music_w, frames_w, head_w, post_step=consistency, **kwargs)
     return stitch_windows(consistency.to_global(windows), overlap, total)
 

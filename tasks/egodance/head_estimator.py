@@ -53,6 +53,7 @@ __all__ = [
     "head_trajectory_loss",
     "head_trajectory_errors",
     "estimate_long_trajectory",
+    "estimate_window_trajectories",
     "long_window_starts",
     "HeadFrameFeatures",
     "HeadFeatureStream",
@@ -153,7 +154,7 @@ class HeadFrameFeatures:
     Attributes:
         features: (T, dim): frame t with its difference to frame t - 1 (zero for frame 0).
         window_first: {start: (dim,)} frame ``start`` with a zero difference, for every window start of
-            :func:`long_window_starts` (``window``) but 0.
+            :func:`long_window_starts` (``window``) but 0, and every multiple of the stream's other ``hops``.
         window: the estimation window the features were prepared for.
     """
 
@@ -181,11 +182,15 @@ class HeadFeatureStream:
     Args:
         estimator: the head-trajectory estimator (in eval mode).
         window: the window of the later :func:`estimate_long_trajectory` call.
+        hops: other window hops whose starts (every multiple) are also kept, for
+            :func:`estimate_window_trajectories` on the windows of long-form sampling.
     """
 
-    def __init__(self, estimator: HeadTrajectoryEstimator, window: int = 150):
+    def __init__(self, estimator: HeadTrajectoryEstimator, window: int = 150, hops: tuple[int, ...] = ()):
         self.estimator = estimator
         self.window = window
+        self.other_hops = tuple(h for h in hops if h > 0)
+        self.hops = tuple({h for h in (window - 1, *hops) if h > 0})
         self.count = 0
         self.features: list[torch.Tensor] = []
         self.window_first: dict[int, torch.Tensor] = {}
@@ -206,13 +211,14 @@ class HeadFeatureStream:
         if self.count == 0:
             diff[0] = 0.0
         self.features.append(self.estimator.cnn_features(small, diff))
-        hop = self.window - 1
-        if hop > 0:  # the starts k * (window - 1), k >= 1, that fall in this chunk
+        starts = set()  # the starts k * hop, k >= 1, that fall in this chunk
+        for hop in self.hops:
             first = -(-max(self.count, 1) // hop) * hop
-            starts = list(range(first, self.count + len(small), hop))
-            if starts:
-                alone = self._alone(small[[s - self.count for s in starts]])
-                self.window_first.update(zip(starts, alone, strict=True))
+            starts.update(range(first, self.count + len(small), hop))
+        starts = sorted(starts)
+        if starts:
+            alone = self._alone(small[[s - self.count for s in starts]])
+            self.window_first.update(zip(starts, alone, strict=True))
         self.recent.extend(small)
         self.count += len(small)
 
@@ -228,7 +234,8 @@ class HeadFeatureStream:
             held = list(self.recent)
             alone = self._alone(torch.stack([held[s - (total - len(held))] for s in missing]))
             self.window_first.update(zip(missing, alone, strict=True))
-        window_first = {s: self.window_first[s] for s in starts}
+        kept = set(starts) | {s for h in self.other_hops for s in range(h, total, h)}
+        window_first = {s: self.window_first[s] for s in sorted(kept)}
         return HeadFrameFeatures(torch.cat(self.features), window_first, self.window)
 
 
@@ -303,3 +310,39 @@ def estimate_long_trajectory(
         positions[start : start + window] = pos
         rotations[start : start + window] = rot
     return positions, rotations
+
+
+@torch.no_grad()
+def estimate_window_trajectories(
+    estimator: HeadTrajectoryEstimator,
+    frames: torch.Tensor | HeadFrameFeatures,
+    starts: list[int],
+    window: int,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each window's head trajectory in that window's own canonical frame (what the estimator was trained
+    to give; :mod:`.window_frames`): frames (T, 3, H, W) or their :class:`HeadFrameFeatures` (prepared with
+    the windows' hop) -> positions (B, window, 3), rotations (B, window, 3, 3) for the windows starting at
+    ``starts``. A window that runs past the video is estimated on the frames there are, and its last
+    estimate repeated (as the music of such a window repeats its last frame).
+    """
+    if isinstance(frames, HeadFrameFeatures):
+        total = len(frames)
+
+        def estimate(start: int, length: int) -> tuple[torch.Tensor, torch.Tensor]:
+            return estimator.trajectory(frames.window_features(start, length)[None])
+
+    else:
+        total = frames.shape[0]
+
+        def estimate(start: int, length: int) -> tuple[torch.Tensor, torch.Tensor]:
+            return estimator(frames[None, start : start + length])
+
+    positions, rotations = [], []
+    for start in starts:
+        if not 0 <= start < total:
+            raise ValueError(f"a window starts at frame {start}, outside the video's {total} frames")
+        pos, rot = estimate(start, min(window, total - start))
+        pad = window - pos.shape[1]
+        positions.append(torch.cat([pos[0], pos[0, -1:].expand(pad, -1)]))
+        rotations.append(torch.cat([rot[0], rot[0, -1:].expand(pad, -1, -1)]))
+    return torch.stack(positions), torch.stack(rotations)

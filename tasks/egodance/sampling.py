@@ -18,16 +18,26 @@ from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
     NUM_CHANNELS,
     NUM_JOINTS,
-    ROOT,
     decode_motion,
     motion_joints,
 )
+from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.rotations import matrix_to_axis_angle
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, sample, sample_long
 from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, window_starts
 
-__all__ = ["CompiledDenoiser", "sample_dance", "sample_long_dance", "tokens_to_motion", "root_xz_mask"]
+__all__ = [
+    "DEFAULT_BATCH_WINDOWS",
+    "CompiledDenoiser",
+    "sample_dance",
+    "sample_long_dance",
+    "tokens_to_motion",
+]
+
+DEFAULT_BATCH_WINDOWS = 16
+"""Windows of a long track denoised together (40 s of dance at the default 150 / 75 windows): memory is
+bounded by this many windows whatever the track's length."""
 
 
 class CompiledDenoiser:
@@ -47,18 +57,6 @@ class CompiledDenoiser:
 
     def null_condition(self, context: torch.Tensor) -> torch.Tensor:
         return self.model.null_condition(context)
-
-
-def root_xz_mask() -> torch.Tensor:
-    """(24, 10) mask of the window-relative channels: the root's horizontal position (x, z; y is up).
-
-    Training windows are canonicalised to start at x = z = 0 (:mod:`.data`), so long-form windows are
-    in-painted and stitched with these channels relative to each window's start.
-    """
-    mask = torch.zeros(NUM_JOINTS, NUM_CHANNELS)
-    mask[0, ROOT.start] = 1.0
-    mask[0, ROOT.start + 2] = 1.0
-    return mask
 
 
 @torch.inference_mode()
@@ -125,38 +123,75 @@ def sample_long_dance(
     window: int = 150,
     overlap: int = 75,
     vision: torch.Tensor | None = None,
+    *,
+    canonical: bool = False,
+    head_windows: torch.Tensor | None = None,
+    batch_windows: int | None = DEFAULT_BATCH_WINDOWS,
     **kwargs,
 ) -> torch.Tensor:
     """A whole track: music (T, L), frames (T, 3, S, S) or their vision features ``vision`` (T, Dc) (the
-    vision encoder is per frame, so windows of features are the features of windows of frames; a long
-    video need not be held), head (T, 3) -> tokens (T, 24, 10).
+    vision encoder is per frame, so frames are encoded once each, and a long video need not be held)
+    -> tokens (T, 24, 10), one continuous dance in the first window's frame.
 
     The conditions are cut into windows every ``window - overlap`` frames (EDGE: 150 / 75; one padded
-    window when the track is shorter), sampled as one batch by
-    :func:`~skeleton_mamba.tasks.training.diffusion.sample_long` (overlaps in-painted after every step, the
-    root's horizontal position relative to each window's start, as in training) and stitched into one
-    continuous dance in the first window's frame. Head targets (T, 3) are moved into each window's frame
-    by the head's own horizontal displacement since frame 0 (an approximation of the root's, which is only
-    known once sampled). Other arguments as :func:`sample_dance`.
+    window when the track is shorter) and sampled by
+    :func:`~skeleton_mamba.tasks.training.diffusion.sample_long`, ``batch_windows`` windows at a time
+    (memory bounded whatever the track's length): every overlap is in-painted after every denoising step in
+    the frame of the window it belongs to, as the model was trained (:class:`.window_frames.HeadingFrames`):
+    the root's horizontal position relative to the window's first frame and, for a model trained with
+    ``canonicalize_init_head`` (``canonical``), the window turned to face its first frame's head heading,
+    both taken from the previous window's sampled motion. The windows are then turned back and joined.
+
+    Head guidance: ``head`` (T, 3) targets in the track's frame, moved into each window's frame by the
+    head's own horizontal displacement since frame 0 (an approximation of the root's, which is only known
+    once sampled; world-yaw models only), or ``head_windows`` (B, window, 3): each window's targets in its
+    own frame (:func:`.head_estimator.estimate_window_trajectories`; what a ``canonical`` model needs, since
+    its windows' headings are only known once sampled). Other arguments as :func:`sample_dance`.
     """
+    if frames is not None and vision is not None:
+        raise ValueError("give frames or their vision features, not both")
+    if head is not None and head_windows is not None:
+        raise ValueError("give head targets for the track (head) or per window (head_windows), not both")
+    if canonical and head is not None:
+        raise ValueError(
+            "a model trained on windows turned to face their first heading needs its head targets per "
+            "window (head_windows), in each window's own frame"
+        )
     total = music.shape[0]
+    starts, _ = window_starts(total, window, overlap)
+    if head_windows is not None and head_windows.shape[:2] != (len(starts), window):
+        raise ValueError(f"head_windows {tuple(head_windows.shape)}: expected ({len(starts)}, {window}, 3)")
+    if frames is not None and model.vision_encoder is not None:  # each frame once, not once per window
+        vision, frames = model.vision_encoder(frames[None])[0], None
     music_w = split_windows(music, window, overlap)
-    frames_w = None if frames is None else split_windows(frames, window, overlap)
     vision_w = None if vision is None else split_windows(vision, window, overlap)
-    head_w = None
+    head_w = head_windows
     if head is not None:
         head_w = split_windows(head, window, overlap)
-        starts, _ = window_starts(total, window, overlap)
         shift = head[[min(s, total - 1) for s in starts]] - head[:1]
         shift[:, 1] = 0.0  # heights are absolute (floor at y = 0)
         head_w = head_w - shift[:, None]
 
-    def windows(post_step) -> torch.Tensor:
+    def windows(post_step, which: slice) -> torch.Tensor:
         return sample_dance(
-            model, diffusion, music_w, frames_w, head_w, post_step=post_step, vision=vision_w, **kwargs
+            model,
+            diffusion,
+            music_w[which],
+            None,
+            None if head_w is None else head_w[which],
+            post_step=post_step,
+            vision=None if vision_w is None else vision_w[which],
+            **kwargs,
         )
 
-    return sample_long(windows, overlap, total, relative=root_xz_mask())
+    return sample_long(
+        windows,
+        overlap,
+        total,
+        frames=HeadingFrames(turn=canonical),
+        num_windows=len(starts),
+        batch_windows=batch_windows,
+    )
 
 
 def tokens_to_motion(tokens: torch.Tensor, fps: float = 30.0) -> MotionData:

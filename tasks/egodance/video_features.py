@@ -61,6 +61,7 @@ def encode_video(
     max_frames: int | None = None,
     chunk: int = DECODE_CHUNK,
     progress: bool = False,
+    hops: tuple[int, ...] = (),
 ) -> VideoFeatures:
     """Decode a video file or image folder as a stream at ``image_size`` and encode its frames.
 
@@ -70,6 +71,8 @@ def encode_video(
         vision_encoder: the EMM's vision encoder (eval mode), or None.
         head_estimator: the head-trajectory estimator (eval mode), or None.
         window: the head estimator's window (:func:`.head_estimator.estimate_long_trajectory`).
+        hops: hops of other windows the head estimator will be run on
+            (:func:`.head_estimator.estimate_window_trajectories`: long-form sampling's windows).
         max_frames: decode at most this many frames.
         chunk: frames decoded and encoded together.
         progress: show a progress bar (frames encoded).
@@ -81,7 +84,7 @@ def encode_video(
         if part is not None and part.training:
             raise ValueError(f"{type(part).__name__} must be in eval mode (per-frame features)")
     vision: list[torch.Tensor] = []
-    head = None if head_estimator is None else HeadFeatureStream(head_estimator, window)
+    head = None if head_estimator is None else HeadFeatureStream(head_estimator, window, hops)
     count = 0
     with tqdm(total=max_frames, desc="video", unit="frame", disable=not progress) as bar:
         for frames in iter_video_frames(path, image_size, max_frames, chunk):

@@ -5,9 +5,11 @@ A long sequence is cut into B windows of W frames starting every ``hop = W - ove
 windows are sampled as one batch and, after every denoising step, the first ``overlap`` frames of window
 b are overwritten by the last ``overlap`` frames of window b - 1 (:class:`WindowConsistency`), so the
 windows agree on their overlaps when sampling ends and :func:`stitch_windows` joins them seamlessly.
-Channels that the task expresses relative to each window's start (a root trajectory canonicalised to
-start at the origin) are in-painted shifted by where the window starts, so the model sees in-distribution
-inputs and the stitched trajectory continues across seams (:meth:`WindowConsistency.to_global`).
+Tasks whose windows are canonicalised at their first frame (a root trajectory that starts at the origin;
+a window turned to face its first heading) give their :mod:`.window_frames`: each overlap is in-painted in
+the frame of the window it belongs to, so the model sees in-distribution inputs, and the stitched
+sequence continues across seams in the first window's frame (:meth:`WindowConsistency.to_global`). Long
+sequences are sampled in bounded batches of windows, each batch continuing the last (:func:`sample_long`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ import math
 from collections.abc import Callable
 
 import torch
+
+from skeleton_mamba.tasks.training.diffusion.window_frames import TranslationFrames, WindowFrames
 
 __all__ = ["window_starts", "split_windows", "WindowConsistency", "stitch_windows", "sample_long"]
 
@@ -50,53 +54,110 @@ class WindowConsistency:
 
     For b >= 1, in order (so every overlap chain starts from window 0)::
 
-        x[b, :overlap] = x[b - 1, W - overlap:] - signal * offset_b,
-        offset_b = relative * x0_hat[b - 1, W - overlap]
+        x[b, :overlap] = to_frame(x[b - 1, W - overlap:], frame_b, signal),
+        frame_b = relative_frame(x0_hat[b - 1, W - overlap])
 
-    ``relative`` (broadcastable to one frame, x.shape[2:]; None: no such channel) marks the channels that
-    hold positions relative to each window's own first frame, as in data canonicalised per window (e.g.
-    the root's horizontal position, 0 at frame 0). ``offset_b`` is where window b starts in window b - 1's
-    frame, taken from the clean prediction x0_hat; it is scaled by ``signal`` = sqrt(alpha_bar) because
-    x = signal * x0 + noise (shifting x0 by d shifts x by signal * d). After the last step (signal 1,
-    x = x0_hat) window b starts exactly at 0 in its own frame and continues window b - 1 exactly;
-    :meth:`to_global` adds the accumulated offsets to bring every window into window 0's frame.
+    ``frames`` (:class:`.window_frames.WindowFrames`; None: every window in one frame) says how window b's
+    own frame relates to window b - 1's: it is found from where window b starts in window b - 1, taken
+    from the clean prediction x0_hat, and ``to_frame`` moves the noisy overlap into it with its
+    translations scaled by ``signal`` = sqrt(alpha_bar) (x = signal * x0 + noise). After the last step
+    (signal 1, x = x0_hat) window b starts in its own frame exactly where window b - 1 puts it and continues
+    it exactly; :meth:`to_global` brings every window into the frame of the first (or of ``base``).
+
+    ``relative`` is the shorthand for translation-only frames (:class:`.window_frames.TranslationFrames`):
+    the channels that hold positions relative to each window's own first frame, as in data canonicalised
+    per window (e.g. the root's horizontal position, 0 at frame 0).
+
+    ``prefix``: a motion already sampled that window 0 must continue (the last ``overlap`` frames of the
+    window before it, clean, in that window's frame), for long sequences sampled in several batches of
+    windows. Window 0's overlap is then in-painted towards it: ``x[0, :overlap] += signal * (known -
+    x0_hat[0, :overlap])`` (x0_hat 0 before the first step), ``known`` the prefix in window 0's frame, so
+    the sample keeps its noise and takes the known clean part. ``base``: the frame of the window the prefix
+    belongs to, relative to the global frame (:meth:`to_global`).
 
     Args:
         overlap: frames shared by consecutive windows.
         relative: the per-window-relative channel mask, or None.
+        frames: the windows' frames (instead of ``relative``).
+        prefix: (overlap, ...) the clean motion window 0 continues, or None.
+        base: (1, K) the prefix window's global frame (None: identity).
     """
 
-    def __init__(self, overlap: int, relative: torch.Tensor | None = None):
+    def __init__(
+        self,
+        overlap: int,
+        relative: torch.Tensor | None = None,
+        frames: WindowFrames | None = None,
+        prefix: torch.Tensor | None = None,
+        base: torch.Tensor | None = None,
+    ):
+        if relative is not None and frames is not None:
+            raise ValueError("give relative channels or window frames, not both")
         self.overlap = overlap
-        self.relative = relative
-        self.offsets: torch.Tensor | None = None  # (B, ...) offset_b of the last call (offset_0 = 0)
+        self.frames = TranslationFrames(relative) if relative is not None else frames
+        if prefix is not None and prefix.shape[0] != overlap:
+            raise ValueError(f"the prefix has {prefix.shape[0]} frames, the overlap {overlap}")
+        self.prefix = prefix
+        self.base = base
+        self.relative_frames: torch.Tensor | None = None  # (B, K) frame of window b in window b - 1's
+
+    def _relative_frames(self, x: torch.Tensor, x0: torch.Tensor | None) -> torch.Tensor | None:
+        """(B, K): window 0's relative to the prefix window (identity without one), window b's from x0."""
+        if self.frames is None:
+            return None
+        frames = self.frames.identity(x.shape[0], x)
+        if self.prefix is not None:
+            frames[:1] = self.frames.relative_frame(self.prefix[:1].to(x.device, x.dtype))
+        if x0 is not None and x.shape[0] > 1:
+            frames[1:] = self.frames.relative_frame(x0[:-1, x.shape[1] - self.overlap])
+        return frames
 
     def __call__(
         self, x: torch.Tensor, x0: torch.Tensor | None = None, signal: torch.Tensor | float = 1.0
     ) -> torch.Tensor:
         _check(x.shape[1], self.overlap)
-        offsets = x.new_zeros(x.shape[0], *x.shape[2:])
-        if self.overlap == 0 or x.shape[0] < 2:
-            self.offsets = offsets
+        if self.overlap == 0:
+            self.relative_frames = self._relative_frames(x, None)
             return x
-        w = x.shape[1]
-        hop = w - self.overlap
-        if self.relative is not None and x0 is not None:
-            rel = self.relative.to(x.device, x.dtype)
-            offsets[1:] = x0[:-1, hop] * rel
+        self.relative_frames = frames = self._relative_frames(x, x0)
         scale = torch.as_tensor(signal, dtype=x.dtype, device=x.device).reshape(-1)
-        scale = scale.expand(x.shape[0]).reshape(-1, *([1] * (x.ndim - 2)))
+        scale = scale.expand(x.shape[0]).reshape(-1, *([1] * (x.ndim - 1)))
+        hop = x.shape[1] - self.overlap
         x = x.clone()
+        if self.prefix is not None:
+            known = self.prefix[None].to(x.device, x.dtype)
+            if frames is not None:
+                known = self.frames.to_frame(known, frames[:1])
+            clean = 0.0 if x0 is None else x0[:1, : self.overlap]
+            x[:1, : self.overlap] = x[:1, : self.overlap] + scale[:1] * (known - clean)
         for b in range(1, x.shape[0]):
-            x[b, : self.overlap] = x[b - 1, hop:] - scale[b] * offsets[b]
-        self.offsets = offsets
+            tail = x[b - 1 : b, hop:]
+            if frames is not None:
+                tail = self.frames.to_frame(tail, frames[b : b + 1], scale[b])
+            x[b, : self.overlap] = tail[0]
         return x
 
+    def global_frames(self, count: int, like: torch.Tensor) -> torch.Tensor | None:
+        """(count, K) every window's frame relative to the global one (None without frames)."""
+        if self.frames is None:
+            return None
+        relative = self.relative_frames
+        if relative is None:
+            relative = self.frames.identity(count, like)
+        frame = self.base if self.base is not None else self.frames.identity(1, like)
+        out = []
+        for b in range(count):
+            frame = self.frames.compose(frame, relative[b : b + 1].to(frame))
+            out.append(frame)
+        return torch.cat(out)
+
     def to_global(self, windows: torch.Tensor) -> torch.Tensor:
-        """(B, W, ...) windows in their own frames -> in window 0's frame (cumulative offsets added)."""
-        if self.offsets is None:
+        """(B, W, ...) windows in their own frames -> in the global frame (the first window's, or that of
+        ``base``)."""
+        frames = self.global_frames(windows.shape[0], windows)
+        if frames is None:
             return windows
-        return windows + self.offsets.cumsum(0)[:, None].to(windows.dtype)
+        return self.frames.from_frame(windows, frames.to(windows.dtype))
 
 
 def stitch_windows(windows: torch.Tensor, overlap: int, total_frames: int | None = None) -> torch.Tensor:
@@ -130,14 +191,37 @@ def stitch_windows(windows: torch.Tensor, overlap: int, total_frames: int | None
 
 
 def sample_long(
-    sample_fn: Callable[[WindowConsistency], torch.Tensor],
+    sample_fn: Callable[[WindowConsistency, slice], torch.Tensor],
     overlap: int,
     total_frames: int | None = None,
     relative: torch.Tensor | None = None,
+    *,
+    frames: WindowFrames | None = None,
+    num_windows: int | None = None,
+    batch_windows: int | None = None,
 ) -> torch.Tensor:
-    """Run ``sample_fn(post_step)`` (a sampler call producing (B, W, ...) windows) with window
-    consistency (``relative`` channels as :class:`WindowConsistency`) as its post-step projection,
-    then stitch the windows, in window 0's frame, into one sequence."""
-    consistency = WindowConsistency(overlap, relative)
-    windows = sample_fn(consistency)
-    return stitch_windows(consistency.to_global(windows), overlap, total_frames)
+    """Sample a long sequence as windows kept consistent during sampling, then stitch them.
+
+    ``sample_fn(post_step, windows)`` runs the sampler for the windows ``windows`` (a slice of the
+    ``num_windows`` windows) with ``post_step`` (a :class:`WindowConsistency`: ``relative`` channels or
+    ``frames`` as there) as its post-step projection, and returns them (n, W, ...). The windows are sampled
+    in batches of at most ``batch_windows`` (None: all at once), so memory does not grow with the sequence;
+    the first window of each later batch continues the last window of the batch before, sampled already
+    (its tail is in-painted as a known ``prefix``). The windows are stitched, in window 0's frame, into
+    one sequence of ``total_frames`` frames.
+    """
+    if num_windows is None:
+        raise ValueError("sample_long needs num_windows (the windows sample_fn can sample)")
+    if batch_windows is not None and batch_windows < 1:
+        raise ValueError(f"batch_windows must be >= 1, got {batch_windows}")
+    step = num_windows if batch_windows is None else batch_windows
+    done: list[torch.Tensor] = []
+    prefix = base = None
+    for first in range(0, num_windows, step):
+        consistency = WindowConsistency(overlap, relative, frames, prefix, base)
+        windows = sample_fn(consistency, slice(first, min(first + step, num_windows)))
+        done.append(consistency.to_global(windows))
+        if overlap > 0 and consistency.frames is not None:
+            base = consistency.global_frames(windows.shape[0], windows)[-1:]
+        prefix = windows[-1, windows.shape[1] - overlap :] if overlap > 0 else None
+    return stitch_windows(torch.cat(done), overlap, total_frames)
