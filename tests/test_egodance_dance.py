@@ -113,17 +113,59 @@ def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch):
     np.testing.assert_allclose(root[:, 1], 0.9, atol=1e-5)
 
 
-def test_sm_dance_refuses_long_tracks_for_heading_canonical_checkpoints(inputs):
-    from skeleton_mamba.tasks.motion.errors import InputError
+TURN = 0.01  # radians per frame of the turning oracle
+STEP = 0.012  # metres per frame along its heading
+
+
+def _turning_forward(self, x_t, t, context=None, mask=None):
+    """Oracle EMM of a model trained on windows turned to face their first heading: whatever x_t is, the
+    rest pose walking forward (along its heading) while turning TURN per frame, starting at x = z = 0 and
+    facing +z at the window's first frame (the rest pose's head faces where its pelvis does)."""
+    out = torch.zeros_like(x_t)
+    k = torch.arange(x_t.shape[1], dtype=torch.float64)
+    yaw = TURN * k
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    out[..., :6] = IDENTITY_6D.to(x_t.dtype)
+    # the root's orientation: a turn about +y by yaw (first two columns (c, 0, -s) and (0, 1, 0))
+    out[:, :, 0, 0], out[:, :, 0, 2] = c.to(x_t.dtype), (-s).to(x_t.dtype)
+    position = torch.cumsum(torch.stack([s, c], -1) * STEP, 0) - torch.stack([s, c], -1)[:1] * STEP
+    out[:, :, 0, 6] = position[:, 0].to(x_t.dtype)
+    out[:, :, 0, 7] = 0.9
+    out[:, :, 0, 8] = position[:, 1].to(x_t.dtype)
+    return out
+
+
+def test_sm_dance_joins_heading_canonical_windows_into_one_turning_walk(inputs, monkeypatch, capsys):
+    """A checkpoint trained with canonicalize_init_head dances a 12 s track (4 windows): each window is
+    sampled facing its first heading, found from the previous window's dance, and the windows joined give
+    the one walk on a circle the oracle describes: heading TURN * t, position sum of the steps along it."""
+    from skeleton_mamba.tasks.motion.motion_file import load_motion
 
     tmp, ckpt, wav = inputs
     checkpoint = torch.load(ckpt, weights_only=True)
     checkpoint["datamodule_hyper_parameters"] = {"canonicalize_init_head": True}
     canonical = tmp / "canonical.ckpt"
     torch.save(checkpoint, canonical)
-    # 360 frames would be stitched from windows in the world-yaw frame: a clear error instead
-    with pytest.raises(InputError, match="canonicalize_init_head.*at most 150 frames"):
-        _dance(tmp, canonical, wav, tmp / "canonical_out", "--no-render")
+    monkeypatch.setattr(EMM, "forward", _turning_forward)
+    assert _dance(tmp, canonical, wav, tmp / "turn.npz", "--no-render", "--head", "none") == 0
+    assert (
+        "4 windows of 150 frames every 75, each facing its first frame's head heading"
+        in capsys.readouterr().out
+    )
+    motion = load_motion(tmp / "turn.npz")
+    yaw = np.arange(360) * TURN
+    steps = np.stack([np.sin(yaw), np.cos(yaw)], -1) * STEP
+    expected = np.cumsum(steps, 0) - steps[:1]  # x, z
+    root = motion.root_position()
+    np.testing.assert_allclose(root[:, [0, 2]], expected, atol=1e-4)  # 3.6 radians of turn, 4.3 m walked
+    np.testing.assert_allclose(root[:, 1], 0.9, atol=1e-5)
+    orient = motion.poses[:, 0]  # axis-angle of the root: about +y by the heading
+    np.testing.assert_allclose(orient[:, [0, 2]], 0.0, atol=1e-4)
+    np.testing.assert_allclose(np.unwrap(orient[:, 1]), yaw, atol=1e-4)
+    # a world-yaw checkpoint (translation-only stitching) cannot join them: it turns back at every seam
+    assert _dance(tmp, ckpt, wav, tmp / "plain.npz", "--no-render", "--head", "none") == 0
+    plain = load_motion(tmp / "plain.npz").root_position()
+    assert np.abs(plain[:, [0, 2]] - expected).max() > 1.0
 
 
 def test_a_checkpoint_loads_without_the_random_resnet_warning(inputs, tiny_egodance_module):

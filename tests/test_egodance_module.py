@@ -16,7 +16,7 @@ from torch.utils.data import DataLoader
 
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.music import audio_stack
 
 
@@ -201,7 +201,7 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song, 
     ]
     assert dance_main(args) == 0
     assert "head trajectory estimated from the video" in capsys.readouterr().out  # the default head source
-    with pytest.raises(SystemExit, match="--head oracle needs the ground-truth camera path"):
+    with pytest.raises(InputError, match="--head oracle needs the ground-truth camera path"):
         dance_main([*args, "--head", "oracle"])
     dance = load_motion(tmp_path / "dance.npz")
     assert (tmp_path / "dance.bvh").is_file() and not (tmp_path / "dance.mp4").exists()

@@ -7,19 +7,22 @@ Examples::
     sm dance --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt --list-samples
     sm dance --ckpt last.ckpt --music song.wav --video ego.mp4 --out dance/ --sampler ddpm
 
-``--sample`` reads an EgoAIST++ sample folder (music slice, egocentric frames and the ground-truth camera
-trajectory); ``--list-samples`` prints the held-out (test, then val) sample folders of the checkpoint's data,
-one per line, which the model never saw in training. ``--head`` chooses the head-guidance targets:
-``estimate`` (the default for vision models: the checkpoint's head-trajectory estimator on the egocentric
-frames, what any video allows), ``oracle`` (the sample's ground-truth camera path; ``--sample`` only,
-printed as oracle) or ``none``.
-``--music`` (+ ``--video`` for vision models: a video file or a folder of images) dances a whole track:
-tracks longer than the training window are sampled as overlapping windows whose overlaps are in-painted
-at every denoising step (EDGE long-form), so a 60 s song gives one continuous dance.
-``--out DIR`` receives ``<name>.npz`` (our motion format), ``<name>.bvh`` and ``<name>.mp4`` (the skeleton
-with the music muxed in; ``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE.
-A checkpoint trained with ``canonicalize_init_head`` (the demo's) dances clips of at most one window: its
-windows face their first frame's head heading, and long-form stitching joins windows in the world-yaw frame.
+``--sample`` reads an EgoAIST++ sample folder of any length (music slice, egocentric frames and the
+ground-truth camera trajectory) and prints the dance's scores against its ground truth; ``--list-samples``
+prints the held-out (test, then val) sample folders of the checkpoint's data, one per line, which the model
+never saw in training. ``--head`` chooses the head-guidance targets: ``estimate`` (the default for vision
+models: the checkpoint's head-trajectory estimator on the egocentric frames, what any video allows),
+``oracle`` (the sample's ground-truth camera path; ``--sample`` only, printed as oracle) or ``none``.
+``--music`` (+ ``--video`` for vision models: a video file or a folder of images) dances a whole track: tracks
+longer than the training window are sampled as overlapping windows whose overlaps are in-painted at every
+denoising step (EDGE long-form), ``--batch-windows`` at a time, so a 60 s song gives one continuous dance in
+bounded memory. A video shorter than the music: the dance covers the part where both are (said before the
+video is decoded); a video of another frame rate is taken at the model's. ``--out DIR`` receives
+``<name>.npz`` (our motion format), ``<name>.bvh`` and ``<name>.mp4`` (the skeleton with the music muxed in;
+``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE. A checkpoint trained with
+``canonicalize_init_head`` (the demo's), whose windows face their first frame's head heading, samples each
+window in that frame, found from the previous window's dance, with head targets estimated per window; the
+windows are turned back and joined (:mod:`.window_frames`).
 """
 
 from __future__ import annotations
@@ -27,29 +30,24 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
-import json
-import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
-from skeleton_mamba.tasks.egodance.builder.layout import read_frames
-from skeleton_mamba.tasks.egodance.data import (
-    EgoDanceDataModule,
-    EgoDanceDataset,
-    SyntheticEgoDanceDataModule,
-)
+from skeleton_mamba.tasks.egodance.dance_inputs import DanceInputs, sample_inputs, track_inputs
+from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, SyntheticEgoDanceDataModule
 from skeleton_mamba.tasks.egodance.export import write_dance
-from skeleton_mamba.tasks.egodance.head_estimator import estimate_long_trajectory
+from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
-from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
-from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
+from skeleton_mamba.tasks.egodance.representation import motion_joints
+from skeleton_mamba.tasks.egodance.sampling import DEFAULT_BATCH_WINDOWS, sample_long_dance
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
+from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_ratios
+from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
+from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.render import RenderStyle
-from skeleton_mamba.tasks.motion.value_checks import load_npz
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
@@ -101,6 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--window", type=int, default=150, help="frames per window (training length)")
     p.add_argument("--overlap", type=int, default=75, help="overlap of long-form windows")
+    p.add_argument(
+        "--batch-windows",
+        type=int,
+        default=DEFAULT_BATCH_WINDOWS,
+        help="long-form windows denoised together (memory is bounded by this many windows)",
+    )
     p.add_argument("--no-ema", action="store_true", help="use the raw weights instead of the EMA")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--progress", action="store_true", help="show a progress bar")
@@ -117,15 +121,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _music_source(args) -> tuple[str | None, float]:
-    """The audio file and start time (s) the dance is sampled for."""
-    if args.music:
-        return args.music, 0.0
-    meta = json.loads((Path(args.sample) / "meta.json").read_text(encoding="utf-8"))
-    music = meta.get("music") or {}
-    return music.get("path"), float(music.get("start_s", 0.0))
-
-
 def _denoiser(args, module) -> torch.nn.Module:
     """The EMM the dance is sampled with: the EMA weights, or the raw ones (``--no-ema``)."""
     return module.model if args.no_ema else module.ema.module
@@ -135,90 +130,44 @@ def _head_source(args, module) -> str:
     return args.head or ("estimate" if module.head_estimator is not None else "none")
 
 
-def _conditions(
-    args, module, canonical: bool = False
-) -> tuple[torch.Tensor, torch.Tensor | VideoFeatures | None, torch.Tensor | None]:
-    """music (T, L); frames (T, 3, S, S) (--sample), the video's per-frame features (--music --video) or
-    None; ground-truth head targets (T, 3) (--sample) or None."""
+def _long_form(args, module, checkpoint: dict) -> LongForm:
+    """The windows of the dance: the command's window and overlap, and whether the model's windows face
+    their first heading (the module's setting; a checkpoint from before it was one: its data module's)."""
+    canonical = module.hparams.get("canonicalize_init_head")
+    if canonical is None:
+        canonical = (checkpoint.get("datamodule_hyper_parameters") or {}).get("canonicalize_init_head", False)
+    return LongForm(args.window, args.overlap, bool(canonical))
 
-    size = module.hparams.image_size
-    vision = module.model.config.use_vision
-    if args.sample:
-        folder = Path(args.sample)
-        num_frames = len(read_frames(folder)) if vision else None
-        if num_frames is None:
-            num_frames = len(load_npz(folder / "camera.npz")["positions"])
-        item = EgoDanceDataset(
-            [folder], window=num_frames, load_frames=vision, image_size=size, canonicalize_init_head=canonical
-        )[0]
-        return item["music"], item.get("frames"), item["head"]
 
-    fps = module.hparams.get("fps", 30)  # the frame rate the model was trained at
-    music = torch.from_numpy(extract_music_features(args.music, fps=fps).features.astype(np.float32))
-    if not vision:
-        return music, None, None
-    if not args.video:
-        raise InputError(f"{args.ckpt} conditions on egocentric video; pass --video")
+def _inputs(args, module, long_form: LongForm) -> DanceInputs:
     estimate = _head_source(args, module) == "estimate" and module.head_estimator is not None
-    # decoded as a stream at the model's resolution, only as far as the music goes, and reduced to the
-    # per-frame features of the vision encoder and the head estimator as it is read (in the dance's
-    # precision, as the encoders would run inside the sampler)
-    with inference_precision(args.precision):
-        video = encode_video(
-            Path(args.video),
-            size,
-            _denoiser(args, module).vision_encoder,
-            module.head_estimator if estimate else None,
-            window=args.window,
-            max_frames=len(music),
-            progress=args.progress,
-        )
-    n = video.num_frames  # at most len(music)
-    if len(music) - n > 1:  # one frame of rounding between the two lengths is no news
-        video_s, music_s = n / fps, len(music) / fps
-        print(
-            f"sm dance: warning: the video has {n} frames ({video_s:.1f} s at {fps:g} fps), "
-            f"the music {len(music)} ({music_s:.1f} s); the dance covers the first {n / fps:.1f} s, "
-            "where both are (pass a video as long as the music for the whole track)",
-            file=sys.stderr,
-        )
-    return music[:n], video, None
+    model = _denoiser(args, module)
+    with inference_precision(args.precision):  # the encoders in the dance's precision, as in the sampler
+        if args.sample:
+            return sample_inputs(args.sample, module, model, long_form, estimate, args.progress)
+        return track_inputs(args.music, args.video, module, model, long_form, estimate, args.progress)
 
 
-def _head_targets(args, module, frames: torch.Tensor | VideoFeatures | None, oracle: torch.Tensor | None):
-    """(head source, targets (T, 3) or None) as ``--head`` asks; exits with a message when impossible."""
+def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torch.Tensor, str]:
+    """The dance tokens (T, 24, C) in fp32 and the head source, in the caller's precision region."""
     source = _head_source(args, module)
-    if source == "oracle":
-        if oracle is None:
-            raise SystemExit("sm dance: --head oracle needs the ground-truth camera path of a --sample")
-        return source, oracle
-    if source == "estimate":
-        if module.head_estimator is None or frames is None:
-            raise SystemExit(
-                f"sm dance: {args.ckpt} has no head-trajectory estimator (music-only); use --head none"
-            )
-        video = frames.head if isinstance(frames, VideoFeatures) else frames
-        return source, estimate_long_trajectory(module.head_estimator.eval(), video, args.window)[0]
-    return source, None
-
-
-def _dance(args, module, music, frames, oracle) -> tuple[torch.Tensor, str]:
-    """The dance tokens (T, 24, C) in fp32 and the head source, in the caller's precision region;
-    ``frames`` (T, 3, S, S) or the video's :class:`VideoFeatures` (its z_v go to the sampler)."""
-    head_source, head = _head_targets(args, module, frames, oracle)
-    vision = None
-    if isinstance(frames, VideoFeatures):
-        frames, vision = None, frames.vision
+    video = None if inputs.video is None else inputs.video.head
+    estimator = module.head_estimator
+    head, head_windows = head_targets(
+        source, long_form, len(inputs.music), estimator, video, inputs.truth, inputs.head
+    )
     sampling = module.sampling.override(**sampling_overrides(args))
     tokens = sample_long_dance(
         _denoiser(args, module),
         module.diffusion,
-        music,
-        frames,
-        head,
-        window=args.window,
-        overlap=args.overlap,
-        vision=vision,
+        inputs.music,
+        head=head,
+        window=long_form.window,
+        overlap=long_form.overlap,
+        vision=None if inputs.video is None else inputs.video.vision,
+        canonical=long_form.canonical,
+        head_windows=head_windows,
+        batch_windows=args.batch_windows,
         **dataclasses.asdict(sampling),
         head_guidance_weight=module.head_guidance.weight if args.head_weight is None else args.head_weight,
         head_guidance_steps=module.head_guidance.steps,
@@ -226,7 +175,24 @@ def _dance(args, module, music, frames, oracle) -> tuple[torch.Tensor, str]:
         progress=args.progress,
         compile=args.compile,
     )
-    return tokens.float(), head_source
+    return tokens.float(), source
+
+
+def _score_against_truth(tokens: torch.Tensor, inputs: DanceInputs, fps: float) -> list[str]:
+    """Lines scoring a --sample's dance against its ground truth (joints from FK, metres)."""
+    dance, truth = motion_joints(tokens), motion_joints(inputs.truth.float())
+    beats = inputs.music[:, BEAT]
+    ratios = dynamics_ratios(dance, truth, fps)
+    scores = {
+        "MPJPE to the ground truth (m)": float(mpjpe(dance.double(), truth.double())),
+        "BeatAlign with the music (the ground truth's)": (
+            f"{sequence_beat_align(dance, beats, 'bailando', fps):.3f} "
+            f"({sequence_beat_align(truth, beats, 'bailando', fps):.3f})"
+        ),
+        **{DYNAMICS_METRICS[k]: v for k, v in ratios.items()},
+    }
+    return [f"sm dance: {name}: {v:.3f}" if isinstance(v, float) else f"sm dance: {name}: {v}"
+            for name, v in scores.items()]  # fmt: skip
 
 
 def held_out_samples(data_hparams: dict) -> dict[str, list[Path]]:
@@ -265,41 +231,34 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
 
+    if args.head == "oracle" and not args.sample:
+        raise InputError("--head oracle needs the ground-truth camera path of a --sample")
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
     if args.list_samples:
         return _list_samples(args.ckpt, checkpoint)
     module.eval()
-    hp = module.hparams
-    fps = hp.fps  # the frame rate the model was trained at (linked from its data module)
-    data_hparams = checkpoint.get("datamodule_hyper_parameters") or {}
-    canonical = bool(data_hparams.get("canonicalize_init_head", False))  # windows faced their first heading
-    try:
-        music, frames, oracle = _conditions(args, module, canonical)
-    except ValueError as err:  # the music, video or sample files (their readers name the file)
-        raise InputError(str(err)) from err
-    if canonical and len(music) > args.window:
-        raise InputError(
-            f"{args.ckpt} was trained on windows turned to face their first frame's head heading "
-            f"(canonicalize_init_head), which long-form stitching cannot join: give at most {args.window} "
-            f"frames ({args.window / fps:.0f} s) of music and video, not {len(music)}"
-        )
+    fps = module.hparams.fps  # the frame rate the model was trained at (linked from its data module)
+    long_form = _long_form(args, module, checkpoint)
     if args.compile and args.precision != "fp32":
         raise InputError(
             f"--compile runs the denoiser in fp32 only: drop --compile or --precision {args.precision}"
         )
+    try:
+        inputs = _inputs(args, module, long_form)
+    except ValueError as err:  # the music, video or sample files (their readers name the file)
+        raise InputError(str(err)) from err
     with inference_precision(args.precision):
-        tokens, head_source = _dance(args, module, music, frames, oracle)
+        tokens, head_source = _dance(args, module, inputs, long_form)
     out = Path(args.out)
     out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
     width, height = args.render_size
-    music_file, start_s = _music_source(args)
     files = write_dance(
         tokens,
         out_dir,
         name,
-        music=music_file,
-        music_start_s=start_s,
+        music=inputs.music_path,
+        music_start_s=inputs.music_start_s,
         render=not args.no_render,
         style=RenderStyle(width=width, height=height),
         title=f"EMM {Path(args.ckpt).name}",
@@ -313,6 +272,13 @@ def main(argv: list[str] | None = None) -> int:
         "none": "no head guidance",
     }[head_source]
     print(f"sm dance: {guidance}")
+    starts = long_form.starts(tokens.shape[0])
+    if len(starts) > 1:
+        turned = ", each facing its first frame's head heading" if long_form.canonical else ""
+        print(f"sm dance: {len(starts)} windows of {long_form.window} frames every {long_form.hop}{turned}, "
+              "joined into one dance")  # fmt: skip
     print(f"sm dance: {tokens.shape[0]} frames ({seconds:.1f} s at {fps:g} fps) written to", out_dir)
     print("\n".join(files.lines()))
+    if inputs.truth is not None:
+        print("\n".join(_score_against_truth(tokens, inputs, fps)))
     return 0

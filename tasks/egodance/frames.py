@@ -24,6 +24,7 @@ from __future__ import annotations
 import re
 import warnings
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import imageio_ffmpeg
@@ -38,10 +39,12 @@ __all__ = [
     "DECODE_CHUNK",
     "IMAGE_SUFFIXES",
     "MAX_IMAGE_PIXELS",
+    "VideoHeader",
     "iter_video_frames",
     "read_image",
     "read_video_frames",
     "resize_frames",
+    "video_header",
 ]
 
 MAX_IMAGE_PIXELS = 40_000_000  # an image or video frame: 8K UHD (7680x4320 = 33.2 MP) fits
@@ -96,14 +99,81 @@ def _to_chunk(images: list[np.ndarray], size: int | tuple[int, int]) -> torch.Te
     return resize_frames(rgb.float() / 255.0, size)
 
 
-def _video_file_frames(path: Path) -> Iterator[np.ndarray]:
-    """(H, W, 3) uint8 frames of a video file, decoded one at a time by ffmpeg."""
+@dataclass(frozen=True)
+class VideoHeader:
+    """What a video's header (or an image folder's listing) says before any frame is decoded.
+
+    Attributes:
+        frames: the frame count (from the header's duration and rate; None when the header gives none).
+        fps: the frame rate (None for an image folder, whose frames are taken at the model's rate).
+    """
+
+    frames: int | None
+    fps: float | None
+
+    def frames_at(self, fps: float) -> int | None:
+        """The frame count once the video is taken at ``fps`` (:func:`iter_video_frames`)."""
+        if self.frames is None:
+            return None
+        return self.frames if self.fps is None else _resampled_count(self.frames, self.fps, fps)
+
+
+def video_header(path: str | Path) -> VideoHeader:
+    """The frame count and rate of a video file (its header only) or an image folder (its listing).
+
+    Raises:
+        FileNotFoundError: no such file or folder.
+        InputError: not a readable video (names the file).
+    """
+    path = Path(path)
+    if path.is_dir():
+        return VideoHeader(sum(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir()), None)
+    if not path.is_file():
+        raise FileNotFoundError(2, "No such video file or image folder", str(path))
+    reader, meta = _open_video(path)
+    reader.close()
+    fps, duration = float(meta.get("fps") or 0.0), float(meta.get("duration") or 0.0)
+    if not (np.isfinite(fps) and fps > 0):
+        return VideoHeader(None, None)
+    return VideoHeader(int(round(duration * fps)) if duration > 0 else None, fps)
+
+
+def _resampled_count(frames: int, source_fps: float, fps: float) -> int:
+    """Frames k = 0, 1, ... at ``fps`` whose nearest source frame exists."""
+    if not _differs(source_fps, fps):
+        return frames
+    return int(np.floor((frames - 0.5) * fps / source_fps)) + 1
+
+
+def _differs(source_fps: float, fps: float) -> bool:
+    """Rates more than 0.1 % apart (29.97 is not 30: over a 3-minute song they drift by 5 frames)."""
+    return abs(source_fps - fps) > 1e-3 * fps
+
+
+def _open_video(path: Path) -> tuple[Iterator[bytes], dict]:
+    """An ffmpeg reader of the video's RGB frames and its header (the reader's first item)."""
+    reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
     try:
-        reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
-        meta = next(reader)
+        return reader, next(reader)
     except (OSError, RuntimeError, StopIteration) as e:
+        reader.close()
         reason = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
         raise InputError(f"{path}: not a readable video ({reason[:200]})") from None
+
+
+def _at_rate(frames: Iterator[np.ndarray], source_fps: float, fps: float) -> Iterator[np.ndarray]:
+    """The frames of a ``source_fps`` video taken at ``fps``: output frame k is the source frame nearest
+    to its time, ``round(k * source_fps / fps)`` (frames dropped or repeated)."""
+    k = 0
+    for i, frame in enumerate(frames):
+        while round(k * source_fps / fps) == i:
+            yield frame
+            k += 1
+
+
+def _video_file_frames(path: Path) -> Iterator[np.ndarray]:
+    """(H, W, 3) uint8 frames of a video file, decoded one at a time by ffmpeg."""
+    reader, meta = _open_video(path)
     try:
         width, height = (int(v) for v in meta["size"])
         _refuse_size(path, width, height, "video frame")
@@ -120,10 +190,16 @@ def _video_file_frames(path: Path) -> Iterator[np.ndarray]:
 
 
 def iter_video_frames(
-    path: str | Path, size: int | tuple[int, int], max_frames: int | None = None, chunk: int = DECODE_CHUNK
+    path: str | Path,
+    size: int | tuple[int, int],
+    max_frames: int | None = None,
+    chunk: int = DECODE_CHUNK,
+    fps: float | None = None,
 ) -> Iterator[torch.Tensor]:
     """Chunks (n <= ``chunk``, 3, S_h, S_w) float in [0, 1] of a video file or a folder of images
     (sorted by name), resized with :func:`resize_frames` as they are read; at most ``max_frames`` frames.
+    ``fps``: take a video file at this rate (frames dropped or repeated, :func:`_at_rate`, when its header
+    says another; an image folder's frames are taken as they are).
 
     Raises:
         FileNotFoundError: no such file or folder.
@@ -137,6 +213,9 @@ def iter_video_frames(
         frames: Iterator[np.ndarray] = (read_image(p) for p in names)
     elif path.is_file():
         frames = _video_file_frames(path)
+        source_fps = video_header(path).fps if fps is not None else None
+        if source_fps is not None and _differs(source_fps, fps):
+            frames = _at_rate(frames, source_fps, fps)
     else:
         raise FileNotFoundError(2, "No such video file or image folder", str(path))
     pending: list[np.ndarray] = []

@@ -62,6 +62,7 @@ def encode_video(
     chunk: int = DECODE_CHUNK,
     progress: bool = False,
     hops: tuple[int, ...] = (),
+    fps: float | None = None,
 ) -> VideoFeatures:
     """Decode a video file or image folder as a stream at ``image_size`` and encode its frames.
 
@@ -73,6 +74,8 @@ def encode_video(
         window: the head estimator's window (:func:`.head_estimator.estimate_long_trajectory`).
         hops: hops of other windows the head estimator will be run on
             (:func:`.head_estimator.estimate_window_trajectories`: long-form sampling's windows).
+        fps: the model's frame rate: a video file of another rate is taken at this one
+            (:func:`.frames.iter_video_frames`).
         max_frames: decode at most this many frames.
         chunk: frames decoded and encoded together.
         progress: show a progress bar (frames encoded).
@@ -87,7 +90,7 @@ def encode_video(
     head = None if head_estimator is None else HeadFeatureStream(head_estimator, window, hops)
     count = 0
     with tqdm(total=max_frames, desc="video", unit="frame", disable=not progress) as bar:
-        for frames in iter_video_frames(path, image_size, max_frames, chunk):
+        for frames in iter_video_frames(path, image_size, max_frames, chunk, fps):
             if vision_encoder is not None:
                 vision.append(vision_encoder(frames[None])[0])
             if head is not None:

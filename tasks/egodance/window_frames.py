@@ -100,6 +100,11 @@ class HeadingFrames:
         shift = -(turn @ (scale * self._origin(frame).to(x.dtype))[..., None])[..., 0]
         return self._move(x, -frame[:, 0], shift)
 
+    def points_to_frame(self, points: torch.Tensor, frame: torch.Tensor) -> torch.Tensor:
+        """Positions (B, n, 3) in the parent frame -> in ``frame`` (B, 3): ``Y(-theta) (p - o)``."""
+        turn = yaw_matrices(-frame[:, 0]).to(points.dtype)[:, None]
+        return (turn @ (points - self._origin(frame)[:, None].to(points.dtype))[..., None])[..., 0]
+
     def from_frame(self, x: torch.Tensor, frame: torch.Tensor) -> torch.Tensor:
         return self._move(x, frame[:, 0], self._origin(frame))
 

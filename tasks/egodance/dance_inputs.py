@@ -1,0 +1,122 @@
+"""What ``sm dance`` samples a dance from: the music's features, the egocentric video reduced to per-frame
+features, the head-guidance targets, and, for a held-out sample, its ground truth.
+
+A user's track (``--music`` + ``--video``) and a sample folder (``--sample``, any length) go the same way: the
+video is decoded as a stream at the model's resolution and frame rate (:func:`.video_features.encode_video`; a
+video of another rate is taken at the model's, frames dropped or repeated), so memory does not grow with its
+length. What the dance covers is decided from the headers before anything is decoded: the music's length, or
+the video's when it is shorter (said on one line, before the decoding starts: the dance then covers the part
+where both are).
+
+The head targets are then chosen by :func:`.long_form.head_targets`.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
+from skeleton_mamba.tasks.egodance.frames import video_header
+from skeleton_mamba.tasks.egodance.long_form import LongForm
+from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
+from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.value_checks import load_npz
+
+__all__ = ["DanceInputs", "sample_inputs", "track_inputs"]
+
+
+@dataclass
+class DanceInputs:
+    """Attributes:
+    music: (T, L) music features at the model's rate.
+    video: the video's per-frame features (vision z_v, head-estimator features), or None (music-only).
+    truth: (T, 24, 10) a sample's ground-truth motion tokens in its canonical frame, or None.
+    head: (T, 3) a sample's ground-truth head positions in that frame, or None.
+    music_path, music_start_s: the audio the dance is sampled for (muxed into the mp4).
+    """
+
+    music: torch.Tensor
+    video: VideoFeatures | None
+    truth: torch.Tensor | None = None
+    head: torch.Tensor | None = None
+    music_path: str | None = None
+    music_start_s: float = 0.0
+
+
+def _encode(video: Path, module, model, frames: int, long_form: LongForm, estimate: bool, progress: bool):
+    return encode_video(
+        video,
+        module.hparams.image_size,
+        model.vision_encoder,
+        module.head_estimator if estimate else None,
+        window=long_form.window,
+        max_frames=frames,
+        progress=progress,
+        hops=(long_form.hop,) if long_form.canonical else (),
+        fps=float(module.hparams.fps),
+    )
+
+
+def track_inputs(
+    music: str, video: str | None, module, model, long_form: LongForm, estimate: bool, progress: bool = False
+) -> DanceInputs:
+    """A user's track: the music file and, for a vision model, the egocentric video (file or image folder).
+
+    The video's length is read from its header first: when it is shorter than the music the dance covers
+    the video's part, and a warning says so before the decoding starts.
+    """
+    fps = float(module.hparams.fps)
+    features = torch.from_numpy(extract_music_features(music, fps=fps).features.astype(np.float32))
+    if model.vision_encoder is None:
+        return DanceInputs(features, None, music_path=music)
+    if not video:
+        raise InputError(f"the model conditions on egocentric video: pass --video with --music {music}")
+    header = video_header(video)
+    covered = header.frames_at(fps)
+    if header.fps is not None and abs(header.fps - fps) > 1e-3 * fps:
+        print(f"sm dance: {video}: a {header.fps:g} fps video, taken at the model's {fps:g} fps "
+              "(frames dropped or repeated)", file=sys.stderr)  # fmt: skip
+    if covered is not None and len(features) - covered > 1:  # one frame of rounding is no news
+        print(
+            f"sm dance: warning: the video has {covered} frames ({covered / fps:.1f} s at {fps:g} fps), the "
+            f"music {len(features)} ({len(features) / fps:.1f} s); the dance covers the first "
+            f"{covered / fps:.1f} s, where both are (pass a video as long as the music for the whole track)",
+            file=sys.stderr,
+        )
+    encoded = _encode(Path(video), module, model, len(features), long_form, estimate, progress)
+    n = encoded.num_frames  # at most len(music); the header can be off by a frame or two
+    if covered is None and len(features) - n > 1:
+        print(f"sm dance: warning: the video has {n} frames, the music {len(features)}; the dance covers the "
+              f"first {n / fps:.1f} s, where both are", file=sys.stderr)  # fmt: skip
+    return DanceInputs(features[:n], encoded, music_path=music)
+
+
+def sample_inputs(
+    folder: str, module, model, long_form: LongForm, estimate: bool, progress: bool = False
+) -> DanceInputs:
+    """An EgoAIST++ sample folder of any length: its music slice, the features of its egocentric video, its
+    ground-truth motion and head path (in the sample's canonical frame, as the data module reads them)."""
+    folder = Path(folder)
+    frames = len(load_npz(folder / "camera.npz")["positions"])
+    item = EgoDanceDataset(
+        [folder],
+        window=frames,
+        fps=int(module.hparams.fps),
+        load_frames=False,
+        canonicalize_init_head=long_form.canonical,
+    )[0]
+    video = None
+    if model.vision_encoder is not None:
+        rgb = folder / "rgb.mp4" if (folder / "rgb.mp4").is_file() else folder / "rgb"
+        video = _encode(rgb, module, model, frames, long_form, estimate, progress)
+        if video.num_frames < frames:
+            raise InputError(f"{rgb}: {video.num_frames} frames, the sample's camera path {frames}")
+    return DanceInputs(
+        item["music"], video, item["motion"], item["head"], item["music_path"], item["music_start_s"]
+    )
