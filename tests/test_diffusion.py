@@ -156,7 +156,7 @@ def test_stitched_sampling_windows_agree_on_overlaps():
         (4, 8, 2),
         cond=cond,
         sampling_steps=10,
-        post_step=WindowConsistency(overlap),
+        post_step=WindowConsistency(overlap, inpaint_last=True),
         generator=torch.Generator().manual_seed(3),
     )
     torch.testing.assert_close(windows[1:, :overlap], windows[:-1, -overlap:], rtol=0, atol=0)
@@ -203,6 +203,30 @@ def test_relative_channels_continue_across_window_seams(sampler):
     expected = torch.stack([v * torch.arange(total, dtype=torch.float32), torch.full((total,), 0.9)], -1)
     torch.testing.assert_close(long, expected, rtol=0, atol=1e-5)
     # without the relative channel every window restarts at the origin: a jump of v * (W - overlap) at seams
-    plain = sample_long(run, overlap, num_windows=windows)
+    plain = sample_long(run, overlap, num_windows=windows, inpaint_last=True)
     steps = plain[1:, 0] - plain[:-1, 0]
     assert steps.min() < -0.5 * v * (width - overlap)
+    faded = sample_long(run, overlap, num_windows=windows)  # cross-faded: no jump, but no walk either
+    assert (faded[:, 0] - expected[:, 0]).abs().max() > v * (width - overlap)
+
+
+def test_the_last_predictions_are_cross_faded_not_overwritten():
+    """A denoiser whose every window is the same ramp (0.01 a frame) raised by 0.1 per window, whatever the
+    overlap says: a window's copy of the previous tail and its own continuation differ by 0.1 - 0.01 * hop =
+    0.04. In-painting after the last step too joins them with a step of 0.05 at each overlap's end; keeping
+    the last predictions (the default, as [EDGE]) cross-fades them: no step above the ramp's own 0.01 by
+    more than 0.04 / (overlap + 1)."""
+    diff, overlap, width, count = GaussianDiffusion(10), 4, 10, 3
+
+    def denoiser(x_t, t, cond):
+        k = torch.arange(x_t.shape[1], dtype=x_t.dtype)[None, :, None]
+        return 0.01 * k + 0.1 * torch.arange(x_t.shape[0], dtype=x_t.dtype)[:, None, None] + 0 * x_t
+
+    def run(post, which):
+        return ddim_sample(diff, denoiser, (count, width, 1), sampling_steps=4, post_step=post,
+                           generator=torch.Generator().manual_seed(0))  # fmt: skip
+
+    faded = sample_long(run, overlap, num_windows=count)[:, 0]
+    overwritten = sample_long(run, overlap, num_windows=count, inpaint_last=True)[:, 0]
+    assert (overwritten[1:] - overwritten[:-1]).abs().max() == pytest.approx(0.05, abs=1e-6)
+    assert (faded[1:] - faded[:-1]).abs().max() <= 0.01 + 0.04 / (overlap + 1) + 1e-6

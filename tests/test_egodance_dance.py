@@ -143,7 +143,7 @@ def test_sm_dance_joins_heading_canonical_windows_into_one_turning_walk(inputs, 
 
     tmp, ckpt, wav = inputs
     checkpoint = torch.load(ckpt, weights_only=True)
-    checkpoint["datamodule_hyper_parameters"] = {"canonicalize_init_head": True}
+    checkpoint["hyper_parameters"]["canonicalize_init_head"] = True  # linked from the data module in sm fit
     canonical = tmp / "canonical.ckpt"
     torch.save(checkpoint, canonical)
     monkeypatch.setattr(EMM, "forward", _turning_forward)
@@ -162,6 +162,12 @@ def test_sm_dance_joins_heading_canonical_windows_into_one_turning_walk(inputs, 
     orient = motion.poses[:, 0]  # axis-angle of the root: about +y by the heading
     np.testing.assert_allclose(orient[:, [0, 2]], 0.0, atol=1e-4)
     np.testing.assert_allclose(np.unwrap(orient[:, 1]), yaw, atol=1e-4)
+    # a checkpoint from before the module had the setting: its data module's says it
+    del checkpoint["hyper_parameters"]["canonicalize_init_head"]
+    checkpoint["datamodule_hyper_parameters"] = {"canonicalize_init_head": True}
+    torch.save(checkpoint, tmp / "older.ckpt")
+    assert _dance(tmp, tmp / "older.ckpt", wav, tmp / "older.npz", "--no-render", "--head", "none") == 0
+    np.testing.assert_allclose(load_motion(tmp / "older.npz").root_position(), root, atol=1e-6)
     # a world-yaw checkpoint (translation-only stitching) cannot join them: it turns back at every seam
     assert _dance(tmp, ckpt, wav, tmp / "plain.npz", "--no-render", "--head", "none") == 0
     plain = load_motion(tmp / "plain.npz").root_position()

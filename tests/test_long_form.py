@@ -167,7 +167,7 @@ def test_overlaps_agree_under_a_denoiser_that_ignores_them():
         out[..., 6:9] = out[..., 6:9] + torch.arange(x_t.shape[1])[:, None, None] * 0.05  # a walk
         return out
 
-    consistency = WindowConsistency(overlap, frames=HeadingFrames(True))
+    consistency = WindowConsistency(overlap, frames=HeadingFrames(True), inpaint_last=True)
     cond = torch.randn(5)
     windows = ddim_sample(diffusion, denoiser, (5, 12, 24, 10), cond, 8, post_step=consistency,
                           generator=torch.Generator().manual_seed(2))  # fmt: skip
@@ -176,3 +176,51 @@ def test_overlaps_agree_under_a_denoiser_that_ignores_them():
     turns = consistency.relative_frames[1:, 0]
     assert turns.abs().max() > 0.1  # the windows really were turned
     assert not math.isclose(float(windows[1, 0, 0, 6]), float(world[1, 0, 0, 6]), abs_tol=1e-3)
+
+
+# ------------------------------------------------------------------ scores of a long dance
+def test_seam_frames_by_hand():
+    from skeleton_mamba.tasks.egodance.long_form_scores import seam_frames
+
+    assert seam_frames([0, 75, 150], 75, 300) == [74, 75, 149, 150, 224, 225]
+    assert seam_frames([0], 75, 150) == []
+    assert seam_frames([0, 2], 2, 5) == [1, 2, 3]  # frames 0 and 4 lack a speed or acceleration
+
+
+def test_seam_ratios_see_a_jump_and_not_a_smooth_dance():
+    from skeleton_mamba.tasks.egodance.long_form_scores import seam_frames, seam_ratios
+
+    poses, root = _turning_dance(300)
+    joints = forward_kinematics(axis_angle_to_matrix(poses), torch.from_numpy(root), smpl_rest_offsets(),
+                                SMPL_PARENTS)[0]  # fmt: skip
+    seams = seam_frames([0, 75, 150, 225], 75, 300)
+    smooth = seam_ratios(joints, seams, 30.0)
+    assert all(0.7 < v < 1.3 for v in smooth.values()), smooth
+    jumped = joints.clone()
+    for s in (75, 150, 225):  # every window restarts 15 cm aside: the root steps at the seam
+        jumped[s:, :, 0] += 0.15
+    ratios = seam_ratios(jumped, seams, 30.0)
+    assert (
+        ratios["root_step_ratio"] > 2 and ratios["speed_ratio"] > 1.5 and ratios["acceleration_ratio"] > 1.5
+    )
+
+
+def test_segments_start_canonical_and_drift_measures_a_turned_dance():
+    from skeleton_mamba.tasks.egodance.long_form_scores import drift, segments
+
+    poses, root = _turning_dance(120)
+    tokens = encode_motion(poses, torch.from_numpy(root))
+    cut = segments(tokens, [0, 40, 80], 40, turn=True)
+    torch.testing.assert_close(cut[:, 0, 0, ROOT][:, [0, 2]], torch.zeros(3, 2, dtype=cut.dtype))
+    torch.testing.assert_close(head_heading(head_rotation(cut[:, 0])), torch.zeros(3, dtype=cut.dtype))
+    for k, s in enumerate((0, 40, 80)):  # each segment as the data module would canonicalise it
+        torch.testing.assert_close(cut[k, :-1], _canonical_tokens(poses, root, s, 40)[:-1], rtol=0, atol=1e-9)
+    frames = HeadingFrames()
+    turned = frames.from_frame(
+        tokens[None], torch.tensor([[math.radians(30.0), 0.5, 0.0]], dtype=tokens.dtype)
+    )[0]
+    moved = drift(turned, tokens, 40)
+    assert moved["end_heading_error_deg"] == pytest.approx(30.0, abs=1e-6)
+    assert moved["end_root_distance_m"] > 0.5 and moved["world_mpjpe_m"] > 0.5
+    assert drift(tokens, tokens, 40) == pytest.approx({"world_mpjpe_m": 0, "end_heading_error_deg": 0,
+                                                      "end_root_distance_m": 0}, abs=1e-9)  # fmt: skip

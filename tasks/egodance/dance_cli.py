@@ -133,9 +133,8 @@ def _head_source(args, module) -> str:
 def _long_form(args, module, checkpoint: dict) -> LongForm:
     """The windows of the dance: the command's window and overlap, and whether the model's windows face
     their first heading (the module's setting; a checkpoint from before it was one: its data module's)."""
-    canonical = module.hparams.get("canonicalize_init_head")
-    if canonical is None:
-        canonical = (checkpoint.get("datamodule_hyper_parameters") or {}).get("canonicalize_init_head", False)
+    data = checkpoint.get("datamodule_hyper_parameters") or {}
+    canonical = module.hparams.get("canonicalize_init_head") or data.get("canonicalize_init_head", False)
     return LongForm(args.window, args.overlap, bool(canonical))
 
 

@@ -58,7 +58,7 @@ def _encode(video: Path, module, model, frames: int, long_form: LongForm, estima
         window=long_form.window,
         max_frames=frames,
         progress=progress,
-        hops=(long_form.hop,) if long_form.canonical else (),
+        hops=(long_form.hop,),  # every long-form window's start, for its own head estimate
         fps=float(module.hparams.fps),
     )
 

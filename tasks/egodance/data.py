@@ -112,12 +112,14 @@ class EgoDanceDataset(Dataset):
 
     Motion, music and head targets are read once at construction; frames are decoded per item, or once and
     kept in memory with ``cache_frames`` (small sets: 150 frames at 64 px take 7 MB a window).
+    ``window=None`` reads every sample whole (its motion and camera path's length), for long-form test and
+    prediction.
     """
 
     def __init__(
         self,
         folders: list[Path],
-        window: int = 150,
+        window: int | None = 150,
         fps: int = FPS,
         load_frames: bool = True,
         image_size: int = 224,
@@ -146,13 +148,11 @@ class EgoDanceDataset(Dataset):
             raise DataFileError(
                 f"{folder / 'motion.npz'}: motion at {motion.fps} fps, the data module expects {fps}"
             )
-        if motion.poses.shape[0] < self.window:
-            raise DataFileError(
-                f"{folder}: {motion.poses.shape[0]} frames, shorter than the window of {self.window}"
-            )
-        t = self.window
-        root = motion.trans[:t] / motion.scaling
         cam = load_npz(folder / "camera.npz")
+        t = self.window or min(motion.poses.shape[0], len(cam["positions"]))
+        if motion.poses.shape[0] < t:
+            raise DataFileError(f"{folder}: {motion.poses.shape[0]} frames, shorter than the window of {t}")
+        root = motion.trans[:t] / motion.scaling
         source = str(folder / "camera.npz")
         positions = check_finite(cam["positions"][:t], source, "positions", ("frame",))
         rotations = check_finite(cam["rotations"][:t], source, "rotations", ("frame",))
@@ -193,7 +193,8 @@ class EgoDanceDataset(Dataset):
         if self.load_frames:
             frames = self._frames.get(index)
             if frames is None:
-                rgb = torch.from_numpy(read_frames(self.folders[index])[: self.window]).permute(0, 3, 1, 2)
+                length = item["motion"].shape[0]
+                rgb = torch.from_numpy(read_frames(self.folders[index])[:length]).permute(0, 3, 1, 2)
                 frames = resize_frames(rgb.float() / 255.0, self.image_size)
                 if self.cache_frames:
                     self._frames[index] = frames
@@ -217,6 +218,9 @@ class EgoDanceDataModule(SplitDataModule):
         music_cache_dir: cache of music features (default ``~/.cache/skeleton_mamba/music``).
         cache_frames: keep the decoded frames in memory after their first use (small sets).
         canonicalize_init_head: turn each window so the head faces +z in its first frame (module docstring).
+        full_sequences: the test split (``sm test``, ``sm predict``) reads every sample whole, one a batch,
+            and the model dances sequences longer than ``window`` long-form; training and validation stay
+            on windows.
     """
 
     def __init__(
@@ -233,6 +237,7 @@ class EgoDanceDataModule(SplitDataModule):
         music_cache_dir: str | None = None,
         cache_frames: bool = False,
         canonicalize_init_head: bool = False,
+        full_sequences: bool = False,
     ):
         super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
@@ -240,6 +245,7 @@ class EgoDanceDataModule(SplitDataModule):
         self.fps, self.image_size = fps, image_size  # linked to the model
         self.music_cache_dir = music_cache_dir  # the test loop's beats read the same cache (DataContract)
         self.music_dim = NUM_MUSIC_FEATURES  # the width of the 30 fps librosa features, linked too
+        self.window, self.canonicalize_init_head = window, canonicalize_init_head  # linked: long-form
 
     def check_data(self) -> list[Path]:
         """The complete sample folders; raises :class:`DatasetNotFoundError` saying what is missing."""
@@ -282,7 +288,7 @@ class EgoDanceDataModule(SplitDataModule):
         for name, folders in self.split_folders().items():
             self.datasets[name] = EgoDanceDataset(
                 folders,
-                hp.window,
+                None if name == "test" and hp.full_sequences else hp.window,
                 hp.fps,
                 hp.load_frames,
                 hp.image_size,
@@ -292,6 +298,10 @@ class EgoDanceDataModule(SplitDataModule):
             )
         if len(self.datasets["train"]) == 0 and stage == "fit":
             raise DatasetNotFoundError(f"{self.root}: every sample fell into val/test; no training windows")
+
+    def loader_options(self, split: str) -> dict:
+        """Whole sequences (``full_sequences``) differ in length: one a batch."""
+        return {"batch_size": 1} if split == "test" and self.hparams.full_sequences else {}
 
     def training_statistics(self) -> dict[str, torch.Tensor]:
         """The training windows' ``motion`` (N, T, 24, 10) and ``music`` (N, T, 35), from which the EMM takes
@@ -313,6 +323,8 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         root: where the generated motions (``motions/``) and the built set (``ego/``) go.
         count: generated dance/music pairs (motion sources).
         duration_s: seconds per generated dance (windows of ``window / fps`` seconds are cut from it).
+        stride_s: seconds between the windows cut from a dance (None: the window's length, non-overlapping);
+            shorter strides give windows that start at more phases of the dance.
         frame_size: rendered egocentric frame size (pixels, square).
         num_rooms: procedural rooms to place the dances in.
         seed: generator seed.
@@ -329,6 +341,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         root: str = "runs/egodance_demo/data",
         count: int = 9,
         duration_s: float = 10.0,
+        stride_s: float | None = None,
         frame_size: int = 64,
         num_rooms: int = 2,
         seed: int = 0,
@@ -344,6 +357,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         music_cache_dir: str | None = None,
         cache_frames: bool = True,
         canonicalize_init_head: bool = False,
+        full_sequences: bool = False,
     ):
         super().__init__(
             str(Path(root) / "ego"),
@@ -358,6 +372,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             music_cache_dir,
             cache_frames,
             canonicalize_init_head,
+            full_sequences,
         )
         self.source_root = Path(root).resolve()
 
@@ -393,6 +408,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             num_rooms=hp.num_rooms,
             fps=float(hp.fps),
             window_s=hp.window / hp.fps,
+            stride_s=hp.stride_s,
             width=hp.frame_size,
             height=hp.frame_size,
             seed=hp.seed,

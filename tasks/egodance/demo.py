@@ -10,10 +10,14 @@ egocentric frames and head-camera trajectory, and writes into ``<log dir>/demo/`
   rendering with the window's music muxed in, and that music slice);
 - ``synthetic_<sample id>_reference.{npz,bvh,mp4,wav}``: the ground-truth dance of the window, for
   comparison (``render_reference``);
+- ``synthetic_long_<dance>_dance.{npz,bvh,mp4,wav}``: a held-out dance of ``long_sample_s`` seconds (a
+  minute) danced long-form from its music and egocentric video (:mod:`.long_demo`);
 - ``demo.json``: what was done, with ``"synthetic": true`` and the data's provenance, and ``scores``: every
   held-out window's dance scored beside its ground truth and two baselines (:mod:`.demo_scores`: pose
-  plausibility, MPJPE, BeatAlign, foot skating, ground penetration), with ``checks`` against the targets.
-  The same table is printed.
+  plausibility, MPJPE, BeatAlign, foot skating, ground penetration), with ``checks`` against the targets;
+  ``long_form``: the long dance's scores (whole-sequence MPJPE beside its windows sampled alone and the
+  mean pose, the seams: :mod:`.long_form_scores`), its checks joining the others. The same tables are
+  printed.
 
 Everything is labelled synthetic (file names, metadata, the printed message and the video title): the
 demo data are procedural dances and synthesised music placed in procedural rooms.
@@ -30,6 +34,7 @@ from lightning.pytorch import Callback, LightningModule, Trainer
 
 from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
 from skeleton_mamba.tasks.egodance.export import write_dance
+from skeleton_mamba.tasks.egodance.long_demo import format_long_scores, long_sample, score_long_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion
@@ -53,6 +58,7 @@ class DanceDemo(Callback):
         render_reference: also write the ground-truth dance of each window.
         width: video width (multiple of 16).
         height: video height (multiple of 16).
+        long_sample_s: seconds of the held-out long dance danced long-form (0: none; generated data only).
     """
 
     def __init__(
@@ -64,6 +70,7 @@ class DanceDemo(Callback):
         render_reference: bool = True,
         width: int = 480,
         height: int = 352,
+        long_sample_s: float = 60.0,
     ):
         self.num_samples = num_samples
         if score_samples is not None and score_samples < 1:
@@ -73,6 +80,9 @@ class DanceDemo(Callback):
         self.render = render
         self.render_reference = render_reference
         self.style = RenderStyle(width=width, height=height)
+        if not long_sample_s >= 0:
+            raise ValueError(f"long_sample_s must be >= 0 seconds, got {long_sample_s}")
+        self.long_sample_s = long_sample_s
 
     @staticmethod
     def _held_out(trainer: Trainer):
@@ -81,6 +91,29 @@ class DanceDemo(Callback):
             if split in datasets and len(datasets[split]) > 0:
                 return split, datasets[split]
         return None, None
+
+    def _long_song(self, trainer: Trainer, pl_module, dataset, train: list[torch.Tensor], out: Path):
+        """The long held-out dance's scores and files (:mod:`.long_demo`), or None (off, or not the
+        generated set)."""
+        data = trainer.datamodule
+        if self.long_sample_s <= 0 or not hasattr(data, "source_root"):
+            return None
+        meta = json.loads((Path(dataset.folders[0]) / "meta.json").read_text(encoding="utf-8"))
+        source = (meta.get("motion") or {}).get("source") or ""
+        folder = long_sample(data, source, self.long_sample_s)
+        mean_pose = torch.cat([clip.reshape(-1, *clip.shape[-2:]) for clip in train]).mean(0)
+        tokens, inputs, scores = score_long_dance(pl_module, folder, mean_pose)
+        files = write_dance(
+            tokens,
+            out,
+            f"synthetic_long_{Path(source).stem.removeprefix('synthetic_')}_dance",
+            music=inputs.music_path,
+            music_start_s=inputs.music_start_s,
+            render=self.render,
+            style=self.style,
+            title="EMM, long-form (synthetic demo)",
+        )
+        return {**scores, "files": {k: str(v) for k, v in vars(files).items() if v is not None}}
 
     def out_dir(self, trainer: Trainer) -> Path:
         return Path(trainer.log_dir or trainer.default_root_dir) / self.out_subdir
@@ -133,6 +166,9 @@ class DanceDemo(Callback):
         train = [motion_joints(item["motion"]) for item in trainer.datamodule.datasets["train"].items]
         scores = score_held_out(dances[:scored], truths[:scored], beats[:scored], train)
         checks = target_checks(scores)
+        long_form = self._long_song(trainer, pl_module, dataset, train, out)
+        if long_form is not None:
+            checks.update({f"long song: {k}": v for k, v in long_form["checks"].items()})
         summary = {
             "synthetic": True,
             "label": LABEL,
@@ -143,6 +179,7 @@ class DanceDemo(Callback):
             "global_step": trainer.global_step,
             "samples": records,
             "scores": {"held_out_windows": scored, "training_windows": len(train), **scores},
+            "long_form": long_form,
             "checks": checks,
         }
         with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
@@ -155,8 +192,15 @@ class DanceDemo(Callback):
         lines += [
             f"[egodance demo] scores, mean over {scored} held-out ({split}) windows after "
             f"{trainer.global_step} steps (baselines from the {len(train)} training windows):",
-            format_scores(scores, checks),
+            format_scores(scores, {k: v for k, v in checks.items() if not k.startswith("long song: ")}),
         ]
+        if long_form is not None:
+            lines += [
+                f"[egodance demo] long song: a held-out dance of {long_form['seconds']:.0f} s danced as "
+                f"{long_form['windows']} windows from its music and egocentric video -> "
+                f"{long_form['files']['npz']}",
+                format_long_scores(long_form),
+            ]
         if records and "reference" in records[0]:  # the first dance beside its ground truth, in a browser
             first = records[0]
             motions = [(kind, load_skeleton_motion(first[kind]["npz"])) for kind in ("dance", "reference")]

@@ -42,10 +42,11 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     head_trajectory_errors,
     head_trajectory_loss,
 )
+from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.sampling import sample_dance
+from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.music import record_audio_stack
@@ -152,6 +153,10 @@ class EgoDanceModule(BackboneModule):
         image_size: ResNet input size. Linked from the data module (not user-settable under ``sm``).
         fps: motion and music frame rate of the test metrics. Linked from the data module (its default
             :data:`.data.FPS` when the module is built alone).
+        window: the training window (frames). Linked from the data module: longer test and predict
+            sequences are danced long-form in windows of this length (:func:`.sampling.sample_long_dance`).
+        canonicalize_init_head: the data's windows face their first frame's head heading. Linked from the
+            data module: long-form windows are then sampled each in that frame (:mod:`.window_frames`).
         diffusion_steps: T (1000).
         loss: :class:`LossOptions`. kinematic: L_kin's weights (:class:`~.losses.KinematicLossWeights`).
         optimizer: :class:`OptimizerOptions`.
@@ -170,6 +175,8 @@ class EgoDanceModule(BackboneModule):
         resnet_path: str | None = None,
         image_size: int = 224,
         fps: int = FPS,
+        window: int = 150,
+        canonicalize_init_head: bool = False,
         diffusion_steps: int = 1000,
         loss: LossOptions = LossOptions(),  # noqa: B008
         kinematic: KinematicLossWeights = KinematicLossWeights(),  # noqa: B008
@@ -355,8 +362,15 @@ class EgoDanceModule(BackboneModule):
         head: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Motion tokens (B, T, 24, 10) for a batch's music and frames, head guidance from ``head_source``
-        (default: ``head_guidance.source``) or the given ``head`` targets (B, T, 3)."""
+        (default: ``head_guidance.source``) or the given ``head`` targets (B, T, 3). Sequences longer than
+        the training ``window`` are danced long-form, one by one (:meth:`sample_long`)."""
         model = self.ema.module if use_ema else self.model
+        if batch["music"].shape[1] > self.hparams.window:
+            generator = torch.Generator().manual_seed(self.evaluation.seed + batch_idx)
+            source = head_source or self.head_guidance.source
+            return torch.stack(
+                [self.sample_long(model, batch, i, source, generator) for i in range(len(batch["music"]))]
+            )
         if head is None:
             head = self.head_targets(batch, head_source)
         return sample_dance(
@@ -369,6 +383,40 @@ class EgoDanceModule(BackboneModule):
             head_guidance_weight=self.head_guidance.weight,
             head_guidance_steps=self.head_guidance.steps,
             generator=torch.Generator().manual_seed(self.evaluation.seed + batch_idx),
+        )
+
+    def sample_long(
+        self, model: EMM, batch: dict, index: int, source: str, generator: torch.Generator
+    ) -> torch.Tensor:
+        """Tokens (T, 24, 10) of sequence ``index`` of the batch, danced in overlapping windows of the
+        training length (overlap: half a window, EDGE's 75 of 150) in the frames the model was trained in,
+        each window's head targets in its own frame (:func:`.long_form.head_targets`)."""
+        hp = self.hparams
+        long_form = LongForm(hp.window, hp.window // 2, bool(hp.canonicalize_init_head))
+        music = batch["music"][index]
+        frames = None if batch.get("frames") is None else batch["frames"][index]
+        truth, head = (None if batch.get(k) is None else batch[k][index] for k in ("motion", "head"))
+        if source == "oracle" and head is None:
+            raise ValueError("head_source='oracle' needs the ground-truth head path (batch['head'])")
+        if source == "estimate" and frames is None:
+            raise ValueError("head_source='estimate' needs the egocentric frames (batch['frames'])")
+        head, head_windows = head_targets(
+            source, long_form, len(music), self.head_estimator, frames, truth, head
+        )
+        return sample_long_dance(
+            model,
+            self.diffusion,
+            music,
+            frames,
+            head,
+            long_form.window,
+            long_form.overlap,
+            canonical=long_form.canonical,
+            head_windows=head_windows,
+            **dataclasses.asdict(self.sampling),
+            head_guidance_weight=self.head_guidance.weight,
+            head_guidance_steps=self.head_guidance.steps,
+            generator=generator,
         )
 
     def _test_sources(self, batch: dict) -> list[str]:
@@ -387,7 +435,8 @@ class EgoDanceModule(BackboneModule):
         frames = batch.get("frames")
         beats = video_beats(frames) if frames is not None else None
         estimate = None
-        if self.head_estimator is not None and frames is not None:
+        long = true.shape[1] > self.hparams.window  # danced long-form: each window estimates its own head
+        if self.head_estimator is not None and frames is not None and not long:
             estimate = self.estimate_head(frames)
             if batch.get("head_rotation") is not None:
                 pos_err, rot_err = head_trajectory_errors(*estimate, batch["head"], batch["head_rotation"])
@@ -405,7 +454,7 @@ class EgoDanceModule(BackboneModule):
             for path, start in zip(batch["music_path"], batch["music_start_s"])
         ]
         for source in self._test_sources(batch):
-            head = estimate[0] if source == "estimate" else None
+            head = estimate[0] if source == "estimate" and estimate is not None else None
             pred = motion_joints(self.sample(batch, batch_idx, head_source=source, head=head))
             name = HEAD_SOURCES[source]
             self.test_metrics[name].update(pred, true, batch["music"], beats)

@@ -127,6 +127,7 @@ def sample_long_dance(
     canonical: bool = False,
     head_windows: torch.Tensor | None = None,
     batch_windows: int | None = DEFAULT_BATCH_WINDOWS,
+    inpaint_last: bool = False,
     **kwargs,
 ) -> torch.Tensor:
     """A whole track: music (T, L), frames (T, 3, S, S) or their vision features ``vision`` (T, Dc) (the
@@ -140,7 +141,8 @@ def sample_long_dance(
     the frame of the window it belongs to, as the model was trained (:class:`.window_frames.HeadingFrames`):
     the root's horizontal position relative to the window's first frame and, for a model trained with
     ``canonicalize_init_head`` (``canonical``), the window turned to face its first frame's head heading,
-    both taken from the previous window's sampled motion. The windows are then turned back and joined.
+    both taken from the previous window's sampled motion. The windows are then turned back and joined, their
+    overlaps cross-faded (``inpaint_last``: in-painted after the last step too, as before the cross-fade).
 
     Head guidance: ``head`` (T, 3) targets in the track's frame, moved into each window's frame by the
     head's own horizontal displacement since frame 0 (an approximation of the root's, which is only known
@@ -191,6 +193,7 @@ def sample_long_dance(
         frames=HeadingFrames(turn=canonical),
         num_windows=len(starts),
         batch_windows=batch_windows,
+        inpaint_last=inpaint_last,
     )
 
 

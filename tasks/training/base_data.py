@@ -99,17 +99,13 @@ class SplitDataModule(LightningDataModule):
         return {}
 
     def loader_options(self, split: str) -> dict[str, Any]:
-        """DataLoader arguments of ``split`` beyond dataset, batch size, shuffling and workers."""
+        """DataLoader arguments of ``split`` beyond dataset, shuffling and workers, or replacing them (a
+        ``batch_size`` of its own)."""
         return {}
 
     def _dataloader_factory(self, split: str) -> DataLoader:
-        return DataLoader(
-            self.datasets[split],
-            batch_size=self.batch_size,
-            shuffle=split == "train",
-            num_workers=self.num_workers,
-            **self.loader_options(split),
-        )
+        options = dict(batch_size=self.batch_size, shuffle=split == "train", num_workers=self.num_workers)
+        return DataLoader(self.datasets[split], **{**options, **self.loader_options(split)})
 
     def train_dataloader(self) -> DataLoader:
         return self._dataloader_factory("train")

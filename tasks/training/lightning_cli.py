@@ -93,6 +93,8 @@ DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
     ("music_frames", "network.music_frames"),
     ("predict_frames", "network.predict_frames"),
     ("generate_frames", "generate_frames"),
+    ("window", "window"),  # EMM's training window and its frame (long-form test and predict)
+    ("canonicalize_init_head", "canonicalize_init_head"),
 )
 
 

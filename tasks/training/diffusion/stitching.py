@@ -68,6 +68,12 @@ class WindowConsistency:
     the channels that hold positions relative to each window's own first frame, as in data canonicalised
     per window (e.g. the root's horizontal position, 0 at frame 0).
 
+    ``inpaint_last``: also in-paint after the last step (signal 1). By default the last step's predictions are
+    kept as they are, as [EDGE] does (it in-paints only while t > 0): the overlaps then agree up to what the
+    last step changed, and :func:`stitch_windows` cross-fades them. Overwriting them instead joins window b's
+    copy of window b - 1's tail to window b's own continuation of its own prediction, which differ by that
+    last change: a step in position and velocity at the end of every overlap (a click every hop).
+
     ``prefix``: a motion already sampled that window 0 must continue (the last ``overlap`` frames of the
     window before it, clean, in that window's frame), for long sequences sampled in several batches of
     windows. Window 0's overlap is then in-painted towards it: ``x[0, :overlap] += signal * (known -
@@ -81,6 +87,7 @@ class WindowConsistency:
         frames: the windows' frames (instead of ``relative``).
         prefix: (overlap, ...) the clean motion window 0 continues, or None.
         base: (1, K) the prefix window's global frame (None: identity).
+        inpaint_last: in-paint after the last step too.
     """
 
     def __init__(
@@ -90,6 +97,7 @@ class WindowConsistency:
         frames: WindowFrames | None = None,
         prefix: torch.Tensor | None = None,
         base: torch.Tensor | None = None,
+        inpaint_last: bool = False,
     ):
         if relative is not None and frames is not None:
             raise ValueError("give relative channels or window frames, not both")
@@ -99,6 +107,7 @@ class WindowConsistency:
             raise ValueError(f"the prefix has {prefix.shape[0]} frames, the overlap {overlap}")
         self.prefix = prefix
         self.base = base
+        self.inpaint_last = inpaint_last
         self.relative_frames: torch.Tensor | None = None  # (B, K) frame of window b in window b - 1's
 
     def _relative_frames(self, x: torch.Tensor, x0: torch.Tensor | None) -> torch.Tensor | None:
@@ -121,6 +130,8 @@ class WindowConsistency:
             return x
         self.relative_frames = frames = self._relative_frames(x, x0)
         scale = torch.as_tensor(signal, dtype=x.dtype, device=x.device).reshape(-1)
+        if not self.inpaint_last and bool((scale == 1).all()):  # after the last step: keep the predictions
+            return x
         scale = scale.expand(x.shape[0]).reshape(-1, *([1] * (x.ndim - 1)))
         hop = x.shape[1] - self.overlap
         x = x.clone()
@@ -199,6 +210,7 @@ def sample_long(
     frames: WindowFrames | None = None,
     num_windows: int | None = None,
     batch_windows: int | None = None,
+    inpaint_last: bool = False,
 ) -> torch.Tensor:
     """Sample a long sequence as windows kept consistent during sampling, then stitch them.
 
@@ -208,7 +220,8 @@ def sample_long(
     in batches of at most ``batch_windows`` (None: all at once), so memory does not grow with the sequence;
     the first window of each later batch continues the last window of the batch before, sampled already
     (its tail is in-painted as a known ``prefix``). The windows are stitched, in window 0's frame, into
-    one sequence of ``total_frames`` frames.
+    one sequence of ``total_frames`` frames, their overlaps cross-faded (``inpaint_last``: as
+    :class:`WindowConsistency`).
     """
     if num_windows is None:
         raise ValueError("sample_long needs num_windows (the windows sample_fn can sample)")
@@ -218,7 +231,7 @@ def sample_long(
     done: list[torch.Tensor] = []
     prefix = base = None
     for first in range(0, num_windows, step):
-        consistency = WindowConsistency(overlap, relative, frames, prefix, base)
+        consistency = WindowConsistency(overlap, relative, frames, prefix, base, inpaint_last)
         windows = sample_fn(consistency, slice(first, min(first + step, num_windows)))
         done.append(consistency.to_global(windows))
         if overlap > 0 and consistency.frames is not None:
