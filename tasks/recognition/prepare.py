@@ -247,7 +247,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="dataset", required=True, metavar="{ntu60,ntu120,kinetics}")
     for name in ("ntu60", "ntu120", "kinetics"):
-        p = sub.add_parser(name, help=f"build the {name} annotation file", formatter_class=SmHelpFormatter)
+        source = (
+            "ST-GCN's Kinetics-skeleton JSON (its train and val parts)"
+            if name == "kinetics"
+            else "raw NTU RGB+D .skeleton files (the benchmark splits; the known missing samples excluded)"
+        )
+        p = sub.add_parser(
+            name,
+            help=f"build the {name} annotation file",
+            description=f"Build the {name} PYSKL annotation file from {source}.",
+            formatter_class=SmHelpFormatter,
+        )
         p.add_argument("--raw", type=Path, required=True, help="folder of the raw files")
         p.add_argument("--out", type=Path, required=True, help="annotation pickle to write")
         p.add_argument("--workers", type=int, default=2, help="parallel processes")

@@ -33,7 +33,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--task",
         choices=("dance", "recognition"),
         default="dance",
-        help="dance (these options) or online action recognition (sm stream --task recognition --help)",
+        help="dance (default: the options here) or recognition (online action recognition, whose options "
+        "sm stream --task recognition --help lists)",
     )
     p.add_argument(
         "--ckpt", required=True, help="a checkpoint of stream_dance*.yaml or a causal recognition recipe"
@@ -45,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--raw-rate", type=int, default=None, help="with --music -: headerless s16le mono PCM at this rate"
     )
     p.add_argument("--realtime", action="store_true", help="pace the input at the music's rate")
-    p.add_argument("--chunk-ms", type=float, default=20.0, help="audio chunk length (ms)")
+    p.add_argument("--chunk-ms", type=float, default=20.0, help="audio chunk length in ms")
     p.add_argument("--no-render", action="store_true", help="skip the mp4")
     p.add_argument(
         "--render-size", default="480x352", help="video WIDTHxHEIGHT, multiples of 16 (default: 480x352)"

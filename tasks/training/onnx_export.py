@@ -39,7 +39,7 @@ Example::
 
     sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
         --causal --out onnx/ --check
-    sm export-onnx --ckpt runs/stream_demo/version_0/checkpoints/last.ckpt --out onnx/
+    sm export-onnx --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out onnx/
 """
 
 from __future__ import annotations

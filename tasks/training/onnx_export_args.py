@@ -19,7 +19,7 @@ PART_HELP = (
 EXAMPLES = """examples:
   sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
       --causal --out onnx/ --check
-  sm export-onnx --ckpt runs/stream_demo/version_0/checkpoints/last.ckpt --out onnx/"""
+  sm export-onnx --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out onnx/"""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,6 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
     p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
     p.add_argument("--out", required=True, help="the folder to write (created)")
-    p.add_argument("--frames", type=int, default=20, help="frames of the example input (any length runs)")
+    p.add_argument(
+        "--frames", type=int, default=20, help="frames of the example input; the graphs take any length"
+    )
     p.add_argument("--check", action="store_true", help="compare onnxruntime with eager PyTorch")
     return p

@@ -40,25 +40,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--up-axis", default=d.up_axis, choices=["x", "y", "z"], help="up axis of the scene files")
     p.add_argument("--num-rooms", type=int, default=d.num_rooms, help="procedural rooms to cycle through")
     p.add_argument("--fps", type=float, default=d.fps, help="frame rate of motion and frames")
-    p.add_argument("--window", type=float, default=d.window_s, dest="window_s", help="window length (s)")
+    p.add_argument(
+        "--window", type=float, default=d.window_s, dest="window_s", metavar="SECONDS", help="window length"
+    )
     p.add_argument(
         "--stride",
         type=float,
         default=d.stride_s,
         dest="stride_s",
-        help="window stride (s); default: the window length",
+        metavar="SECONDS",
+        help="window stride (default: the window length)",
     )
-    p.add_argument("--width", type=int, default=d.width, help="image width (pixels)")
-    p.add_argument("--height", type=int, default=d.height, help="image height (pixels)")
-    p.add_argument("--fov", type=float, default=d.fov, help="horizontal field of view (degrees)")
+    p.add_argument("--width", type=int, default=d.width, help="image width in pixels")
+    p.add_argument("--height", type=int, default=d.height, help="image height in pixels")
+    p.add_argument("--fov", type=float, default=d.fov, help="horizontal field of view in degrees")
     p.add_argument(
-        "--threshold", type=float, default=d.threshold, help="reject placements with S_p above (cm)"
+        "--threshold",
+        type=float,
+        default=d.threshold,
+        help="reject placements whose penetration score S_p (cm) is above this",
     )
     p.add_argument("--max-attempts", type=int, default=d.max_attempts, help="placements tried per window")
     p.add_argument(
         "--penetration-stride", type=int, default=d.penetration_stride, help="score every n-th frame only"
     )
-    p.add_argument("--seed", type=int, default=d.seed, help="random seed (placements, procedural rooms)")
+    p.add_argument(
+        "--seed", type=int, default=d.seed, help="random seed of the placements and procedural rooms"
+    )
     p.add_argument(
         "--frames",
         default=d.frame_format,
@@ -70,9 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--camera-forward",
         type=float,
         default=d.camera_forward,
-        help="eye offset forward of the head joint (m)",
+        help="eye offset forward of the head joint in metres",
     )
-    p.add_argument("--camera-up", type=float, default=d.camera_up, help="eye offset above the head joint (m)")
+    p.add_argument(
+        "--camera-up", type=float, default=d.camera_up, help="eye offset above the head joint in metres"
+    )
     p.add_argument(
         "--smpl-model",
         default=None,
