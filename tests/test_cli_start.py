@@ -203,3 +203,22 @@ def test_the_sampler_and_precision_names_are_the_ones_that_run():
         inference_precision(precision)  # every offered precision runs
     for sampler in PARSERS["dance"]._option_string_actions["--sampler"].choices:
         SamplingOptions(sampler, 10, 1.0, 2.0)  # every offered sampler is accepted
+
+
+def test_lightning_cli_builds_the_parser_of_the_subcommand_it_runs_only(capsys):
+    from lightning.pytorch import LightningDataModule, LightningModule
+
+    from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI
+
+    class Probe(SkeletonMambaCLI):
+        def _prepare_subcommand_parser(self, klass, subcommand, **kwargs):
+            self.built = [*getattr(self, "built", []), subcommand]
+            return super()._prepare_subcommand_parser(klass, subcommand, **kwargs)
+
+    for only, built in (("test", ["test"]), (None, ["fit", "validate", "test", "predict"])):
+        cli = Probe.__new__(Probe)
+        with pytest.raises(SystemExit):
+            cli.__init__(LightningModule, LightningDataModule, subclass_mode_model=True,
+                         subclass_mode_data=True, only_subcommand=only, args=["test", "--help"])  # fmt: skip
+        assert cli.built == built
+        assert "--ckpt_path" in capsys.readouterr().out  # the test subcommand's own help
