@@ -12,7 +12,9 @@ script, timed from start to exit (wall clock); the median is compared with the g
   checkpoint loads (at most 1.5 s);
 - ``sm analyze-music TRACK`` on a track whose features are cached (one untimed run fills a fresh cache
   first): at most 3 s. TRACK is ``--track``, else the first track of ``../shared/data/music`` (skipped,
-  with the reason, when absent).
+  with the reason, when absent);
+- for reference, no goal: ``python -c "import torch"`` and ``python -c "import lightning.pytorch"``, the floor
+  of any command that needs them (LightningCLI's help among them).
 
 The goals hold for a quiet 2-core machine; the load average before and after is recorded, as a busy
 machine (other jobs on the cores) stretches every figure.
@@ -85,6 +87,8 @@ def command_lines(sm: str, track: Path | None, cache: Path) -> list[tuple[str, l
     if track is not None:
         analyze = [sm, "analyze-music", str(track), "--cache-dir", str(cache)]
         lines.append(("sm analyze-music (cached track)", analyze, ANALYZE_CACHED_S))
+    for module in ("torch", "lightning.pytorch"):  # the floor of what imports them (no goal)
+        lines.append((f"python -c 'import {module}'", [sys.executable, "-c", f"import {module}"], None))
     return lines
 
 
