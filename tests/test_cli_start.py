@@ -12,6 +12,7 @@ import subprocess
 import sys
 
 import pytest
+from test_packaging import HEAVY as PACKAGE_HEAVY
 
 from skeleton_mamba.tasks.motion.cli_options import (
     CommandParser,
@@ -23,19 +24,12 @@ from skeleton_mamba.tasks.motion.cli_options import (
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training import cli
 
+# torch, onnxruntime and the heavy libraries of test_packaging's list (jsonargparse is light; sm's command
+# table lives in the tasks' package, so importing it is no sign of a heavy import)
 HEAVY = (
     "torch",
-    "lightning",
-    "pytorch_lightning",
-    "torchmetrics",
-    "transformers",
-    "librosa",
-    "trimesh",
-    "scipy",
-    "matplotlib",
-    "cv2",
-    "kornia",
     "onnxruntime",
+    *(m for m in PACKAGE_HEAVY if m not in ("jsonargparse", "skeleton_mamba.tasks")),
 )
 # every command line whose help comes from sm's own parsers (fit/validate/test/predict: LightningCLI's)
 HELP_LINES = [["--help"]] + [

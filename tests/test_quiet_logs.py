@@ -14,9 +14,7 @@ import warnings
 
 import lightning.pytorch as pl
 import pytest
-import torch
-from lightning.pytorch import LightningModule
-from torch.utils.data import DataLoader, TensorDataset
+from test_progress_bar import TinyRegression as Regression
 
 from skeleton_mamba.tasks.training import progress_bar
 from skeleton_mamba.tasks.training.library_noise import LIBRARY_LOG_LINES, silence_library_noise
@@ -90,24 +88,13 @@ def test_sm_fit_quiet_is_the_trainers_switch():
     assert quiet_as_trainer_option(["fit", "--recipe", "r.yaml"]) == ["fit", "--recipe", "r.yaml"]
 
 
-class TinyRegression(LightningModule):
-    """A linear model on 12 samples in batches of 4 (3 batches per epoch)."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.layer = torch.nn.Linear(2, 1)
+class TinyRegression(Regression):
+    """test_progress_bar's linear model, logging its loss to the progress bar."""
 
     def training_step(self, batch, batch_idx):
-        x, y = batch
-        loss = torch.nn.functional.mse_loss(self.layer(x), y)
+        loss = super().training_step(batch, batch_idx)
         self.log("train/loss", loss, prog_bar=True)
         return loss
-
-    def configure_optimizers(self):
-        return torch.optim.SGD(self.parameters(), lr=0.01)
-
-    def train_dataloader(self):
-        return DataLoader(TensorDataset(torch.randn(12, 2), torch.randn(12, 1)), batch_size=4)
 
 
 def test_the_plain_progress_log_prints_lines_per_epoch_and_when_due(capsys):
