@@ -64,7 +64,7 @@ def test_the_hostile_payload_is_live_under_a_plain_load(hostile_checkpoint):
     [
         ["test", "--recipe", SYNTHETIC, "--ckpt_path", "{ckpt}"],
         ["predict", "--recipe", SYNTHETIC, "--ckpt_path", "{ckpt}"],
-        ["dance", "--ckpt", "{ckpt}", "--music", "x.wav", "--out", "{tmp}/out"],
+        ["dance", "--ckpt", "{ckpt}", "--list-samples"],  # --music needs an existing file (checked first)
         ["generate", "--text", "a person walks", "--checkpoint", "{ckpt}", "--out", "{tmp}/out"],
     ],
 )
@@ -153,7 +153,7 @@ def test_remote_checkpoints_are_refused_without_a_connection(url, command, tmp_p
 
 def test_missing_and_directory_checkpoints_are_one_line_errors(tmp_path, capsys):
     assert sm_main(["test", "--recipe", SYNTHETIC, "--ckpt_path", str(tmp_path / "none.ckpt")]) == 2
-    assert sm_main(["dance", "--ckpt", str(tmp_path), "--music", "x.wav", "--out", str(tmp_path)]) == 2
+    assert sm_main(["dance", "--ckpt", str(tmp_path), "--list-samples"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         f"sm test: error: {tmp_path / 'none.ckpt'}: No such checkpoint file",
@@ -485,12 +485,14 @@ def test_sm_dance_bad_inputs_are_one_line_errors(tmp_path, tiny_egodance_module,
     )
     (tmp_path / "bad.wav").write_text("not audio")
     base = ["dance", "--ckpt", str(ckpt), "--music", str(tmp_path / "bad.wav"), "--out", str(tmp_path / "o")]
-    assert sm_main([*base, "--video", str(tmp_path / "none.mp4")]) == 2
+    assert sm_main([*base, "--video", str(tmp_path / "none.mp4")]) == 2  # refused before the checkpoint loads
+    assert sm_main(base) == 2
     assert sm_main([*base, "--render-size", "100x100"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines[0].startswith(f"sm dance: error: {tmp_path / 'bad.wav'}: cannot decode audio")
-    assert lines[1] == "sm dance: error: --render-size 100x100: use multiples of 16"
-    assert len(lines) == 2 and not (tmp_path / "o").exists()
+    assert lines[0] == f"sm dance: error: {tmp_path / 'none.mp4'}: no such file or folder (--video)"
+    assert lines[1].startswith(f"sm dance: error: {tmp_path / 'bad.wav'}: cannot decode audio")
+    assert lines[2] == "sm dance: error: --render-size 100x100: use multiples of 16"
+    assert len(lines) == 3 and not (tmp_path / "o").exists()
 
 
 def test_one_line_message_maps_os_errors():

@@ -48,8 +48,9 @@ def test_list_samples_prints_the_held_out_folders_only(tmp_path, tiny_egodance_m
     assert not {source(p) for p in listed} & {source(p) for p in train}  # no source straddles
 
     # no --out needed to list; still needed to dance
+    (tmp_path / "x.wav").write_bytes(b"")  # an input that exists: --music is checked before --out
     with pytest.raises(SystemExit):
-        sm_main(["dance", "--ckpt", str(ckpt), "--music", "x.wav"])
+        sm_main(["dance", "--ckpt", str(ckpt), "--music", str(tmp_path / "x.wav")])
     assert "required: --out" in capsys.readouterr().err
 
     # a checkpoint without data hyper-parameters: one line, exit 2

@@ -13,6 +13,7 @@ import pytest
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+import skeleton_mamba.tasks.training.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
 from skeleton_mamba.tasks.motion.errors import DataFileError, one_line_message
 from skeleton_mamba.tasks.training import cli
 from skeleton_mamba.tasks.training.cli import main as sm_main
@@ -168,7 +169,7 @@ def test_an_error_raised_in_a_dataloader_worker_is_one_line(kind, message, tmp_p
     runner = types.ModuleType("sm_worker_probe")
     runner.run = _load_in_a_worker
     monkeypatch.setitem(sys.modules, "sm_worker_probe", runner)
-    monkeypatch.setitem(cli.COMMANDS, "worker-probe", ("sm_worker_probe:run", "test only"))
+    monkeypatch.setitem(cli.COMMANDS, "worker-probe", cli.Command("sm_worker_probe:run", "test only"))
     monkeypatch.setattr(cli, "_module_available", lambda target: True)
     path = tmp_path / "sample_007.npy"
     with pytest.raises(DataFileError if kind == "data" else FileNotFoundError) as raised:

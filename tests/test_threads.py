@@ -75,6 +75,23 @@ def test_the_sm_entry_applies_the_defaults_and_respects_the_users_values(env, ex
     assert json.loads(done.stdout.strip().splitlines()[-1]) == expected
 
 
+def test_torch_imported_after_the_entry_starts_with_its_thread_defaults():
+    """``sm`` imports no torch before a command runs: the defaults reach torch through the environment."""
+    probe = (
+        "import json, os, sys; from skeleton_mamba.tasks.training.cli import main; code = main(['recipes']); "
+        "before = 'torch' in sys.modules; import torch; "
+        "print(json.dumps([code, before, torch.get_num_threads(), os.environ.get('OMP_WAIT_POLICY')]))"
+    )
+    base = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OMP_WAIT_POLICY")}
+    done = subprocess.run(
+        [sys.executable, "-c", probe], env=base, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == [0, False, 1, "PASSIVE"]
+    env: dict[str, str] = {}
+    assert apply_thread_defaults(env, cores=2) == torch.get_num_threads()  # torch imported here: its count
+
+
 def test_the_realtime_hint_names_one_thread_then_compile(monkeypatch):
     monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
     hint = realtime_hint(LATE, compiled=False, fps=30, threads=2)

@@ -18,6 +18,8 @@ from collections.abc import Callable
 
 import torch
 
+from skeleton_mamba.precision_names import PRECISIONS
+
 
 def autocast_on(t: torch.Tensor) -> bool:
     """Whether autocast is enabled for the device type of ``t`` (``"cpu"``, ``"cuda"``, ...)."""
@@ -47,14 +49,6 @@ def full_precision(form: Callable) -> Callable:
             return form(*args, **kwargs)
 
     return wrapped
-
-
-# Inference precisions of the commands (``sm dance``, ``sm stream``): fp32, or bf16 autocast.
-PRECISIONS = ("fp32", "bf16")
-PRECISION_HELP = (
-    "fp32 (default) or bf16: the network under bfloat16 autocast (weights fp32; projections, convolutions "
-    "and attention in bf16; the SSD's decays, cumulative sums and states in fp32); not with --compile."
-)
 
 
 def inference_precision(precision: str, device_type: str = "cpu") -> contextlib.AbstractContextManager:

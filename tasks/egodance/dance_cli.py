@@ -27,98 +27,31 @@ windows are turned back and joined (:mod:`.window_frames`).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import inspect
 from pathlib import Path
 
 import torch
 
-from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
+from skeleton_mamba.ssd.precision import inference_precision
+from skeleton_mamba.tasks.egodance.dance_args import build_parser
 from skeleton_mamba.tasks.egodance.dance_inputs import DanceInputs, sample_inputs, track_inputs
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, SyntheticEgoDanceDataModule
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.sampling import DEFAULT_BATCH_WINDOWS, sample_long_dance
+from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
+from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.render import RenderStyle
-from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
 __all__ = ["main", "build_parser"]
-
-# The bf16 dance against the fp32 one of the same seed (measured; the bound is tested).
-DANCE_BF16_ERROR = (
-    "Measured on a trained EgoMusic demo EMM (5 DDIM steps, 150 frames, same seed): joints within 6 mm "
-    "of the fp32 dance (mean 0.3 mm)."
-)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
-    return width, height
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm dance", description=__doc__.split("\n\n")[0])
-    p.add_argument(
-        "--ckpt",
-        required=True,
-        help="an EgoDanceModule checkpoint (.ckpt), its sm export-pretrained folder or Hub id",
-    )
-    src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--sample", help="an EgoAIST++ sample folder (sm make-ego)")
-    src.add_argument("--music", help="an audio file")
-    src.add_argument(
-        "--list-samples",
-        action="store_true",
-        help="print the held-out sample folders of the checkpoint's data (for --sample) and exit",
-    )
-    p.add_argument("--video", help="egocentric video file or image folder for --music (vision models)")
-    p.add_argument("--out", help="output folder (or FILE.npz: files named after FILE); required to dance")
-    p.add_argument("--name", default="dance", help="file stem inside an output folder")
-    p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
-    p.add_argument("--render-size", type=_size, default=(640, 480), help="video WxH (multiples of 16)")
-    add_sampling_arguments(p)
-    p.add_argument("--head-weight", type=float, default=None, help="head guidance step size (0: off)")
-    p.add_argument(
-        "--head",
-        choices=("estimate", "oracle", "none"),
-        default=None,
-        help="head guidance targets: estimated from the video (default for vision models), the ground-truth "
-        "camera path of a --sample (oracle), or none (default for music-only models)",
-    )
-    p.add_argument("--window", type=int, default=150, help="frames per window (training length)")
-    p.add_argument("--overlap", type=int, default=75, help="overlap of long-form windows")
-    p.add_argument(
-        "--batch-windows",
-        type=int,
-        default=DEFAULT_BATCH_WINDOWS,
-        help="long-form windows denoised together (memory is bounded by this many windows)",
-    )
-    p.add_argument("--no-ema", action="store_true", help="use the raw weights instead of the EMA")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--progress", action="store_true", help="show a progress bar")
-    p.add_argument(
-        "--compile",
-        action="store_true",
-        help="run the denoiser compiled (torch.compile, weights frozen): about 2 minutes of CPU to compile "
-        "at the paper size, then about 1.3 to 1.4x less time per step (measured; worth it for DDPM's "
-        "1000 steps); same dance to float32 rounding",
-    )
-    p.add_argument(
-        "--precision", choices=PRECISIONS, default="fp32", help=f"{PRECISION_HELP} {DANCE_BF16_ERROR}"
-    )
-    return p
 
 
 def _denoiser(args, module) -> torch.nn.Module:

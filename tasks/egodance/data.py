@@ -44,6 +44,7 @@ from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import encode_motion
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.cli_options import progress_default
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
@@ -413,6 +414,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             height=hp.frame_size,
             seed=hp.seed,
             workers=1,
+            progress=progress_default(),  # a bar on a terminal, none in a log file
         )
         run_build(config, motions)
         self.root = self.source_root / "ego"

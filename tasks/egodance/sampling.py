@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.compiling import compile_for_inference
+from skeleton_mamba.tasks.egodance.dance_args import DEFAULT_BATCH_WINDOWS  # torch-free, for sm dance --help
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
@@ -34,10 +35,6 @@ __all__ = [
     "sample_long_dance",
     "tokens_to_motion",
 ]
-
-DEFAULT_BATCH_WINDOWS = 16
-"""Windows of a long track denoised together (40 s of dance at the default 150 / 75 windows): memory is
-bounded by this many windows whatever the track's length."""
 
 
 class CompiledDenoiser:

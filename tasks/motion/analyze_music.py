@@ -26,20 +26,21 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack, extract_music_features
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="sm analyze-music",
-        description="Print the tempo (BPM) and beat times of an audio file and optionally save its "
+def build_parser() -> argparse.ArgumentParser:
+    p = command_parser(
+        "sm analyze-music",
+        "Print the tempo (BPM) and beat times of an audio file and optionally save its "
         "35-d FACT/EDGE librosa features (envelope, 20 MFCC, 12 chroma, onset peaks, beats).",
     )
     p.add_argument("file", type=Path, help="audio file (wav, flac, ogg/opus, mp3, ...)")
-    p.add_argument("--fps", type=int, choices=(30, 60), default=60, help="feature frame rate (default 60)")
+    p.add_argument("--fps", type=int, choices=(30, 60), default=60, help="feature frame rate")
     p.add_argument("--out", type=Path, default=None, help="save the (T, 35) features to this .npy file")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--start-bpm", type=float, default=None, help="beat-tracker tempo prior (default: auto)")
@@ -87,7 +88,7 @@ def _analyse(args: argparse.Namespace):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``sm analyze-music``; returns the process exit code."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     problem = None if args.out is None else _check_out(args.out)
     if problem is not None:
         raise InputError(problem)

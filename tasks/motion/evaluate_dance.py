@@ -18,7 +18,6 @@ table, or one JSON object with ``--json``. (EDGE's own output pickles, z-up at 3
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -27,8 +26,8 @@ from tqdm import tqdm
 
 from skeleton_mamba.tasks.motion.aistpp import music_id
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.evaluate_dance_args import build_parser
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
-from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
 from skeleton_mamba.tasks.motion.music import audio_stack
 from skeleton_mamba.tasks.motion.render_cli import load_joints
 
@@ -137,29 +136,11 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def _parser() -> argparse.ArgumentParser:
-
-    p = argparse.ArgumentParser(
-        prog="sm evaluate-dance",
-        description="FID_k/g, Div_k/g, BeatAlign (and PFC for edge) of generated dance under a named "
-        "paper protocol.",
-    )
-    p.add_argument("generated", type=Path, help="folder of generated motions (.npz, AIST++ .pkl)")
-    p.add_argument("real", type=Path, help="folder of real motions: the FID reference set")
-    p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="fact",
-                   help="fact (FACT/QEAN, default), bailando or edge")  # fmt: skip
-    p.add_argument("--music-dir", type=Path, default=None, help="music files, for BeatAlign (see --help)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-    p.add_argument("--cache-dir", type=Path, default=None, help="music feature cache folder")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm evaluate-dance``; returns the exit code."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     result = evaluate_folders(
-        args.generated, args.real, args.protocol, args.music_dir, args.cache_dir, not args.quiet
+        args.generated, args.real, args.protocol, args.music_dir, args.cache_dir, args.progress
     )
     print(json.dumps(result) if args.json else format_table(result))
     return 0

@@ -8,35 +8,21 @@ glTF has no audio.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
+from skeleton_mamba.tasks.motion.export_args import build_parser
 from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion, write_glb
 
 __all__ = ["main"]
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm export", description="Write a motion file as glTF 2.0 (.glb).")
-    p.add_argument(
-        "motion",
-        help="motion file: .npz (ours), .pkl (AIST++), .npy: (T,J,3) joints or (T,263) HumanML3D features, "
-        ".bvh, .skeleton",
-    )
-    p.add_argument("--out", required=True, help="output .glb")
-    p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
-    p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export``; returns 0 on success, 2 on a bad file or argument."""
-    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     out = Path(args.out)
     try:
         if out.suffix.lower() != ".glb":

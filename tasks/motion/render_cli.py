@@ -16,7 +16,6 @@ Reads any motion file the toolkit knows and renders a skeleton animation (see :m
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from collections.abc import Sequence
@@ -36,6 +35,7 @@ from skeleton_mamba.tasks.motion.humanml3d_features import FPS as HUMANML3D_FPS
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.render import render_motion
+from skeleton_mamba.tasks.motion.render_args import build_parser
 from skeleton_mamba.tasks.motion.resample import resample_linear
 from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
 
@@ -136,22 +136,9 @@ def render_file(
     )
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm render", description="Render a motion file as a skeleton animation.")
-    p.add_argument("motion", help="motion file: .npz (ours), .pkl (AIST++), .npy (T,J,3), .bvh, .skeleton")
-    p.add_argument("--out", required=True, help="output video, .mp4 or .gif")
-    p.add_argument("--music", default=None, help="audio file muxed into the mp4 (cut to the motion's length)")
-    p.add_argument("--fps", type=float, default=None, help="output frame rate (default: the motion's)")
-    p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
-    p.add_argument("--title", default=None, help="text drawn on every frame (default: the file name)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm render``; returns 0 on success (bad input raises: `sm` prints one line)."""
-    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     start = time.perf_counter()
     try:
         out = render_file(
@@ -162,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             skeleton=args.skeleton,
             motion_fps=args.motion_fps,
             title=args.title if args.title is not None else Path(args.motion).name,
-            progress=not args.quiet,
+            progress=args.progress,
         )
     except (ValueError, KeyError) as e:  # the readers' argument checks name the file too: one line, exit 2
         raise InputError(one_line_message(e)) from e

@@ -11,7 +11,6 @@ clock, ``seek(t)``, the camera and the projection of each motion's root to canva
 
 from __future__ import annotations
 
-import argparse
 import base64
 import json
 import sys
@@ -25,6 +24,7 @@ import numpy as np
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.view_args import build_parser
 
 __all__ = ["write_view", "main"]
 
@@ -126,21 +126,9 @@ def write_view(
     return out
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm view", description="Write a self-contained HTML viewer of motions.")
-    p.add_argument("motions", nargs="+", help="motion files: .npz, .pkl, .bvh, .npy (T,J,3), .skeleton")
-    p.add_argument("--out", required=True, help="output .html")
-    p.add_argument("--music", default=None, help="audio file played in sync (.wav, .mp3, .ogg, .flac)")
-    p.add_argument("--metrics", default=None, help="a JSON file of metrics to list (e.g. demo.json)")
-    p.add_argument("--overlay", action="store_true", help="draw the motions on top of one another")
-    p.add_argument("--skeleton", default=None, help="skeleton of .npy joint files (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the files')")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm view``; returns 0 on success (bad input raises: `sm` prints one line)."""
-    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
         motions = [
             (Path(m).stem, load_skeleton_motion(m, skeleton=args.skeleton, motion_fps=args.motion_fps))

@@ -40,6 +40,7 @@ from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.cli_options import progress_default
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
@@ -248,7 +249,8 @@ class AISTPPDanceDataModule(LightningDataModule):
         return self._sequences[name]
 
     def _load(self, names: list[str], what: str) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
-        return {n: self.sequence(n) for n in tqdm(names, desc=f"AIST++ {what}", disable=len(names) < 50)}
+        bar = tqdm(names, desc=f"AIST++ {what}", disable=len(names) < 50 or not progress_default())
+        return {n: self.sequence(n) for n in bar}
 
     def reference_joints(self) -> Iterator[torch.Tensor]:
         """Full-length joint positions (T, 24, 3) of every sequence of ``reference_splits`` (the real set)."""

@@ -218,7 +218,7 @@ class QEANModule(BackboneModule):
     def predict_step(self, batch: dict, batch_idx: int) -> list[Path]:
         """Generate and write ``<output_dir>/<name>.npz / .bvh / .glb`` (and ``.mp4`` with its ``.wav``, the
         music's slice of the dance's length, when ``render``); returns the written paths."""
-        full = self.generate(batch["seed"], batch["music"], progress=True)
+        full = self.generate(batch["seed"], batch["music"], progress=False)  # Lightning's bar counts batches
         written = []
         for i, name in enumerate(batch["name"]):
             poses, root = features_to_smpl(full[i].double())

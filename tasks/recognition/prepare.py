@@ -34,6 +34,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from skeleton_mamba.tasks.motion.cli_options import SmHelpFormatter, add_quiet_argument, command_parser
 from skeleton_mamba.tasks.motion.errors import SkeletonMambaError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
 from skeleton_mamba.tasks.recognition.kinetics import (
@@ -44,7 +45,7 @@ from skeleton_mamba.tasks.recognition.kinetics import (
 from skeleton_mamba.tasks.recognition.pyskl import KEYPOINT_DTYPES, save_annotations
 from skeleton_mamba.tasks.recognition.splits import benchmark_splits, in_dataset, load_missing_samples
 
-__all__ = ["main", "prepare_kinetics", "prepare_ntu"]
+__all__ = ["build_parser", "main", "prepare_kinetics", "prepare_ntu"]
 
 KINETICS_PARTS = ("train", "val")
 KINETICS_FRAME_SHAPE = (256, 340)  # ST-GCN resized the videos to 340x256 before OpenPose
@@ -91,8 +92,9 @@ def _run(
     workers: int,
     skip_bad: bool,
     desc: str,
+    progress: bool = True,
 ) -> tuple[dict[str, dict], list[str], list[str]]:
-    """Run ``worker(*job)`` over ``jobs`` with a process pool and a progress bar.
+    """Run ``worker(*job)`` over ``jobs`` with a process pool and a progress bar (unless not ``progress``).
 
     Returns:
         (annotations by name, names without any body, error messages of skipped files).
@@ -112,8 +114,10 @@ def _run(
 
     pool = multiprocessing.Pool(workers, initializer=worker_ignores_ctrl_c) if workers > 1 else None
     try:
-        progress = tqdm(results(pool), total=len(jobs), desc=desc, unit="file", file=sys.stderr)
-        for name, anno, error in progress:
+        bar = tqdm(
+            results(pool), total=len(jobs), desc=desc, unit="file", file=sys.stderr, disable=not progress
+        )
+        for name, anno, error in bar:
             if error is not None:
                 if not skip_bad:
                     raise PrepareError(f"{error}\n(use --skip-bad to skip unreadable files with a warning)")
@@ -144,11 +148,11 @@ def _star(item: tuple) -> tuple:
 
 
 def prepare_ntu(dataset: str, raw: Path, out: Path, workers: int = 2, skip_bad: bool = False,
-                max_bodies: int = 2, dtype: str = "float32") -> dict:  # fmt: skip
+                max_bodies: int = 2, dtype: str = "float32", progress: bool = True) -> dict:  # fmt: skip
     """Build the PYSKL annotation file of ``dataset`` ("ntu60" or "ntu120") from raw ``.skeleton`` files.
 
     ``dtype``: keypoint storage, ``"float32"`` or ``"float16"`` (as PYSKL's files; see
-    :func:`.pyskl.save_annotations`).
+    :func:`.pyskl.save_annotations`). ``progress``: show a progress bar.
 
     Returns:
         A summary: counts of ``written``, ``missing_excluded``, ``outside_dataset``, ``empty`` and
@@ -175,7 +179,7 @@ def prepare_ntu(dataset: str, raw: Path, out: Path, workers: int = 2, skip_bad: 
     inside = [n for n in files if in_dataset(n, dataset)]
     selected = [n for n in inside if n not in missing]
     jobs = [(str(files[n]), max_bodies) for n in selected]
-    annos, empty, bad = _run(_ntu_annotation, jobs, workers, skip_bad, f"prepare {dataset}")
+    annos, empty, bad = _run(_ntu_annotation, jobs, workers, skip_bad, f"prepare {dataset}", progress)
     names = sorted(annos)
     _check_some_written(len(names), out, empty=len(empty), bad=len(bad))
     split = benchmark_splits(names, dataset)
@@ -186,8 +190,10 @@ def prepare_ntu(dataset: str, raw: Path, out: Path, workers: int = 2, skip_bad: 
 
 
 def prepare_kinetics(raw: Path, out: Path, labels: Sequence[Path] | None = None, workers: int = 2,
-                     skip_bad: bool = False, dtype: str = "float32") -> dict:  # fmt: skip
-    """Build a PYSKL 2D annotation file from ST-GCN's Kinetics-skeleton folders (``dtype`` as NTU's).
+                     skip_bad: bool = False, dtype: str = "float32",
+                     progress: bool = True) -> dict:  # fmt: skip
+    """Build a PYSKL 2D annotation file from ST-GCN's Kinetics-skeleton folders (``dtype``, ``progress`` as
+    NTU's).
 
     Returns:
         A summary: counts of ``written``, ``no_skeleton`` (label file says so), ``empty`` and ``bad`` clips
@@ -216,7 +222,9 @@ def prepare_kinetics(raw: Path, out: Path, labels: Sequence[Path] | None = None,
                 summary["no_skeleton"] += 1
                 continue
             jobs.append((str(path), int(entry["label_index"])))
-        annos, empty, bad = _run(_kinetics_annotation, jobs, workers, skip_bad, f"prepare kinetics {part}")
+        annos, empty, bad = _run(
+            _kinetics_annotation, jobs, workers, skip_bad, f"prepare kinetics {part}", progress
+        )
         split[part] = sorted(annos)
         annotations += [annos[n] for n in split[part]]
         summary["empty"] += len(empty)
@@ -230,41 +238,60 @@ def prepare_kinetics(raw: Path, out: Path, labels: Sequence[Path] | None = None,
     return summary
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="sm prepare",
-        description="Build one PYSKL annotation pickle from raw NTU RGB+D or Kinetics-skeleton files.",
-        epilog="examples:\n  sm prepare ntu60 --raw nturgb+d_skeletons --out data/ntu60_3danno.pkl\n"
+def build_parser() -> argparse.ArgumentParser:
+    parser = command_parser(
+        "sm prepare",
+        "Build one PYSKL annotation pickle from raw NTU RGB+D or Kinetics-skeleton files.",
+        "examples:\n  sm prepare ntu60 --raw nturgb+d_skeletons --out data/ntu60_3danno.pkl\n"
         "  sm prepare kinetics --raw kinetics-skeleton --out data/kinetics_2d.pkl",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sub = parser.add_subparsers(dest="dataset", required=True, metavar="{ntu60,ntu120,kinetics}")
     for name in ("ntu60", "ntu120", "kinetics"):
-        p = sub.add_parser(name, help=f"build the {name} annotation file")
+        source = (
+            "ST-GCN's Kinetics-skeleton JSON (its train and val parts)"
+            if name == "kinetics"
+            else "raw NTU RGB+D .skeleton files (the benchmark splits; the known missing samples excluded)"
+        )
+        p = sub.add_parser(
+            name,
+            help=f"build the {name} annotation file",
+            description=f"Build the {name} PYSKL annotation file from {source}.",
+            formatter_class=SmHelpFormatter,
+        )
         p.add_argument("--raw", type=Path, required=True, help="folder of the raw files")
         p.add_argument("--out", type=Path, required=True, help="annotation pickle to write")
-        p.add_argument("--workers", type=int, default=2, help="parallel processes (default: 2)")
+        p.add_argument("--workers", type=int, default=2, help="parallel processes")
         p.add_argument("--skip-bad", action="store_true", help="skip unreadable files with a warning")
         p.add_argument("--dtype", choices=KEYPOINT_DTYPES, default="float32",
-                       help="keypoint storage (default float32; float16 as PYSKL's own files)")  # fmt: skip
+                       help="keypoint storage (default: float32; float16 as PYSKL's own files)")  # fmt: skip
         if name == "kinetics":
             p.add_argument("--labels", type=Path, nargs="+",
                            help="label jsons (default: RAW/kinetics_{train,val}_label.json)")  # fmt: skip
         else:
-            p.add_argument("--max-bodies", type=int, default=2, help="body slots per sample (default: 2)")
+            p.add_argument("--max-bodies", type=int, default=2, help="body slots per sample")
+        add_quiet_argument(p, "progress bar")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``sm prepare`` entry point; returns the exit code."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     if args.workers < 1:
         raise PrepareError(f"--workers {args.workers}: must be >= 1")
     if args.dataset == "kinetics":  # PrepareError, AnnotationFileError: sm prints one line, exit 2
-        summary = prepare_kinetics(args.raw, args.out, args.labels, args.workers, args.skip_bad, args.dtype)
+        summary = prepare_kinetics(
+            args.raw, args.out, args.labels, args.workers, args.skip_bad, args.dtype, args.progress
+        )
     else:
         summary = prepare_ntu(
-            args.dataset, args.raw, args.out, args.workers, args.skip_bad, args.max_bodies, args.dtype
+            args.dataset,
+            args.raw,
+            args.out,
+            args.workers,
+            args.skip_bad,
+            args.max_bodies,
+            args.dtype,
+            args.progress,
         )
     splits = ", ".join(f"{k} {v}" for k, v in summary.pop("splits").items())
     print(f"wrote {summary.pop('written')} samples to {args.out} ({splits})")

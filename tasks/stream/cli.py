@@ -32,11 +32,12 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
-from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
+from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
+from skeleton_mamba.tasks.stream.cli_args import build_parser
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.live import LiveDancer
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
@@ -51,53 +52,6 @@ from skeleton_mamba.tasks.training.frame_timing import (
 from skeleton_mamba.tasks.training.pretrained import load_module_from
 
 __all__ = ["build_parser", "main", "realtime_hint"]
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm stream", description=__doc__.split("\n\n")[0])
-    p.add_argument(
-        "--task",
-        choices=("dance", "recognition"),
-        default="dance",
-        help="dance (these options) or online action recognition (sm stream --task recognition --help)",
-    )
-    p.add_argument(
-        "--ckpt", required=True, help="a checkpoint of stream_dance*.yaml or a causal recognition recipe"
-    )
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--name", default=None, help="file stem (default: the music's / skeleton file's stem)")
-    p.add_argument("--music", help="dance: audio file, or - for a WAV stream on standard input")
-    p.add_argument(
-        "--raw-rate", type=int, default=None, help="with --music -: headerless s16le mono PCM at this rate"
-    )
-    p.add_argument("--realtime", action="store_true", help="pace the input at the music's rate")
-    p.add_argument("--chunk-ms", type=float, default=20.0, help="audio chunk length (ms)")
-    p.add_argument("--no-render", action="store_true", help="skip the mp4")
-    p.add_argument("--render-size", default="480x352", help="video WIDTHxHEIGHT (multiples of 16)")
-    p.add_argument(
-        "--skeleton", help="recognition: a skeleton file (NTU .skeleton, PYSKL-style .npy (T, J, C))"
-    )
-    p.add_argument(
-        "--threads", type=int, default=None, help="torch CPU threads (default: OMP_NUM_THREADS, else 1)"
-    )
-    p.add_argument(
-        "--compile",
-        action="store_true",
-        help="compile the frame step with torch.compile first (about a minute at the paper width, needs a "
-        "C++ compiler; 1.7x faster per frame there in our runs: real time on 2 cores); if it fails, a "
-        "warning and the eager step",
-    )
-    p.add_argument(
-        "--precision", choices=PRECISIONS, default="fp32", help=f"{PRECISION_HELP} {STREAM_BF16_ERROR}"
-    )
-    return p
-
-
-# The bf16 dance of a stream against the fp32 one (measured; the bound is tested).
-STREAM_BF16_ERROR = (
-    "Measured on a tiny random network: joints within 1.4 %% of the largest fp32 coordinate "
-    "over a 2 s stream."
-)
 
 
 def _load_dancer(ckpt: str):

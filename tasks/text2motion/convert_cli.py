@@ -9,7 +9,6 @@ Turns HumanML3D 263-d features (T, 263) into joint positions (T, 22, 3) with
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 from os import PathLike
@@ -27,6 +26,7 @@ from skeleton_mamba.tasks.motion.humanml3d_features import (
     recover_from_ric,
 )
 from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.text2motion.convert_args import build_parser
 
 __all__ = ["convert_file", "main"]
 
@@ -51,18 +51,9 @@ def convert_file(
     return out
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm convert", description="HumanML3D features -> joints (T, 22, 3).")
-    p.add_argument("features", help="(T, 263) .npy feature file")
-    p.add_argument("--out", required=True, help="output .npy of joint positions (T, 22, 3), metres, y-up")
-    p.add_argument("--normalized", action="store_true", help="the features are (x - Mean) / Std")
-    p.add_argument("--stats", default=None, help="folder with Mean.npy and Std.npy (for --normalized)")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm convert``; returns 0 on success (bad input raises: `sm` prints one line)."""
-    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.normalized and args.stats is None:
         raise InputError("--normalized needs --stats DIR (Mean.npy, Std.npy)")
     try:

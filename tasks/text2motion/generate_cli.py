@@ -15,7 +15,6 @@ selects DDIM), ``--eta`` or ``--guidance`` (the classifier-free guidance scale) 
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import re
 import sys
@@ -27,13 +26,14 @@ import torch
 
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.value_checks import non_finite_message
+from skeleton_mamba.tasks.text2motion.generate_args import build_parser
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
-from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
 from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from
 
 __all__ = ["parse_length", "slug", "save_generated", "main"]
@@ -100,23 +100,6 @@ def save_generated(
     return paths
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm generate", description="Generate motion from text.")
-    p.add_argument(
-        "--checkpoint",
-        required=True,
-        help="TextToMotionModule checkpoint (.ckpt), its export-pretrained folder or Hub id",
-    )
-    p.add_argument("--text", action="append", required=True, help="caption (repeat for several)")
-    p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default 6s)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--num", type=int, default=1, help="samples per caption")
-    add_sampling_arguments(p)
-    p.add_argument("--seed", type=int, default=0, help="noise seed")
-    p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
-    return p
-
-
 @contextlib.contextmanager
 def _no_loading_bar() -> Iterator[None]:
     """Hide transformers' weight-loading bar while the text encoder is built (it loads in well under a
@@ -134,7 +117,7 @@ def _no_loading_bar() -> Iterator[None]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm generate``; returns 0 on success (bad input raises: `sm` prints one line)."""
-    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     # everything cheap is refused before the checkpoint and the text encoder are loaded
     try:
         frames = parse_length(args.length)
@@ -154,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         captions,
         [frames] * len(captions),
         generator=torch.Generator().manual_seed(args.seed),
-        progress=True,
+        progress=args.progress,
         **overrides,
     )
     for i, caption in enumerate(captions):  # every motion checked before the first is written

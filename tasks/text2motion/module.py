@@ -47,6 +47,7 @@ from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder
 from skeleton_mamba.tasks.training.backbone_config import config_from
 from skeleton_mamba.tasks.training.base_module import BackboneModule
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, SamplingOptions, sample
+from skeleton_mamba.tasks.training.progress_bar import live_bars_shown
 
 __all__ = ["TextToMotionModule"]
 
@@ -180,7 +181,7 @@ class TextToMotionModule(BackboneModule):
         def generate(captions: list[str], lengths: list[int], noise: torch.Generator) -> torch.Tensor:
             return self.generate(captions, lengths, generator=noise, **dataclasses.asdict(sampling))[0]
 
-        progress = self.trainer.progress_bar_callback is not None
+        progress = self.trainer.progress_bar_callback is not None and live_bars_shown()  # none in a log file
         summary = summarize(evaluation.run(generate, progress=progress))
         folder = Path(self.trainer.log_dir or self.trainer.default_root_dir)
         protocol = {**evaluation.describe(), **sampling.describe()}

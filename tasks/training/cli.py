@@ -2,8 +2,12 @@
 
 ``sm fit|validate|test|predict --recipe NAME`` runs LightningCLI (:mod:`.lightning_cli`); the helper
 commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the task or toolkit code
-that implements them and are named here as strings, imported only when their command runs (lazy for
-start-up time: ``sm --help`` imports neither Lightning nor a task). Every command shares one error policy:
+that implements them and are named here as strings. A command is imported only when it runs, and its
+parser comes from a module that imports no torch (``*_args.py`` beside it, with the shared options of
+:mod:`~skeleton_mamba.tasks.motion.cli_options`): ``sm`` parses the command line with it first, so
+``sm --help``, ``sm CMD --help``, a bad argument or a missing input file answer before torch, Lightning or
+a checkpoint loads (``benchmarks/bench_startup.py`` times them).
+Every command shares one error policy:
 an expected failure (:func:`~skeleton_mamba.tasks.motion.errors.expected_failure`) prints one line
 ``sm COMMAND: error: MESSAGE`` (argparse's own form for a bad argument, so every refusal reads alike) and
 exits 2, Ctrl-C prints one line and exits 130, anything else keeps its traceback. The commands raise; they
@@ -16,48 +20,119 @@ import importlib
 import importlib.util
 import os
 import sys
-import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
 from skeleton_mamba.tasks.training.allocator import keep_freed_memory
+from skeleton_mamba.tasks.training.library_noise import silence_library_noise
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults
 
-# name -> ("module:function", one-line help). Each function takes the arguments after the
-# command name (the LightningCLI entry also receives the subcommand) and returns an exit code.
-COMMANDS: dict[str, tuple[str, str]] = {
-    "fit": ("skeleton_mamba.tasks.training.lightning_cli:run", "train a model from a recipe (LightningCLI)"),
-    "validate": ("skeleton_mamba.tasks.training.lightning_cli:run", "run the validation loop of a recipe"),
-    "test": ("skeleton_mamba.tasks.training.lightning_cli:run", "evaluate a checkpoint on the test split"),
-    "predict": ("skeleton_mamba.tasks.training.lightning_cli:run", "run a recipe's prediction loop"),
-    "recipes": ("skeleton_mamba.tasks.training.lightning_cli:list_recipes", "list the packaged recipes"),
-    "prepare": ("skeleton_mamba.tasks.recognition.prepare:main", "build NTU / Kinetics annotation files"),
-    "analyze-music": (
-        "skeleton_mamba.tasks.motion.analyze_music:main",
+
+@dataclass(frozen=True)
+class Command:
+    """One ``sm`` command.
+
+    ``run``: ``"module:function"``, imported only to run; the function takes the arguments after the command
+    name (the LightningCLI entry also receives the subcommand) and returns an exit code. ``help``: one line
+    for ``sm --help``. ``parser``: ``"module:function"`` returning the command's argparse parser from a
+    module that imports no torch (the same parser ``run`` parses with); None for the LightningCLI commands,
+    whose parser is Lightning's.
+    """
+
+    run: str
+    help: str
+    parser: str | None = None
+
+
+_PKG = "skeleton_mamba.tasks"
+_LIGHTNING = f"{_PKG}.training.lightning_cli:run"
+COMMANDS: dict[str, Command] = {
+    "fit": Command(_LIGHTNING, "train a model from a recipe (LightningCLI)"),
+    "validate": Command(_LIGHTNING, "run the validation loop of a recipe"),
+    "test": Command(_LIGHTNING, "evaluate a checkpoint on the test split"),
+    "predict": Command(_LIGHTNING, "run a recipe's prediction loop"),
+    "recipes": Command(
+        f"{_PKG}.training.recipes_cli:main",
+        "list the packaged recipes",
+        f"{_PKG}.training.recipes_cli:build_parser",
+    ),
+    "prepare": Command(
+        f"{_PKG}.recognition.prepare:main",
+        "build NTU / Kinetics annotation files",
+        f"{_PKG}.recognition.prepare:build_parser",
+    ),
+    "analyze-music": Command(
+        f"{_PKG}.motion.analyze_music:main",
         "tempo, beats and features of a track",
+        f"{_PKG}.motion.analyze_music:build_parser",
     ),
-    "evaluate-dance": ("skeleton_mamba.tasks.motion.evaluate_dance:main", "dance metrics, paper protocols"),
-    "render": ("skeleton_mamba.tasks.motion.render_cli:main", "render a motion file to mp4 / gif"),
-    "export": ("skeleton_mamba.tasks.motion.export_cli:main", "write a motion file as glTF 2.0 (.glb)"),
-    "view": ("skeleton_mamba.tasks.motion.view:main", "motions in one self-contained HTML viewer"),
-    "stream": ("skeleton_mamba.tasks.stream.cli:main", "live music-to-dance / online recognition"),
-    "make-ego": ("skeleton_mamba.tasks.egodance.builder.cli:main", "build EgoAIST++-style egocentric data"),
-    "dance": ("skeleton_mamba.tasks.egodance.dance_cli:main", "estimate a dance from music and video"),
-    "generate": ("skeleton_mamba.tasks.text2motion.generate_cli:main", "generate motion from text"),
-    "export-onnx": (
-        "skeleton_mamba.tasks.training.onnx_export:main",
+    "evaluate-dance": Command(
+        f"{_PKG}.motion.evaluate_dance:main",
+        "dance metrics, paper protocols",
+        f"{_PKG}.motion.evaluate_dance_args:build_parser",
+    ),
+    "render": Command(
+        f"{_PKG}.motion.render_cli:main",
+        "render a motion file to mp4 / gif",
+        f"{_PKG}.motion.render_args:build_parser",
+    ),
+    "export": Command(
+        f"{_PKG}.motion.export_cli:main",
+        "write a motion file as glTF 2.0 (.glb)",
+        f"{_PKG}.motion.export_args:build_parser",
+    ),
+    "view": Command(
+        f"{_PKG}.motion.view:main",
+        "motions in one self-contained HTML viewer",
+        f"{_PKG}.motion.view_args:build_parser",
+    ),
+    "stream": Command(
+        f"{_PKG}.stream.cli:main",
+        "live music-to-dance / online recognition",
+        f"{_PKG}.stream.cli_args:build_parser",
+    ),
+    "make-ego": Command(
+        f"{_PKG}.egodance.builder.cli:main",
+        "build EgoAIST++-style egocentric data",
+        f"{_PKG}.egodance.builder.cli_args:build_parser",
+    ),
+    "dance": Command(
+        f"{_PKG}.egodance.dance_cli:main",
+        "estimate a dance from music and video",
+        f"{_PKG}.egodance.dance_args:build_parser",
+    ),
+    "generate": Command(
+        f"{_PKG}.text2motion.generate_cli:main",
+        "generate motion from text",
+        f"{_PKG}.text2motion.generate_args:build_parser",
+    ),
+    "export-onnx": Command(
+        f"{_PKG}.training.onnx_export:main",
         "a backbone or task network as ONNX (sequence forward, streaming step)",
+        f"{_PKG}.training.onnx_export_args:build_parser",
     ),
-    "convert": ("skeleton_mamba.tasks.text2motion.convert_cli:main", "HumanML3D features to joints"),
-    "export-pretrained": (
-        "skeleton_mamba.tasks.training.export_pretrained:main",
+    "convert": Command(
+        f"{_PKG}.text2motion.convert_cli:main",
+        "HumanML3D features to joints",
+        f"{_PKG}.text2motion.convert_args:build_parser",
+    ),
+    "export-pretrained": Command(
+        f"{_PKG}.training.export_pretrained:main",
         "a checkpoint as a Hugging Face from_pretrained folder",
+        f"{_PKG}.training.export_pretrained_args:build_parser",
     ),
 }
-# command -> {value of its --task option: "module:function"}: a task's own variant of a shared command
-TASK_VARIANTS: dict[str, dict[str, str]] = {
-    "stream": {"recognition": "skeleton_mamba.tasks.recognition.online:main"},
+# command -> {value of its --task option: Command}: a task's own variant of a shared command
+TASK_VARIANTS: dict[str, dict[str, Command]] = {
+    "stream": {
+        "recognition": Command(
+            f"{_PKG}.recognition.online:main",
+            "online action recognition",
+            f"{_PKG}.recognition.online_args:build_parser",
+        )
+    },
 }
 LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
 EXIT_BAD_INPUT = 2  # an expected failure: bad or missing input, unwritable output (one line, no traceback)
@@ -72,12 +147,14 @@ def _module_available(target: str) -> bool:
         return False
 
 
-def available_commands() -> dict[str, tuple[str, str]]:
+def available_commands() -> dict[str, Command]:
     """The commands whose implementation is installed."""
-    return {name: spec for name, spec in COMMANDS.items() if _module_available(spec[0])}
+    return {name: command for name, command in COMMANDS.items() if _module_available(command.run)}
 
 
 def _usage() -> str:
+    commands = available_commands()
+    width = max(len(name) for name in commands) + 2  # the longest name and two spaces before its help
     lines = [
         f"sm {__version__}: Skeleton Mamba command line",
         "",
@@ -86,10 +163,14 @@ def _usage() -> str:
         "",
         "commands:",
     ]
-    for name, (_, help_text) in available_commands().items():
-        lines.append(f"  {name:<15}{help_text}")
+    lines += [f"  {name:<{width}}{command.help}" for name, command in commands.items()]
     lines += ["", "options:", "  -h, --help     show this message", "  --version      print the version"]
     return "\n".join(lines)
+
+
+def _load(target: str) -> Callable:
+    module, function = target.split(":")
+    return getattr(importlib.import_module(module), function)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -101,28 +182,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args[0] in ("-V", "--version"):
         print(f"skeleton-mamba {__version__}")
         return 0
-    command, rest = args[0], args[1:]
+    command_name, rest = args[0], args[1:]
     commands = available_commands()
-    if command not in commands:
-        print(f"sm: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
+    if command_name not in commands:
+        print(f"sm: unknown command {command_name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     apply_thread_defaults()  # one intra-op thread on a small machine unless OMP_NUM_THREADS is set
-    silence_library_deprecations()
-    module_name, func_name = _target(command, rest, commands[command][0]).split(":")
-    if command in LIGHTNING_SUBCOMMANDS:
+    silence_library_noise()
+    command = _variant(command_name, rest, commands[command_name])
+    if command_name in LIGHTNING_SUBCOMMANDS:
         keep_freed_memory()  # the next step reuses what this one freed, instead of faulting in new pages
-        rest = [command, *rest]
+        rest = [command_name, *rest]
     try:
-        func = getattr(importlib.import_module(module_name), func_name)
-        result = func(rest)
+        if (
+            command.parser is not None
+        ):  # --help, a bad argument, a missing input: before the command's imports
+            _load(command.parser)().parse_args(rest)
+        result = _load(command.run)(rest)
     except KeyboardInterrupt:
-        print(f"sm {command}: interrupted", file=sys.stderr)
+        print(f"sm {command_name}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as err:
         message = _expected_failure_message(err)
         if message is None or os.environ.get("SM_TRACEBACK"):
             raise
-        print(error_line(command, message), file=sys.stderr)
+        print(error_line(command_name, message), file=sys.stderr)
         return EXIT_BAD_INPUT
     return int(result or 0)
 
@@ -132,27 +216,9 @@ def error_line(command: str, message: str) -> str:
     return f"sm {command}: error: {message}"
 
 
-# Warnings a library raises about its own use of another library's API: nothing a user of `sm` can act on.
-# (message, category, module) as for warnings.filterwarnings; each names the versions it was seen with.
-LIBRARY_DEPRECATIONS = (
-    # lightning 2.6.6 (utilities/_pytree.py) with torch 2.13, on every fit
-    (
-        r"`isinstance\(treespec, LeafSpec\)` is deprecated",
-        FutureWarning,
-        r"lightning\.pytorch\.utilities\._pytree",
-    ),
-)
-
-
-def silence_library_deprecations() -> None:
-    """Ignore :data:`LIBRARY_DEPRECATIONS` (only those: every other warning still shows)."""
-    for message, category, module in LIBRARY_DEPRECATIONS:
-        warnings.filterwarnings("ignore", message=message, category=category, module=module)
-
-
-def _target(command: str, args: list[str], default: str) -> str:
-    """The function that runs ``command``: its ``--task`` variant when it has one (:data:`TASK_VARIANTS`)."""
-    variants = TASK_VARIANTS.get(command, {})
+def _variant(name: str, args: list[str], default: Command) -> Command:
+    """The command that runs ``name``: its ``--task`` variant when it has one (:data:`TASK_VARIANTS`)."""
+    variants = TASK_VARIANTS.get(name, {})
     for i, arg in enumerate(args):
         value = arg.split("=", 1)[1] if arg.startswith("--task=") else None
         if arg == "--task" and i + 1 < len(args):

@@ -18,7 +18,6 @@ Example::
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
@@ -31,6 +30,7 @@ from skeleton_mamba.pretrained import PretrainedMixin, push_folder_to_hub
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
+from skeleton_mamba.tasks.training.export_pretrained_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import MODULE_WEIGHTS_NAME, import_project_class, module_record
 
 __all__ = ["export_pretrained", "main", "network_attribute", "test_metrics"]
@@ -116,26 +116,9 @@ def export_pretrained(
     return folder
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm export-pretrained", description=__doc__.split("\n\n")[0])
-    p.add_argument("--ckpt", required=True, help="a Lightning checkpoint (.ckpt) of a task recipe")
-    p.add_argument("--out", required=True, help="the folder to write (created)")
-    p.add_argument(
-        "--module", default=None, help="the LightningModule class path, when the checkpoint names none"
-    )
-    p.add_argument(
-        "--recipe", default=None, help="the recipe the model was trained with (for the model card)"
-    )
-    p.add_argument(
-        "--push-to-hub", default=None, metavar="ORG/NAME", help="also upload the folder to the Hub"
-    )
-    p.add_argument("--private", action="store_true", help="create the Hub repository private")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-pretrained``; returns the exit code."""
-    args = _parser().parse_args(list(argv) if argv is not None else None)
+    args = build_parser().parse_args(list(argv) if argv is not None else None)
     folder = export_pretrained(args.ckpt, args.out, args.module, args.recipe)
     config = json.loads((folder / "config.json").read_text())
     print(f"wrote {folder}/ ({config['class'].rsplit('.', 1)[-1]} of {config['module']['class_path']})")

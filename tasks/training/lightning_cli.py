@@ -1,4 +1,4 @@
-"""``sm fit|validate|test|predict`` (LightningCLI) and ``sm recipes``.
+"""``sm fit|validate|test|predict`` (LightningCLI); ``sm recipes`` lists the recipes (:mod:`.recipes_cli`).
 
 A recipe composes a task's LightningModule and LightningDataModule through ``class_path`` /
 ``init_args`` (subclass mode for both), so any task runs through the same CLI::
@@ -21,7 +21,6 @@ Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGu
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import importlib.util
 import re
@@ -42,6 +41,7 @@ from skeleton_mamba.tasks.training.checkpoints import (
     use_checked_checkpoint_io,
 )
 from skeleton_mamba.tasks.training.lightning_compat import import_policy, install_accepted_links
+from skeleton_mamba.tasks.training.model_summary import with_parameter_summary
 from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_checkpoint_source
 from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.training.recipe_policy import (
@@ -55,8 +55,6 @@ from skeleton_mamba.tasks.training.recipe_policy import (
 from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
     install_bounded_yaml_loader,
-    packaged_recipes,
-    recipe_description,
 )
 from skeleton_mamba.tasks.training.run_folders import (
     find_last_checkpoint,
@@ -71,7 +69,7 @@ from skeleton_mamba.tasks.training.run_guards import (
     silence_interrupt_notice,
 )
 
-__all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "list_recipes", "run"]
+__all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "quiet_as_trainer_option", "run"]
 
 # Task packages whose ``module`` and ``data`` modules are imported before parsing, so recipes may
 # use short class names (``class_path: ActionRecognitionModule``).
@@ -167,8 +165,21 @@ class SkeletonMambaCLI(LightningCLI):
     """LightningCLI with ``--recipe``, the data-to-model links of :data:`DATA_TO_MODEL_LINKS` and one-line
     parse errors (``parser_class`` defaults to :class:`OneLineErrorParser`)."""
 
-    def __init__(self, *args, parser_class: type[LightningArgumentParser] = OneLineErrorParser, **kwargs):
+    def __init__(
+        self,
+        *args,
+        parser_class: type[LightningArgumentParser] = OneLineErrorParser,
+        only_subcommand: str | None = None,
+        **kwargs,
+    ):
+        self.only_subcommand = only_subcommand
         super().__init__(*args, parser_class=parser_class, **kwargs)
+
+    def subcommands(self) -> dict[str, set[str]]:
+        """Lightning's subcommands, or only ``only_subcommand``: ``sm`` runs one per process, and building the
+        parsers of the other three (the trainer's, model's and data's options each) took 0.2 to 0.5 s."""
+        every = LightningCLI.subcommands()
+        return every if self.only_subcommand is None else {self.only_subcommand: every[self.only_subcommand]}
 
     def init_parser(self, **kwargs) -> LightningArgumentParser:
         """The base parser, with one config action answering to ``-c``, ``--config`` and ``--recipe``.
@@ -251,12 +262,13 @@ class SkeletonMambaCLI(LightningCLI):
         free ``version_N`` lazily, so the second would see the first's new folder and take N + 1.
         Reading all versions up front gives both the same folder. The folders this run creates are
         recorded so that a run stopping before it wrote anything leaves none behind. The progress bar shows
-        the epoch total (:mod:`.progress_bar`) unless the recipe configures its own.
+        the epoch total (:mod:`.progress_bar`: plain lines where no terminal shows it) and the model summary
+        has no FLOPs column of zeros (:mod:`.model_summary`), unless the recipe configures its own.
         """
         config = {**_subcommand_config(self.config_init, self.subcommand).get("trainer", {}), **kwargs}
-        kwargs["callbacks"] = with_default_progress_bar(
-            config.get("callbacks"), config.get("enable_progress_bar")
-        )
+        callbacks = with_default_progress_bar(config.get("callbacks"), config.get("enable_progress_bar"))
+        summary = with_parameter_summary(callbacks, config.get("enable_model_summary"))
+        kwargs["callbacks"], kwargs["enable_model_summary"] = summary
         trainer = super().instantiate_trainer(**kwargs)
         use_checked_checkpoint_io(trainer)  # checked reads, writes through a temporary file beside the target
         for logger in trainer.loggers:
@@ -277,10 +289,21 @@ def _subcommand_config(config, subcommand: str | None):
     return config.get(str(subcommand), config) if subcommand is not None else config
 
 
+QUIET_OPTION = "--quiet"  # every sm command's spelling: here --trainer.enable_progress_bar false
+
+
+def quiet_as_trainer_option(args: list[str]) -> list[str]:
+    """``args`` with ``--quiet`` (after the subcommand) as ``--trainer.enable_progress_bar false``."""
+    if QUIET_OPTION not in args:
+        return args
+    return [a for a in args if a != QUIET_OPTION] + ["--trainer.enable_progress_bar", "false"]
+
+
 def run(argv: Sequence[str] | None = None) -> int:
     """``sm fit|validate|test|predict ARGS``: argv starts with the subcommand; returns the exit code."""
     given = list(sys.argv[1:] if argv is None else argv)
     args, allowed_modules = split_allow_import(given)
+    args = quiet_as_trainer_option(args)
     from_command_line = given == sys.argv[1:]
     if from_command_line:  # LightningCLI reads sys.argv itself (and warns when args repeat it)
         sys.argv[1:] = args
@@ -296,12 +319,14 @@ def _run(args: list[str], cli_args: list[str] | None) -> int:
         cli = SkeletonMambaCLI(
             LightningModule,
             LightningDataModule,
+            only_subcommand=args[0] if args and args[0] in LightningCLI.subcommands() else None,
             subclass_mode_model=True,
             subclass_mode_data=True,
             save_config_kwargs={"overwrite": True},
             trainer_defaults={"callbacks": [NonFiniteLossGuard(), recorder]},
             parser_kwargs={
-                "description": "Skeleton Mamba (LightningCLI). Pick a recipe with --recipe NAME|PATH. "
+                "description": "Skeleton Mamba (LightningCLI). Pick a recipe with --recipe NAME|PATH "
+                f"(sm recipes lists them); {QUIET_OPTION} hides the progress bar. "
                 f"Class paths outside the project's modules are refused unless trusted with "
                 f"{ALLOW_IMPORT_OPTION} MODULE (repeatable, before or after the subcommand's options) or "
                 f"{ALLOW_IMPORT_ENV}=mod1,mod2."
@@ -331,18 +356,3 @@ EXIT_SIGTERM = 143  # 128 + SIGTERM, as shells report a process ended by it
 def _remove_empty_run_dirs(recorder: InterruptRecorder) -> None:
     for folder in recorder.new_run_dirs:
         remove_if_empty(folder)
-
-
-def list_recipes(argv: Sequence[str] | None = None) -> int:
-    """``sm recipes``: print each packaged recipe with the description from its leading ``# `` line."""
-
-    parser = argparse.ArgumentParser(prog="sm recipes", description="List the packaged recipes.")
-    parser.parse_args(list(argv or []))
-    recipes = packaged_recipes()
-    width = max((len(name) for name in recipes), default=0)
-    for name, path in recipes.items():
-        print(f"{name:<{width}}  {recipe_description(path)}")
-    if not recipes:
-        print("no packaged recipes found", file=sys.stderr)
-        return 1
-    return 0

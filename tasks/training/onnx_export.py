@@ -39,12 +39,11 @@ Example::
 
     sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
         --causal --out onnx/ --check
-    sm export-onnx --ckpt runs/stream_demo/version_0/checkpoints/last.ckpt --out onnx/
+    sm export-onnx --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out onnx/
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -63,6 +62,7 @@ from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.training.backbone_config import backbone_config
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
+from skeleton_mamba.tasks.training.onnx_export_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
 
 __all__ = [
@@ -439,34 +439,9 @@ def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
     return SkeletonMamba(config)
 
 
-PART_HELP = (
-    "network (default): a task network's own graphs (the streaming dancer: sequence and step; the "
-    "recognition network: sequence; EMM and the text-to-motion denoiser: denoiser, the condition or caption "
-    "already encoded (the caption encoder is not part of the network; EMM's condition encoders stay in "
-    "PyTorch: nn.TransformerEncoderLayer's fused inference op aten._transformer_encoder_layer_fwd has no "
-    "ONNX function); other networks (QEAN): their backbone's); backbone: its SkeletonMamba only"
-)
-
-
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sm export-onnx", description=__doc__.split("\n\n")[0])
-    src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--ckpt", help="a Lightning checkpoint: its task network (see --part) is exported")
-    src.add_argument("--pretrained", help="a from_pretrained folder or Hub id (a backbone or a task network)")
-    src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
-    p.add_argument("--part", choices=("network", "backbone"), default="network", help=PART_HELP)
-    p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
-    p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
-    p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
-    p.add_argument("--out", required=True, help="the folder to write (created)")
-    p.add_argument("--frames", type=int, default=20, help="frames of the example input (any length runs)")
-    p.add_argument("--check", action="store_true", help="compare onnxruntime with eager PyTorch")
-    return p
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-onnx``; returns the exit code."""
-    args = _parser().parse_args(list(argv) if argv is not None else None)
+    args = build_parser().parse_args(list(argv) if argv is not None else None)
     if args.ckpt is not None:
         network, source = network_from_checkpoint(args.ckpt), args.ckpt
     elif args.pretrained is not None:

@@ -8,12 +8,15 @@ The description also says how long the whole run has left (Lightning's own bars 
 optimizer steps still to go times the mean time of those done so far (:class:`StepClock`), so a slow or
 busy machine shows a longer wait instead of a shorter run. A run bounded only by time shows the time
 left under ``max_time``. ``sm fit`` installs :func:`default_progress_bar` unless the recipe configures a
-progress bar or turns it off (``tasks/training/lightning_cli.py``).
+progress bar or turns it off (``tasks/training/lightning_cli.py``): a live bar on a terminal, and where the
+output goes to a log file or a pipe (no terminal to redraw a bar on) :class:`PlainProgressLog`, plain lines
+without carriage returns.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Sequence
 from datetime import timedelta
@@ -22,11 +25,15 @@ import lightning.pytorch as pl
 from lightning.pytorch.callbacks import Callback, ProgressBar, RichProgressBar, TQDMProgressBar
 from lightning.pytorch.callbacks.timer import Timer
 
+from skeleton_mamba.tasks.motion.cli_options import progress_default
+
 __all__ = [
     "EpochTotalRichProgressBar",
     "EpochTotalTQDMProgressBar",
+    "PlainProgressLog",
     "StepClock",
     "default_progress_bar",
+    "live_bars_shown",
     "planned_steps",
     "planned_epochs",
     "train_description",
@@ -169,8 +176,91 @@ class EpochTotalTQDMProgressBar(TQDMProgressBar):
         super().on_train_batch_end(trainer, *args, **kwargs)
 
 
+class PlainProgressLog(ProgressBar):
+    """The progress of a run as plain lines on stderr, for a log file or a pipe: no carriage returns, no
+    redrawn bar. One line at the end of every training epoch, and one every ``interval`` seconds within a
+    long epoch or evaluation::
+
+        Epoch 3/9 (0:01:20 left): batch 120/120, train/loss 1.23, val/top1 0.812
+        Predicting: batch 40/100
+    """
+
+    def __init__(self, interval: float = 30.0) -> None:
+        super().__init__()
+        self.interval = interval
+        self.enabled = True
+        self.clock = StepClock()
+        self.last_line = time.monotonic()
+
+    def disable(self) -> None:
+        self.enabled = False
+
+    def enable(self) -> None:
+        self.enabled = True
+
+    def print(self, *args, **kwargs) -> None:
+        print(*args, **{"file": sys.stderr, **kwargs})
+
+    def _line(self, text: str) -> None:
+        if self.enabled:
+            self.print(text, flush=True)
+            self.last_line = time.monotonic()
+
+    def _due(self) -> bool:
+        return self.enabled and time.monotonic() - self.last_line >= self.interval
+
+    def _metrics(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> str:
+        parts = []
+        for name, value in self.get_metrics(trainer, pl_module).items():
+            if name == "v_num":
+                continue
+            value = value.item() if hasattr(value, "item") else value
+            parts.append(f"{name} {value:.4g}" if isinstance(value, float) else f"{name} {value}")
+        return "".join(f", {part}" for part in parts)
+
+    def _train_line(self, trainer: pl.Trainer, pl_module: pl.LightningModule, batches: int) -> None:
+        total = self.total_train_batches
+        of = f"/{total}" if total != math.inf else ""
+        description = train_description(trainer, trainer.current_epoch, self.clock)
+        self._line(f"{description}: batch {batches}{of}{self._metrics(trainer, pl_module)}")
+
+    def on_train_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        self.clock.start(trainer)
+        self.last_line = time.monotonic()
+
+    def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx: int) -> None:
+        if self._due():
+            self._train_line(trainer, pl_module, batch_idx + 1)
+
+    def on_train_epoch_end(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        self._train_line(trainer, pl_module, trainer.fit_loop.epoch_loop.batch_progress.current.ready)
+
+    def _eval_batch_end(self, description: str, batch_idx: int, totals: list, dataloader_idx: int) -> None:
+        if self._due():
+            total = totals[dataloader_idx] if dataloader_idx < len(totals) else math.inf
+            of = f"/{total}" if total != math.inf else ""
+            self._line(f"{description}: batch {batch_idx + 1}{of}")
+
+    def on_validation_batch_end(self, trainer, pl_module, outputs, batch, batch_idx, dataloader_idx=0):
+        self._eval_batch_end(self.validation_description, batch_idx, trainer.num_val_batches, dataloader_idx)
+
+    def on_test_batch_end(self, trainer, pl_module, outputs, batch, batch_idx, dataloader_idx=0):
+        self._eval_batch_end(self.test_description, batch_idx, trainer.num_test_batches, dataloader_idx)
+
+    def on_predict_batch_end(self, trainer, pl_module, outputs, batch, batch_idx, dataloader_idx=0):
+        self._eval_batch_end(self.predict_description, batch_idx, trainer.num_predict_batches, dataloader_idx)
+
+
+def live_bars_shown() -> bool:
+    """Whether a live (redrawn) bar has a terminal to draw on: stderr (tqdm's) and stdout (rich's) both."""
+    return progress_default(sys.stderr) and progress_default(sys.stdout)
+
+
 def default_progress_bar() -> ProgressBar:
-    """The bar Lightning would pick (rich when installed, else tqdm), with epoch totals."""
+    """On a terminal the bar Lightning would pick (rich when installed, else tqdm) with epoch totals;
+    elsewhere :class:`PlainProgressLog`."""
+    if not live_bars_shown():
+        return PlainProgressLog()
     try:
         return EpochTotalRichProgressBar()
     except ModuleNotFoundError:  # RichProgressBar's own check: rich missing or too old

@@ -11,22 +11,26 @@ torch on one intra-op thread and passes ``OMP_NUM_THREADS=1`` on to the processe
 cores). Everywhere it passes ``OMP_WAIT_POLICY=PASSIVE`` (idle OpenMP threads sleep instead of spinning).
 A user's own ``OMP_NUM_THREADS`` / ``OMP_WAIT_POLICY`` wins, as does ``sm stream --threads N``.
 
-``import torch`` starts OpenMP and reads these variables then; ``sm`` has imported torch by the time its
-entry runs (the package's ``__init__`` imports the backbone), so the thread count is set through
-``torch.set_num_threads``, before any torch work, and the variables serve the child processes.
+``import torch`` starts OpenMP and reads these variables then. ``sm`` sets them before any command imports
+torch (its command table imports none), so torch starts with them; where torch is already imported (a
+caller that imported it first) the count is also set through ``torch.set_num_threads``. The variables
+serve the child processes too.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import MutableMapping
 
-import torch
-
-__all__ = ["DEFAULT_ENV", "SMALL_MACHINE_CORES", "apply_thread_defaults", "available_cores"]
+__all__ = ["DEFAULT_ENV", "SMALL_MACHINE_CORES", "THREADS_HELP", "apply_thread_defaults", "available_cores"]
 
 DEFAULT_ENV = {"OMP_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
 SMALL_MACHINE_CORES = 4
+THREADS_HELP = (  # the live commands' --threads
+    "torch CPU threads (default: OMP_NUM_THREADS if set, else 1 on a machine of at most "
+    f"{SMALL_MACHINE_CORES} cores and torch's count on a larger one)"
+)
 
 
 def available_cores() -> int:
@@ -36,14 +40,19 @@ def available_cores() -> int:
     return os.cpu_count() or 1
 
 
-def apply_thread_defaults(environ: MutableMapping[str, str] | None = None, cores: int | None = None) -> int:
+def apply_thread_defaults(
+    environ: MutableMapping[str, str] | None = None, cores: int | None = None
+) -> int | None:
     """Set ``OMP_WAIT_POLICY=PASSIVE`` where ``environ`` (default ``os.environ``) lacks it, and on a machine
     of ``cores`` (default :func:`available_cores`) <= :data:`SMALL_MACHINE_CORES` without ``OMP_NUM_THREADS``
-    one thread (torch's and ``OMP_NUM_THREADS=1``); returns torch's thread count."""
+    one thread (``OMP_NUM_THREADS=1``, and torch's count when torch is already imported); returns torch's
+    thread count, or None when torch is not imported yet (it reads the variables when it is)."""
     environ = os.environ if environ is None else environ
     cores = available_cores() if cores is None else cores
+    torch = sys.modules.get("torch")  # imported by the caller, or not yet: then it starts with the variables
     if "OMP_NUM_THREADS" not in environ and cores <= SMALL_MACHINE_CORES:
-        torch.set_num_threads(int(DEFAULT_ENV["OMP_NUM_THREADS"]))
         environ["OMP_NUM_THREADS"] = DEFAULT_ENV["OMP_NUM_THREADS"]
+        if torch is not None:
+            torch.set_num_threads(int(DEFAULT_ENV["OMP_NUM_THREADS"]))
     environ.setdefault("OMP_WAIT_POLICY", DEFAULT_ENV["OMP_WAIT_POLICY"])
-    return torch.get_num_threads()
+    return None if torch is None else torch.get_num_threads()

@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import logging
 import multiprocessing
-import os
 import shutil
 import zlib
 from collections import Counter
@@ -40,6 +39,7 @@ from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
+from skeleton_mamba.tasks.egodance.builder.config import BuildConfig
 from skeleton_mamba.tasks.egodance.builder.penetration import mesh_penetration_score, penetration_score
 from skeleton_mamba.tasks.egodance.builder.placement import place_points, random_placement
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
@@ -76,41 +76,6 @@ _FIXED_SETTINGS = (
     "camera_up",
     "smpl_model",
 )
-
-
-@dataclass
-class BuildConfig:
-    """Options of ``sm make-ego`` (see ``cli.py`` for their help)."""
-
-    out: str
-    scenes: str = "procedural"
-    up_axis: str = "y"
-    scene_pattern: str | None = None  # glob under a scenes folder, e.g. "*/mesh.ply" for Replica
-    num_rooms: int = 8
-    fps: float = 30.0
-    window_s: float = 5.0
-    stride_s: float | None = None  # None: the window length (non-overlapping windows)
-    width: int = 224
-    height: int = 224
-    fov: float = 90.0
-    threshold: float = 2.0
-    max_attempts: int = 20
-    penetration_stride: int = 1
-    seed: int = 0
-    frame_format: str = "mp4"
-    camera_forward: float = 0.10
-    camera_up: float = 0.06
-    smpl_model: str | None = None  # SMPL model file (.pkl official / .npz): score the mesh, not capsules
-    music_dir: str | None = None
-    keep_ignored: bool = False
-    skip_bad: bool = False  # go on past corrupt motion files and list them at the end
-    workers: int = 1
-    progress: bool = True
-
-    @property
-    def stride(self) -> float:
-        """Window stride in seconds (the window length unless set)."""
-        return self.window_s if self.stride_s is None else self.stride_s
 
 
 @dataclass(frozen=True)
@@ -479,8 +444,3 @@ def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
     summary.complete = len(layout.complete_samples(out))
     layout.write_json(out / "summary.json", asdict(summary))
     return summary
-
-
-def default_workers() -> int:
-    """Worker processes by default: the CPUs this process may use."""
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)

@@ -16,12 +16,11 @@ from typing import Any
 
 import torch
 
+from skeleton_mamba.tasks.motion.cli_options import SAMPLERS  # torch-free: the commands' --help lists them
 from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion
 from skeleton_mamba.tasks.training.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
 
 __all__ = ["SAMPLERS", "SamplingOptions", "sample"]
-
-SAMPLERS = ("ddim", "ddpm")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,50 @@
+"""The options of a dataset build (``sm make-ego``): :class:`BuildConfig`, torch-free so that the command's
+``--help`` shows their defaults without importing the builder."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from skeleton_mamba.tasks.training.threads import available_cores
+
+__all__ = ["BuildConfig", "default_workers"]
+
+
+def default_workers() -> int:
+    """Worker processes by default: the CPUs this process may use."""
+    return max(1, available_cores())
+
+
+@dataclass
+class BuildConfig:
+    """Options of ``sm make-ego`` (see ``cli_args.py`` for their help)."""
+
+    out: str
+    scenes: str = "procedural"
+    up_axis: str = "y"
+    scene_pattern: str | None = None  # glob under a scenes folder, e.g. "*/mesh.ply" for Replica
+    num_rooms: int = 8
+    fps: float = 30.0
+    window_s: float = 5.0
+    stride_s: float | None = None  # None: the window length (non-overlapping windows)
+    width: int = 224
+    height: int = 224
+    fov: float = 90.0
+    threshold: float = 2.0
+    max_attempts: int = 20
+    penetration_stride: int = 1
+    seed: int = 0
+    frame_format: str = "mp4"
+    camera_forward: float = 0.10
+    camera_up: float = 0.06
+    smpl_model: str | None = None  # SMPL model file (.pkl official / .npz): score the mesh, not capsules
+    music_dir: str | None = None
+    keep_ignored: bool = False
+    skip_bad: bool = False  # go on past corrupt motion files and list them at the end
+    workers: int = 1
+    progress: bool = True
+
+    @property
+    def stride(self) -> float:
+        """Window stride in seconds (the window length unless set)."""
+        return self.window_s if self.stride_s is None else self.stride_s

@@ -1,0 +1,25 @@
+"""The command line of ``sm export`` (argparse only: ``--help`` imports no torch)."""
+
+from __future__ import annotations
+
+import argparse
+
+from skeleton_mamba.tasks.motion.cli_options import command_parser
+
+__all__ = ["build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = command_parser(
+        "sm export", "Write a motion file as glTF 2.0 (.glb): a skinned skeleton and its animation."
+    )
+    p.add_argument(
+        "motion",
+        help="motion file: .npz (ours), .pkl (AIST++), .npy: (T,J,3) joints or (T,263) HumanML3D features, "
+        ".bvh, .skeleton",
+    )
+    p.add_argument("--out", required=True, help="output .glb")
+    p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
+    p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
+    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
+    return p

@@ -1,0 +1,27 @@
+"""The command line of ``sm generate`` (argparse only: ``--help`` imports no torch)."""
+
+from __future__ import annotations
+
+import argparse
+
+from skeleton_mamba.tasks.motion.cli_options import add_quiet_argument, add_sampling_arguments, command_parser
+
+__all__ = ["build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = command_parser("sm generate", "Generate motion from text with a trained text-to-motion checkpoint.")
+    p.add_argument(
+        "--checkpoint",
+        required=True,
+        help="TextToMotionModule checkpoint (.ckpt), its export-pretrained folder or Hub id",
+    )
+    p.add_argument("--text", action="append", required=True, help="caption (repeat for several)")
+    p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default: 6s)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--num", type=int, default=1, help="samples per caption")
+    add_sampling_arguments(p)
+    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
+    add_quiet_argument(p, "progress bar")
+    return p
