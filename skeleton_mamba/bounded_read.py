@@ -46,6 +46,7 @@ MAX_JSON_BYTES = 64 << 20  # a JSON file the project reads, unless its reader st
 MAX_JSON_DEPTH = 64  # nested arrays / objects; the project's files nest fewer than 10
 MAX_INT_DIGITS = 18  # every integer the project's files hold (counts, indices, seeds) fits an int64
 _BRACKETS_OR_STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
+_NUMBERS_OR_STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"|-?(?:Infinity|NaN)|-?\d[\d.eE+-]*')
 _READ_BLOCK = 1 << 20
 
 
@@ -122,6 +123,20 @@ def _line_column(text: str, index: int) -> str:
     return f"{line}:{index - (text.rfind(chr(10), 0, index) + 1) + 1}"
 
 
+def _first_non_finite(text: str) -> str:
+    """``line:column`` of the first NaN, Infinity or overflowing number of ``text`` (strings skipped): the
+    one the parser, reading left to right, refused."""
+    for match in _NUMBERS_OR_STRINGS.finditer(text):
+        token = match.group()
+        try:
+            finite = token[0] == '"' or math.isfinite(float(token.replace("Infinity", "inf")))
+        except ValueError:
+            continue
+        if not finite:
+            return _line_column(text, match.start())
+    return "?"
+
+
 def check_json_depth(
     text: str, source: str, max_depth: int, error: type[Exception] = BoundedReadError
 ) -> None:
@@ -164,7 +179,9 @@ def parse_json(
         if non_finite == "null":
             return None
         shown = token if len(token) <= 30 else token[:27] + "..."
-        raise error(f"{source}: {shown} is not a finite number (JSON numbers must be finite)")
+        raise error(
+            f"{source}:{_first_non_finite(text)}: {shown} is not a finite number (JSON's numbers are finite)"
+        )
 
     def parse_float(token: str) -> float | None:
         value = float(token)

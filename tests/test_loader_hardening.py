@@ -105,11 +105,20 @@ def _clip(pose_value=0.5, frame_indices=(1, 2)) -> dict:
     return {"data": frames, "label": "abseiling", "label_index": 0}
 
 
-@pytest.mark.parametrize("value", [float("nan"), float("inf"), 1e39])
-def test_kinetics_non_finite_pose_is_refused_with_its_entry(tmp_path, value):
+def test_kinetics_pose_beyond_float32_is_refused_with_its_entry(tmp_path):
     path = tmp_path / "clip.json"
-    path.write_text(json.dumps(_clip(value)))
+    path.write_text(json.dumps(_clip(1e39)))
     with pytest.raises(KineticsFileError, match=r"clip.json: data\[1\].skeleton\[0\].pose: value: .* 7"):
+        read_kinetics_clip(path)
+
+
+@pytest.mark.parametrize("value, token", [(float("nan"), "NaN"), (float("inf"), "Infinity")])
+def test_kinetics_non_finite_pose_is_refused_at_its_line_and_column(tmp_path, value, token):
+    path = tmp_path / "clip.json"
+    text = json.dumps(_clip(value))
+    path.write_text(text)
+    column = text.index(token) + 1  # one line of JSON: the column is the token's offset + 1
+    with pytest.raises(KineticsFileError, match=rf"clip.json:1:{column}: {token} is not a finite number"):
         read_kinetics_clip(path)
 
 

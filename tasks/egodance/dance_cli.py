@@ -27,13 +27,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
 from skeleton_mamba.tasks.egodance.builder.layout import read_frames
 from skeleton_mamba.tasks.egodance.data import (
@@ -48,6 +48,13 @@ from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.option_types import (
+    MAX_FRAMES,
+    image_size_option,
+    int_option,
+    real_option,
+    seed_option,
+)
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.value_checks import load_npz
 from skeleton_mamba.tasks.training.diffusion.cli_options import add_sampling_arguments, sampling_overrides
@@ -60,14 +67,6 @@ DANCE_BF16_ERROR = (
     "Measured on a trained EgoMusic demo EMM (5 DDIM steps, 150 frames, same seed): joints within 6 mm "
     "of the fp32 dance (mean 0.3 mm)."
 )
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
-    return width, height
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -89,9 +88,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (or FILE.npz: files named after FILE); required to dance")
     p.add_argument("--name", default="dance", help="file stem inside an output folder")
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
-    p.add_argument("--render-size", type=_size, default=(640, 480), help="video WxH (multiples of 16)")
+    p.add_argument(
+        "--render-size", type=image_size_option, default=(640, 480), help="video WxH (multiples of 16)"
+    )
     add_sampling_arguments(p)
-    p.add_argument("--head-weight", type=float, default=None, help="head guidance step size (0: off)")
+    p.add_argument(
+        "--head-weight",
+        type=real_option(0.0, 1e3, "a step size"),
+        default=None,
+        help="head guidance step size (0: off)",
+    )
     p.add_argument(
         "--head",
         choices=("estimate", "oracle", "none"),
@@ -99,10 +105,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="head guidance targets: estimated from the video (default for vision models), the ground-truth "
         "camera path of a --sample (oracle), or none (default for music-only models)",
     )
-    p.add_argument("--window", type=int, default=150, help="frames per window (training length)")
-    p.add_argument("--overlap", type=int, default=75, help="overlap of long-form windows")
+    p.add_argument(
+        "--window",
+        type=int_option(1, MAX_FRAMES, "a frame count"),
+        default=150,
+        help="frames per window (training length)",
+    )
+    p.add_argument(
+        "--overlap",
+        type=int_option(0, MAX_FRAMES, "a frame count"),
+        default=75,
+        help="overlap of long-form windows",
+    )
     p.add_argument("--no-ema", action="store_true", help="use the raw weights instead of the EMA")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_option, default=0)
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument(
         "--compile",
@@ -121,7 +137,7 @@ def _music_source(args) -> tuple[str | None, float]:
     """The audio file and start time (s) the dance is sampled for."""
     if args.music:
         return args.music, 0.0
-    meta = json.loads((Path(args.sample) / "meta.json").read_text(encoding="utf-8"))
+    meta = read_json(Path(args.sample) / "meta.json", error=InputError)
     music = meta.get("music") or {}
     return music.get("path"), float(music.get("start_s", 0.0))
 

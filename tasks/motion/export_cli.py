@@ -16,6 +16,7 @@ from pathlib import Path
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.option_types import fps_option
 
 __all__ = ["main"]
 
@@ -30,7 +31,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output .glb")
     p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
     p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
+    p.add_argument(
+        "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the file's)"
+    )
     return p
 
 

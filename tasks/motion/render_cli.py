@@ -35,6 +35,7 @@ from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, check_fe
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS as HUMANML3D_FPS
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.option_types import fps_option
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.resample import resample_linear
 from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
@@ -141,9 +142,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("motion", help="motion file: .npz (ours), .pkl (AIST++), .npy (T,J,3), .bvh, .skeleton")
     p.add_argument("--out", required=True, help="output video, .mp4 or .gif")
     p.add_argument("--music", default=None, help="audio file muxed into the mp4 (cut to the motion's length)")
-    p.add_argument("--fps", type=float, default=None, help="output frame rate (default: the motion's)")
+    p.add_argument("--fps", type=fps_option, default=None, help="output frame rate (default: the motion's)")
     p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
+    p.add_argument(
+        "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the file's)"
+    )
     p.add_argument("--title", default=None, help="text drawn on every frame (default: the file name)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p

@@ -25,6 +25,7 @@ import numpy as np
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.option_types import fps_option
 
 __all__ = ["write_view", "main"]
 
@@ -134,7 +135,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--metrics", default=None, help="a JSON file of metrics to list (e.g. demo.json)")
     p.add_argument("--overlay", action="store_true", help="draw the motions on top of one another")
     p.add_argument("--skeleton", default=None, help="skeleton of .npy joint files (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the files')")
+    p.add_argument(
+        "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the files')"
+    )
     return p
 
 

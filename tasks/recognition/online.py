@@ -26,6 +26,7 @@ import torch
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, int_option
 from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
@@ -124,7 +125,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--name", default=None, help="file stem (default: the skeleton file's stem)")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    p.add_argument(
+        "--threads",
+        type=int_option(1, MAX_WORKERS, "a thread count"),
+        default=None,
+        help="torch CPU threads (default: torch's)",
+    )
     p.add_argument("--compile", action="store_true", help="compile the frame step with torch.compile first")
     p.add_argument(
         "--precision", choices=PRECISIONS, default="fp32", help=f"{PRECISION_HELP} {ONLINE_BF16_ERROR}"

@@ -35,6 +35,7 @@ import soundfile as sf
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_motion
+from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, image_size_option, int_option, real_option
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
@@ -68,17 +69,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default=None, help="file stem (default: the music's / skeleton file's stem)")
     p.add_argument("--music", help="dance: audio file, or - for a WAV stream on standard input")
     p.add_argument(
-        "--raw-rate", type=int, default=None, help="with --music -: headerless s16le mono PCM at this rate"
+        "--raw-rate",
+        type=int_option(8_000, 192_000, "a sample rate (Hz)"),
+        default=None,
+        help="with --music -: headerless s16le mono PCM at this rate",
     )
     p.add_argument("--realtime", action="store_true", help="pace the input at the music's rate")
-    p.add_argument("--chunk-ms", type=float, default=20.0, help="audio chunk length (ms)")
+    p.add_argument(
+        "--chunk-ms",
+        type=real_option(1.0, 10_000.0, "milliseconds"),
+        default=20.0,
+        help="audio chunk length (ms)",
+    )
     p.add_argument("--no-render", action="store_true", help="skip the mp4")
-    p.add_argument("--render-size", default="480x352", help="video WIDTHxHEIGHT (multiples of 16)")
+    p.add_argument(
+        "--render-size",
+        type=image_size_option,
+        default=(480, 352),
+        help="video WIDTHxHEIGHT (multiples of 16)",
+    )
     p.add_argument(
         "--skeleton", help="recognition: a skeleton file (NTU .skeleton, PYSKL-style .npy (T, J, C))"
     )
     p.add_argument(
-        "--threads", type=int, default=None, help="torch CPU threads (default: OMP_NUM_THREADS, else 1)"
+        "--threads",
+        type=int_option(1, MAX_WORKERS, "a thread count"),
+        default=None,
+        help="torch CPU threads (default: OMP_NUM_THREADS, else 1)",
     )
     p.add_argument(
         "--compile",
@@ -146,7 +163,7 @@ def stream_dance(args: argparse.Namespace) -> int:
                 raise InputError(message)
             print(f"sm stream: {message}", file=sys.stderr)
             return 130
-        width, height = (int(v) for v in args.render_size.lower().split("x"))
+        width, height = args.render_size
         files = write_motion(
             tokens_to_motion(dancer.tokens().float(), FPS),
             out,

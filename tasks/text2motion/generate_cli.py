@@ -30,6 +30,7 @@ from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
+from skeleton_mamba.tasks.motion.option_types import int_option, seed_option
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.value_checks import non_finite_message
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
@@ -110,9 +111,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--text", action="append", required=True, help="caption (repeat for several)")
     p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default 6s)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--num", type=int, default=1, help="samples per caption")
+    p.add_argument(
+        "--num", type=int_option(1, 10_000, "a sample count"), default=1, help="samples per caption"
+    )
     add_sampling_arguments(p)
-    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--seed", type=seed_option, default=0, help="noise seed")
     p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
     return p
 

@@ -53,17 +53,19 @@ from pathlib import Path
 import numpy as np
 import onnxruntime
 import torch
-import yaml
 from torch import nn
 from torch.export import Dim
 
-from skeleton_mamba import SkeletonMamba
+from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedError, decode_value
+from skeleton_mamba.pretrained_checks import SIZE_BOUNDS, check_sizes
 from skeleton_mamba.streaming import frame_forward
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
-from skeleton_mamba.tasks.training.backbone_config import backbone_config
+from skeleton_mamba.tasks.motion.option_types import int_option
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
+from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
 
 __all__ = [
     "NETWORK_SPECS",
@@ -424,20 +426,33 @@ def backbone_of(network: nn.Module, source: str) -> SkeletonMamba:
 
 
 def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
-    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides."""
-    p = Path(path)
-    try:
-        fields = yaml.safe_load(p.read_text()) or {}
-    except yaml.YAMLError as err:
-        raise InputError(f"{p}: not valid YAML ({' '.join(str(err).split())})") from err
-    if not isinstance(fields, dict):
-        raise InputError(f"{p}: a backbone file holds a mapping of SkeletonMambaConfig fields")
-    try:
-        config = backbone_config({**fields, **{k: v for k, v in overrides.items() if v is not None}})
-    except TypeError as err:
-        raise InputError(f"{p}: not a SkeletonMambaConfig ({err})") from err
-    return SkeletonMamba(config)
+    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides.
 
+    The file is read by the bounded YAML reader; its fields are decoded with the types of
+    :class:`SkeletonMambaConfig` (an unknown field, a list where a number belongs, a mixer that is not a
+    mapping are refused naming the field) and its sizes checked against their bounds before anything is
+    built.
+
+    Raises:
+        InputError: naming the file and what is wrong.
+    """
+    fields = read_yaml_file(path, "backbone file")
+    fields = {} if fields is None else fields
+    if not isinstance(fields, dict):
+        raise InputError(f"{path}: a backbone file holds a mapping of SkeletonMambaConfig fields")
+    merged = {**fields, **{k: v for k, v in overrides.items() if v is not None}}
+    try:
+        config = decode_value(merged, SkeletonMambaConfig, f"{path}: SkeletonMambaConfig")
+    except PretrainedError as err:
+        raise InputError(str(err)) from err
+    check_sizes(config, f"{path}: SkeletonMambaConfig", InputError)
+    try:
+        return SkeletonMamba(config)
+    except (TypeError, ValueError, KeyError, RuntimeError) as err:
+        raise InputError(f"{path}: not a usable backbone ({err})") from err
+
+
+MAX_EXAMPLE_FRAMES = 4096  # frames of the example input: the graphs' SSD is quadratic in the frames
 
 PART_HELP = (
     "network (default): a task network's own graphs (the streaming dancer: sequence and step; the "
@@ -456,10 +471,20 @@ def _parser() -> argparse.ArgumentParser:
     src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
     p.add_argument("--part", choices=("network", "backbone"), default="network", help=PART_HELP)
     p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
-    p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
+    p.add_argument(
+        "--in-channels",
+        type=int_option(1, SIZE_BOUNDS["in_channels"], "a channel count"),
+        default=None,
+        help="with --backbone: input features per joint",
+    )
     p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
     p.add_argument("--out", required=True, help="the folder to write (created)")
-    p.add_argument("--frames", type=int, default=20, help="frames of the example input (any length runs)")
+    p.add_argument(
+        "--frames",
+        type=int_option(2, MAX_EXAMPLE_FRAMES, "a frame count"),
+        default=20,
+        help="frames of the example input (any length runs)",
+    )
     p.add_argument("--check", action="store_true", help="compare onnxruntime with eager PyTorch")
     return p
 

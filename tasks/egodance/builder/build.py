@@ -21,7 +21,6 @@ The manual verification step of [EgoMusic] supp. Sec. 5 is left to the user (``m
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing
 import os
@@ -36,6 +35,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
@@ -406,7 +406,7 @@ def _check_settings(cfg: BuildConfig) -> None:
     path = Path(cfg.out) / "build.json"
     settings = {k: getattr(cfg, k) for k in _FIXED_SETTINGS}
     if path.is_file():
-        old = json.loads(path.read_text(encoding="utf-8"))
+        old = read_json(path, error=DataFileError)
         diff = {k: (old.get(k), v) for k, v in settings.items() if old.get(k) != v}
         if diff:
             raise ValueError(f"{cfg.out} was built with other settings {diff} (old, new): use another --out")

@@ -18,8 +18,21 @@ import argparse
 import logging
 
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, default_workers, run_build
+from skeleton_mamba.tasks.motion.option_types import (
+    MAX_FRAMES,
+    MAX_IMAGE_SIZE,
+    MAX_WORKERS,
+    fps_option,
+    int_option,
+    real_option,
+    seed_option,
+)
 
 __all__ = ["main", "build_parser"]
+
+SECONDS = real_option(0.0, 86_400.0, "seconds", low_open=True)
+PIXELS = int_option(1, MAX_IMAGE_SIZE, "pixels")
+METRES = real_option(-10.0, 10.0, "metres")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,27 +55,50 @@ def build_parser() -> argparse.ArgumentParser:
         help="glob of the scene files under a --scenes folder (Replica: '*/mesh.ply'); default: all meshes",
     )
     p.add_argument("--up-axis", default=d.up_axis, choices=["x", "y", "z"], help="up axis of the scene files")
-    p.add_argument("--num-rooms", type=int, default=d.num_rooms, help="procedural rooms to cycle through")
-    p.add_argument("--fps", type=float, default=d.fps, help="frame rate of motion and frames")
-    p.add_argument("--window", type=float, default=d.window_s, dest="window_s", help="window length (s)")
+    p.add_argument(
+        "--num-rooms",
+        type=int_option(1, 10_000, "a room count"),
+        default=d.num_rooms,
+        help="procedural rooms to cycle through",
+    )
+    p.add_argument("--fps", type=fps_option, default=d.fps, help="frame rate of motion and frames")
+    p.add_argument("--window", type=SECONDS, default=d.window_s, dest="window_s", help="window length (s)")
     p.add_argument(
         "--stride",
-        type=float,
+        type=SECONDS,
         default=d.stride_s,
         dest="stride_s",
         help="window stride (s); default: the window length",
     )
-    p.add_argument("--width", type=int, default=d.width, help="image width (pixels)")
-    p.add_argument("--height", type=int, default=d.height, help="image height (pixels)")
-    p.add_argument("--fov", type=float, default=d.fov, help="horizontal field of view (degrees)")
+    p.add_argument("--width", type=PIXELS, default=d.width, help="image width (pixels)")
+    p.add_argument("--height", type=PIXELS, default=d.height, help="image height (pixels)")
     p.add_argument(
-        "--threshold", type=float, default=d.threshold, help="reject placements with S_p above (cm)"
+        "--fov",
+        type=real_option(0.0, 180.0, "degrees", low_open=True, high_open=True),
+        default=d.fov,
+        help="horizontal field of view (degrees)",
     )
-    p.add_argument("--max-attempts", type=int, default=d.max_attempts, help="placements tried per window")
     p.add_argument(
-        "--penetration-stride", type=int, default=d.penetration_stride, help="score every n-th frame only"
+        "--threshold",
+        type=real_option(0.0, 1e6, "centimetres"),
+        default=d.threshold,
+        help="reject placements with S_p above (cm)",
     )
-    p.add_argument("--seed", type=int, default=d.seed, help="random seed (placements, procedural rooms)")
+    p.add_argument(
+        "--max-attempts",
+        type=int_option(1, 1_000_000, "an attempt count"),
+        default=d.max_attempts,
+        help="placements tried per window",
+    )
+    p.add_argument(
+        "--penetration-stride",
+        type=int_option(1, MAX_FRAMES, "a frame stride"),
+        default=d.penetration_stride,
+        help="score every n-th frame only",
+    )
+    p.add_argument(
+        "--seed", type=seed_option, default=d.seed, help="random seed (placements, procedural rooms)"
+    )
     p.add_argument(
         "--frames",
         default=d.frame_format,
@@ -72,11 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--camera-forward",
-        type=float,
+        type=METRES,
         default=d.camera_forward,
         help="eye offset forward of the head joint (m)",
     )
-    p.add_argument("--camera-up", type=float, default=d.camera_up, help="eye offset above the head joint (m)")
+    p.add_argument(
+        "--camera-up", type=METRES, default=d.camera_up, help="eye offset above the head joint (m)"
+    )
     p.add_argument(
         "--smpl-model",
         default=None,
@@ -88,7 +126,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--skip-bad", action="store_true", help="go on past corrupt motion files and list them at the end"
     )
-    p.add_argument("--workers", type=int, default=default_workers(), help="worker processes")
+    p.add_argument(
+        "--workers",
+        type=int_option(0, MAX_WORKERS, "a worker count"),
+        default=default_workers(),
+        help="worker processes",
+    )
     p.add_argument("--no-progress", action="store_false", dest="progress", help="hide the progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="log every skipped window and cleanup")
     return p

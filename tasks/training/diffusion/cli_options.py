@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from skeleton_mamba.tasks.motion.option_types import real_option
 from skeleton_mamba.tasks.training.diffusion.sampling import SAMPLERS
 
 __all__ = ["add_sampling_arguments", "sampling_overrides"]
@@ -29,9 +30,17 @@ def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--steps", type=_steps, default=None, help="DDIM steps (alone: DDIM; default: the checkpoint's)"
     )
-    parser.add_argument("--eta", type=float, default=None, help="DDIM noise eta (default: the checkpoint's)")
     parser.add_argument(
-        "--guidance", type=float, default=None, help="classifier-free guidance weight (default: checkpoint's)"
+        "--eta",
+        type=real_option(0.0, 10.0, "a DDIM eta"),
+        default=None,
+        help="DDIM noise eta (default: the checkpoint's)",
+    )
+    parser.add_argument(
+        "--guidance",
+        type=real_option(0.0, 100.0, "a guidance weight"),
+        default=None,
+        help="classifier-free guidance weight (default: checkpoint's)",
     )
 
 
