@@ -132,6 +132,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=default_workers(),
         help="worker processes",
     )
+    p.add_argument(
+        "--max-faces",
+        type=int_option(1, 1_000_000_000, "a triangle count"),
+        default=d.max_faces,
+        help="the most triangles a scene file may hold (checked from its header before it is loaded)",
+    )
     p.add_argument("--no-progress", action="store_false", dest="progress", help="hide the progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="log every skipped window and cleanup")
     return p
