@@ -47,6 +47,7 @@ from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.export import DANCE_SUFFIXES
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.option_types import (
     MAX_FRAMES,
@@ -54,6 +55,12 @@ from skeleton_mamba.tasks.motion.option_types import (
     int_option,
     real_option,
     seed_option,
+)
+from skeleton_mamba.tasks.motion.output_folder import (
+    OVERWRITE_HELP,
+    claim_output_files,
+    claim_output_folder,
+    record_outputs,
 )
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.value_checks import load_npz
@@ -87,6 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--video", help="egocentric video file or image folder for --music (vision models)")
     p.add_argument("--out", help="output folder (or FILE.npz: files named after FILE); required to dance")
     p.add_argument("--name", default="dance", help="file stem inside an output folder")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
     p.add_argument(
         "--render-size", type=image_size_option, default=(640, 480), help="video WxH (multiples of 16)"
@@ -273,6 +281,21 @@ def _list_samples(ckpt: str, checkpoint: dict) -> int:
     return 0
 
 
+def claim_dance_output(out: str, name: str, overwrite: bool) -> None:
+    """``--out DIR``: a folder this command may write into; ``--out FILE.npz``: no file beside it replaced
+    (:mod:`~skeleton_mamba.tasks.motion.output_folder`)."""
+    path = Path(out)
+    if path.suffix.lower() == ".npz":
+        siblings = [path.with_suffix(suffix) for suffix in DANCE_SUFFIXES]
+        claim_output_files(siblings, path, overwrite=overwrite)
+    else:
+        claim_output_folder(path, "sm dance", _dance_files(name), overwrite=overwrite)
+
+
+def _dance_files(name: str) -> list[str]:
+    return [f"{name}{suffix}" for suffix in DANCE_SUFFIXES]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -280,6 +303,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("the following arguments are required: --out")
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
+    if not args.list_samples:
+        claim_dance_output(args.out, args.name, args.overwrite)
 
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
@@ -310,6 +335,8 @@ def main(argv: list[str] | None = None) -> int:
     out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
     width, height = args.render_size
     music_file, start_s = _music_source(args)
+    if out.suffix.lower() != ".npz":
+        record_outputs(out_dir, "sm dance", _dance_files(name))
     files = write_dance(
         tokens,
         out_dir,

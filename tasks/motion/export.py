@@ -22,7 +22,9 @@ from skeleton_mamba.tasks.motion.gltf import from_motion_data, write_glb
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 
-__all__ = ["DanceFiles", "write_motion", "write_music_slice"]
+__all__ = ["DANCE_SUFFIXES", "DanceFiles", "write_motion", "write_music_slice"]
+
+DANCE_SUFFIXES = (".npz", ".bvh", ".glb", ".mp4", ".wav")  # the files write_motion writes for one name
 
 
 @dataclass

@@ -63,6 +63,7 @@ from skeleton_mamba.streaming import frame_forward
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.option_types import int_option
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP, claim_output_folder
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
 from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
@@ -478,7 +479,11 @@ def _parser() -> argparse.ArgumentParser:
         help="with --backbone: input features per joint",
     )
     p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
-    p.add_argument("--out", required=True, help="the folder to write (created)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="the folder to write (created; an existing one must be an earlier export)",
+    )
     p.add_argument(
         "--frames",
         type=int_option(2, MAX_EXAMPLE_FRAMES, "a frame count"),
@@ -486,12 +491,16 @@ def _parser() -> argparse.ArgumentParser:
         help="frames of the example input (any length runs)",
     )
     p.add_argument("--check", action="store_true", help="compare onnxruntime with eager PyTorch")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-onnx``; returns the exit code."""
     args = _parser().parse_args(list(argv) if argv is not None else None)
+    graphs = [f"{g}.onnx{data}" for g in ("sequence", "step", "denoiser") for data in ("", ".data")]
+    claim_output_folder(args.out, "sm export-onnx", [*graphs, "export.json"], overwrite=args.overwrite,
+                        marker=lambda folder: (folder / "export.json").is_file())  # fmt: skip
     if args.ckpt is not None:
         network, source = network_from_checkpoint(args.ckpt), args.ckpt
     elif args.pretrained is not None:
@@ -502,7 +511,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.part == "backbone":
         network = backbone_of(network, source)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     specs = network_specs(network, frames=args.frames)
     backbone = backbone_of(network, source)
     record = {

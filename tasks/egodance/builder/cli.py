@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
+from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, default_workers, run_build
 from skeleton_mamba.tasks.motion.option_types import (
     MAX_FRAMES,
@@ -27,6 +29,7 @@ from skeleton_mamba.tasks.motion.option_types import (
     real_option,
     seed_option,
 )
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP, claim_output_folder
 
 __all__ = ["main", "build_parser"]
 
@@ -138,9 +141,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=d.max_faces,
         help="the most triangles a scene file may hold (checked from its header before it is loaded)",
     )
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--no-progress", action="store_false", dest="progress", help="hide the progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="log every skipped window and cleanup")
     return p
+
+
+def _is_build(folder: Path) -> bool:
+    return (folder / "build.json").is_file()
 
 
 def main(argv: list[str]) -> int:
@@ -151,7 +159,11 @@ def main(argv: list[str]) -> int:
         level=logging.INFO if args.pop("verbose") else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    overwrite = args.pop("overwrite")
     cfg = BuildConfig(**args)
+    # an earlier build (its build.json) is resumed; any other non-empty folder is the user's
+    own = ("build.json", "summary.json", layout.SAMPLES, layout.SKIPPED)
+    claim_output_folder(cfg.out, "sm make-ego", own, overwrite=overwrite, marker=_is_build)
     summary = run_build(cfg, motion)
     print(
         f"make-ego: {summary.planned} windows planned; this run placed {summary.placed}, "
