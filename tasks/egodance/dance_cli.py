@@ -47,7 +47,7 @@ from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.motion.export import DANCE_SUFFIXES
+from skeleton_mamba.tasks.motion.export import dance_files
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.option_types import (
     MAX_FRAMES,
@@ -281,19 +281,15 @@ def _list_samples(ckpt: str, checkpoint: dict) -> int:
     return 0
 
 
-def claim_dance_output(out: str, name: str, overwrite: bool) -> None:
+def claim_dance_output(out: str, name: str, render: bool, overwrite: bool) -> None:
     """``--out DIR``: a folder this command may write into; ``--out FILE.npz``: no file beside it replaced
     (:mod:`~skeleton_mamba.tasks.motion.output_folder`)."""
     path = Path(out)
     if path.suffix.lower() == ".npz":
-        siblings = [path.with_suffix(suffix) for suffix in DANCE_SUFFIXES]
+        siblings = [path.with_name(name) for name in dance_files(path.stem, render)]
         claim_output_files(siblings, path, overwrite=overwrite)
     else:
-        claim_output_folder(path, "sm dance", _dance_files(name), overwrite=overwrite)
-
-
-def _dance_files(name: str) -> list[str]:
-    return [f"{name}{suffix}" for suffix in DANCE_SUFFIXES]
+        claim_output_folder(path, "sm dance", dance_files(name, render), overwrite=overwrite)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -304,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
     if not args.list_samples:
-        claim_dance_output(args.out, args.name, args.overwrite)
+        claim_dance_output(args.out, args.name, not args.no_render, args.overwrite)
 
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
@@ -336,7 +332,7 @@ def main(argv: list[str] | None = None) -> int:
     width, height = args.render_size
     music_file, start_s = _music_source(args)
     if out.suffix.lower() != ".npz":
-        record_outputs(out_dir, "sm dance", _dance_files(name))
+        record_outputs(out_dir, "sm dance", dance_files(name, not args.no_render))
     files = write_dance(
         tokens,
         out_dir,

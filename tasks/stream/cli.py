@@ -35,7 +35,7 @@ import soundfile as sf
 from skeleton_mamba.ssd.precision import PRECISION_HELP, PRECISIONS, inference_precision
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
-from skeleton_mamba.tasks.motion.export import DANCE_SUFFIXES, write_motion
+from skeleton_mamba.tasks.motion.export import dance_files, write_motion
 from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, image_size_option, int_option, real_option
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP, claim_output_folder, record_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
@@ -131,7 +131,7 @@ def stream_dance(args: argparse.Namespace) -> int:
     if args.compile and args.precision != "fp32":
         raise InputError(f"--compile steps in fp32 only: drop --compile or --precision {args.precision}")
     name = args.name or ("stdin" if args.music == "-" else Path(args.music).stem)
-    produced = [f"{name}{suffix}" for suffix in DANCE_SUFFIXES] + [f"{name}_stream.json"]
+    produced = [*dance_files(name, not args.no_render), f"{name}_stream.json"]
     out = claim_output_folder(args.out, "sm stream", produced, overwrite=args.overwrite)
     source = AudioSource(args.music, args.chunk_ms / 1e3, args.realtime, args.raw_rate)
     model = _load_dancer(args.ckpt)

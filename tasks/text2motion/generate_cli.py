@@ -145,8 +145,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         frames = parse_length(args.length)
     except ValueError as e:
         raise InputError(str(e)) from e  # names the text given
-    if args.num < 1:
-        raise InputError(f"--num {args.num}: need at least one sample per caption")
     captions = [c for c in args.text for _ in range(args.num)]
     stems = [f"{i:03d}_{slug(caption)}" for i, caption in enumerate(captions)]
     suffixes = (".npy", "_features.npy", ".glb", *((f".{args.render}",) if args.render else ()))
