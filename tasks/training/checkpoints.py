@@ -28,6 +28,7 @@ reads through :func:`load_checkpoint`, writes through a temporary file in the ch
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import inspect
 import io
@@ -422,6 +423,10 @@ def _build_module(cls: type[ModuleT], shell: bytes, map_location: Any, path: Pat
             return cls.load_from_checkpoint(  # type: ignore[attr-defined]
                 io.BytesIO(shell), map_location=map_location, weights_only=True, strict=False
             )
+    except argparse.ArgumentError as err:  # jsonargparse (Lightning's instantiator) refusing a value
+        text = " ".join(str(err).split())
+        text = text if len(text) <= 300 else text[:297] + "..."
+        raise CheckpointError(f"{path}: its hyper-parameters do not fit {cls.__name__} ({text})") from err
     except (KeyError, TypeError, ValueError, RuntimeError, NotImplementedError) as err:
         first = str(err).strip().splitlines()
         raise CheckpointError(

@@ -24,6 +24,7 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
+from lightning.pytorch import LightningModule
 from safetensors.torch import save
 
 from skeleton_mamba.pretrained import (
@@ -114,7 +115,7 @@ def export_pretrained(
         raise CheckpointError(
             f"{ckpt}: its hyper-parameters name no module class (_class_path); pass --module"
         )
-    cls = import_project_class(class_path, str(ckpt))
+    cls = import_project_class(class_path, str(ckpt), LightningModule)
     module, checkpoint = load_module_and_checkpoint(cls, ckpt)
     attribute = network_attribute(module)
     record = module_record(module, checkpoint, attribute)

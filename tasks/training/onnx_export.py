@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 import onnxruntime
 import torch
+from lightning.pytorch import LightningModule
 from torch import nn
 from torch.export import Dim
 
@@ -406,7 +407,7 @@ def network_from_checkpoint(ckpt: str) -> nn.Module:
     class_path = hparams.get("_class_path") if isinstance(hparams, dict) else None
     if not isinstance(class_path, str):
         raise CheckpointError(f"{ckpt}: its hyper-parameters name no module class (_class_path)")
-    module, _ = load_module_and_checkpoint(import_project_class(class_path, ckpt), ckpt)
+    module, _ = load_module_and_checkpoint(import_project_class(class_path, ckpt, LightningModule), ckpt)
     for m in module.modules():
         if type(m).__name__ in NETWORK_SPECS or isinstance(m, SkeletonMamba):
             return m
