@@ -46,6 +46,7 @@ from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.training.checkpoints import (
     check_checkpoint_path,
     check_class_paths,
+    check_finite_tensors,
     load_module_and_checkpoint,
 )
 
@@ -232,8 +233,11 @@ def _folder_checkpoint(source: str | os.PathLike[str], cls: type | None = None) 
         extra_path = folder / MODULE_WEIGHTS_NAME
         if extra_path.exists():
             read_safetensors_header(extra_path, CheckpointError)
-        network = {f"{record['network']}.{k}": v for k, v in load_file(str(folder / WEIGHTS_NAME)).items()}
+        weights = load_file(str(folder / WEIGHTS_NAME))
         extra = load_file(str(extra_path)) if extra_path.exists() else {}
+        check_finite_tensors(weights, str(folder / WEIGHTS_NAME))
+        check_finite_tensors(extra, str(extra_path))
+        network = {f"{record['network']}.{k}": v for k, v in weights.items()}
     except PretrainedError as err:
         raise CheckpointError(str(err)) from err
     except (SafetensorError, OSError) as err:

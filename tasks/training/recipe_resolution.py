@@ -93,8 +93,8 @@ def recipe_description(path: Path) -> str:
 def resolve_recipe(value: str) -> Path | None:
     """The file a ``--recipe`` value names: an existing path, else a packaged recipe; ``None`` if neither."""
     candidate = Path(value).expanduser()
-    if candidate.is_file():
-        return candidate
+    if candidate.is_file() or (candidate.exists() and not candidate.is_dir()):
+        return candidate  # a FIFO or a device too: the bounded reader refuses it, naming what it is
     recipes = packaged_recipes()
     for name in (value, *(value + s for s in RECIPE_SUFFIXES)):
         if name in recipes:
