@@ -69,25 +69,26 @@ def script_json(data: object) -> str:
     return text
 
 
-def _is_number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+def _metric(value: object) -> bool:
+    """A value the page lists: a number, or ``None`` (a JSON ``null``, or a non-finite number read as one)."""
+    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
 
 
-def _number(value: float) -> float | None:
-    """A metric as the page lists it: ``None`` (shown as ``null``) for NaN and infinities."""
-    number = float(value)
-    return number if math.isfinite(number) else None
+def _number(value: float | None) -> float | None:
+    """A metric as the page lists it: ``None`` (shown as ``null``) for NaN, infinities and no value."""
+    number = None if value is None else float(value)
+    return number if number is not None and math.isfinite(number) else None
 
 
 def _numeric_metrics(metrics: dict | None) -> dict[str, float | None]:
     """Top-level numbers (and one level of nested numbers as ``outer.inner``) of a metrics dict; non-finite
-    ones as ``None``."""
+    and null ones as ``None``."""
     out: dict[str, float | None] = {}
     for key, value in (metrics or {}).items():
-        if _is_number(value):
+        if _metric(value):
             out[str(key)] = _number(value)
         elif isinstance(value, dict):
-            out.update({f"{key}.{k}": _number(v) for k, v in value.items() if _is_number(v)})
+            out.update({f"{key}.{k}": _number(v) for k, v in value.items() if _metric(v)})
     return out
 
 
