@@ -156,7 +156,7 @@ def _torch_load(data: bytes | Path, source: str, map_location: Any) -> Any:
     except OSError as err:
         if err.filename is not None:  # the file itself (permissions, a read error): its own one-line message
             raise
-        raise CheckpointError(  # torch's zip reader on a truncated file: "[Errno 22] Invalid argument"
+        raise CheckpointError(  # torch's zip reader on a truncated file: errno 22, "Invalid argument"
             f"{source}: not a readable PyTorch checkpoint (truncated or damaged: {err.strerror or err})"
         ) from None
     except Exception as err:  # any failure to parse untrusted bytes (IndexError, struct.error, ...)
