@@ -33,11 +33,12 @@ class GroupScan(nn.Module):
         mixer: MixerConfig | None = None,
     ):
         super().__init__()
-        paths_t = torch.tensor([list(p) for p in paths], dtype=torch.long)
-        num_groups = paths_t.shape[1]
-        for p in paths_t.tolist():
+        lists = [[int(g) for g in p] for p in paths]  # checked as numbers: no tensor is read (meta builds)
+        num_groups = len(lists[0]) if lists else 0
+        for p in lists:
             if sorted(p) != list(range(num_groups)):
                 raise ValueError(f"group path {p} is not a permutation of 0..{num_groups - 1}")
+        paths_t = torch.tensor(lists, dtype=torch.long)
         self.num_paths, self.num_groups = paths_t.shape
         self.shared = shared
         # Gather index of the concatenated permuted sequence, and the (G, n*G) matrix that

@@ -37,7 +37,19 @@ from typing import Any
 
 import torch
 
+from skeleton_mamba.atomic import atomic_path
+from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.config import SkeletonMambaConfig
+from skeleton_mamba.pretrained_checks import (
+    MAX_CONFIG_BYTES,
+    MAX_PARAMETERS,
+    check_finite_weights,
+    check_header_fits,
+    check_sizes,
+    meta_state,
+    read_safetensors_header,
+    total_values,
+)
 
 __all__ = [
     "CARD_NAME",
@@ -280,11 +292,9 @@ def read_pretrained_config(folder: str | os.PathLike[str]) -> dict:
     """
     path = Path(folder) / CONFIG_NAME
     try:
-        config = json.loads(path.read_text(encoding="utf-8"))
+        config = read_json(path, max_bytes=MAX_CONFIG_BYTES, what=CONFIG_NAME, error=PretrainedError)
     except FileNotFoundError:
         raise PretrainedError(f"{path}: missing (not a from_pretrained folder)") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise PretrainedError(f"{path}: not JSON ({err})") from None
     if not isinstance(config, dict) or config.get("format") != FORMAT:
         raise PretrainedError(
             f"{path}: not a {FORMAT} config (its 'format' is "
@@ -301,15 +311,9 @@ def read_pretrained_config(folder: str | os.PathLike[str]) -> dict:
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path``, then rename it over ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write ``data`` to ``path`` through a temporary file beside it (:mod:`skeleton_mamba.atomic`)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def push_folder_to_hub(
@@ -532,7 +536,18 @@ class PretrainedMixin:
         """A freshly initialised network from a ``config.json`` dict (its class must be ``cls``).
 
         Raises:
-            PretrainedError: another class, or arguments that do not fit ``cls.__init__``.
+            PretrainedError: another class, a size beyond its bound, or arguments that do not fit
+                ``cls.__init__``.
+        """
+        return cls._build(cls.pretrained_kwargs(config, source), source)
+
+    @classmethod
+    def pretrained_kwargs(cls, config: Mapping[str, Any], source: str = CONFIG_NAME) -> dict[str, Any]:
+        """The ``__init__`` arguments a ``config.json`` dict stores, decoded and checked: its class must be
+        ``cls`` and every size within :data:`~skeleton_mamba.pretrained_checks.SIZE_BOUNDS`. Nothing is built.
+
+        Raises:
+            PretrainedError: naming ``source`` and the argument at fault.
         """
         stored = config.get("class")
         if stored != class_name(cls):
@@ -545,48 +560,85 @@ class PretrainedMixin:
             if name not in parameters and not takes_kwargs:
                 raise PretrainedError(f"{source}: {cls.__name__} takes no argument {name!r}")
             kwargs[name] = decode_value(value, hints.get(name, Any), f"{source}: {cls.__name__}.{name}")
+        check_sizes(kwargs, f"{source}: {cls.__name__}", PretrainedError)
+        return kwargs
+
+    @classmethod
+    def _build(cls, kwargs: Mapping[str, Any], source: str, meta: bool = False):
+        """``cls(**kwargs)`` (on the ``meta`` device: sizes only), its refusal naming ``source``."""
         with warnings.catch_warnings():
             for category in cls.pretrained_ignored_warnings:
                 warnings.simplefilter("ignore", category)
             try:
-                return cls(**kwargs)
-            except (TypeError, ValueError, KeyError) as err:
-                raise PretrainedError(f"{source}: {cls.__name__}(...) refused its arguments ({err})") from err
+                return meta_state(cls, kwargs) if meta else cls(**kwargs)
+            except (TypeError, ValueError, KeyError, RuntimeError) as err:
+                first = str(err).strip().splitlines()
+                raise PretrainedError(
+                    f"{source}: {cls.__name__}(...) refused its arguments ({first[0] if first else err!r})"
+                ) from err
+
+    @classmethod
+    def check_pretrained_folder(cls, folder: str | os.PathLike[str], config: Mapping[str, Any]) -> dict:
+        """Check ``folder`` (its ``config.json`` dict ``config``) before anything is allocated; returns the
+        ``__init__`` arguments. The order of :mod:`skeleton_mamba.pretrained_checks`: sizes, the network
+        built on ``meta`` and its value count, the safetensors header against it.
+
+        Raises:
+            PretrainedError: naming the file and what is wrong.
+        """
+        folder = Path(folder)
+        source = str(folder / CONFIG_NAME)
+        kwargs = cls.pretrained_kwargs(config, source)
+        expected = cls._build(kwargs, source, meta=True)
+        values = total_values(expected)
+        if values > MAX_PARAMETERS:
+            raise PretrainedError(
+                f"{source}: {cls.__name__} of {values:,} values, more than a network's {MAX_PARAMETERS:,}"
+            )
+        weights = folder / WEIGHTS_NAME
+        try:
+            header = read_safetensors_header(weights, PretrainedError)
+        except FileNotFoundError:
+            raise PretrainedError(f"{weights}: missing (not a from_pretrained folder)") from None
+        check_header_fits(header, expected, str(weights), cls.__name__, PretrainedError)
+        return kwargs
 
     def load_pretrained_weights(
         self, path: str | os.PathLike[str], device: str | torch.device = "cpu"
     ) -> None:
-        """Load ``model.safetensors`` into this network; every tensor must be present with its shape.
+        """Load ``model.safetensors`` into this network: its header is checked against the network (names,
+        shapes, types) before any tensor is read, the tensors finite before any is copied.
 
         Raises:
-            PretrainedError: an unreadable file, a missing or unexpected tensor, a shape that differs.
+            PretrainedError: an unreadable file, a missing or unexpected tensor, a shape or type that
+                differs, a NaN or Inf.
         """
         from safetensors import SafetensorError  # lazy: optional dependency (pretrained folders only)
         from safetensors.torch import load_file  # lazy: optional dependency (pretrained folders only)
 
+        name = type(self).__name__
+        try:
+            header = read_safetensors_header(path, PretrainedError)
+        except FileNotFoundError:
+            raise PretrainedError(f"{path}: missing (not a from_pretrained folder)") from None
+        check_header_fits(header, self.state_dict(), str(path), name, PretrainedError)  # type: ignore[attr-defined]
         try:
             tensors = load_file(os.fspath(path), device=str(device))
         except (SafetensorError, OSError) as err:
-            if isinstance(err, FileNotFoundError):
-                raise PretrainedError(f"{path}: missing (not a from_pretrained folder)") from None
             raise PretrainedError(f"{path}: not a safetensors file ({err})") from None
-        expected = self.state_dict()  # type: ignore[attr-defined]
-        name = type(self).__name__
-        missing = [k for k in expected if k not in tensors]
-        unexpected = [k for k in tensors if k not in expected]
-        if missing or unexpected:
-            what = f"lacks {missing[0]!r}" if missing else f"has {unexpected[0]!r}, which {name} does not"
-            raise PretrainedError(
-                f"{path}: does not fit {name}: {what} "
-                f"({len(missing)} missing, {len(unexpected)} unexpected tensors)"
-            )
-        for key, tensor in tensors.items():
-            if tensor.shape != expected[key].shape:
-                raise PretrainedError(
-                    f"{path}: tensor {key!r} has shape {tuple(tensor.shape)}, {name} expects "
-                    f"{tuple(expected[key].shape)}"
-                )
+        check_finite_weights(tensors, str(path), PretrainedError)
         self.load_state_dict(tensors, strict=True)  # type: ignore[attr-defined]
+
+    @classmethod
+    def from_folder(cls, folder: str | os.PathLike[str], device: str | torch.device = "cpu"):
+        """The network saved in the local ``folder``, checked (:meth:`check_pretrained_folder`) before it is
+        built, in eval mode."""
+        folder = Path(folder)
+        config = read_pretrained_config(folder)
+        kwargs = cls.check_pretrained_folder(folder, config)
+        model = cls._build(kwargs, str(folder / CONFIG_NAME))
+        model.load_pretrained_weights(folder / WEIGHTS_NAME, device)
+        return model.to(device).eval()
 
     @classmethod
     def from_pretrained(
@@ -599,17 +651,17 @@ class PretrainedMixin:
         token: str | bool | None = None,
         device: str | torch.device = "cpu",
     ):
-        """The network saved in ``source`` (a folder or a Hub id ``org/name``), in eval mode.
+        """The network saved in ``source`` (a folder or a Hub id ``org/name``), in eval mode; checked before
+        anything is allocated (:mod:`skeleton_mamba.pretrained_checks`).
 
         Raises:
-            PretrainedError: not such a folder, another class, config or weights that do not fit.
+            PretrainedError: not such a folder, another class, a size beyond its bound, config or weights
+                that do not fit, non-finite weights.
         """
         folder = resolve_pretrained(
             source, revision=revision, cache_dir=cache_dir, local_files_only=local_files_only, token=token
         )
-        model = cls.from_config(read_pretrained_config(folder), str(folder / CONFIG_NAME))
-        model.load_pretrained_weights(folder / WEIGHTS_NAME, device)
-        return model.to(device).eval()
+        return cls.from_folder(folder, device)
 
     def push_to_hub(
         self,

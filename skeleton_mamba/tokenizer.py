@@ -40,16 +40,17 @@ class InverseHumanTokenizer(nn.Module):
     def __init__(self, groups: Sequence[Sequence[int]], num_joints: int):
         super().__init__()
         index = _group_index(groups)
-        if int(index.max()) >= num_joints or int(index.min()) < 0:
+        joints = [j for g in groups for j in g]  # checked as numbers: no tensor is read (meta builds)
+        if any(j >= num_joints or j < 0 for j in joints):
             raise ValueError(f"group joint indices must lie in [0, {num_joints})")
-        counts = torch.bincount(index, minlength=num_joints)
-        if bool((counts == 0).any()):
-            missing = torch.nonzero(counts == 0).flatten().tolist()
+        counts = [joints.count(j) for j in range(num_joints)]
+        missing = [j for j, count in enumerate(counts) if count == 0]
+        if missing:
             raise ValueError(
                 f"joints {missing} belong to no group; the inverse tokenizer cannot restore them"
             )
         self.register_buffer("index", index, persistent=False)
-        self.register_buffer("inv_count", 1.0 / counts.float(), persistent=False)
+        self.register_buffer("inv_count", 1.0 / torch.tensor(counts, dtype=torch.float32), persistent=False)
         self.num_joints = num_joints
 
     def forward(self, tokens: torch.Tensor) -> torch.Tensor:

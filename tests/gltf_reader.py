@@ -3,10 +3,37 @@ rule world = parent @ T(t) R(q), quaternions x y z w), sharing no code with the 
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
 import pygltflib
+import pytest
+
+NPM = Path(os.environ.get("SM_NPM_CACHE", Path.home() / ".cache" / "skeleton_mamba" / "npm"))
+VALIDATOR = NPM / "node_modules" / "gltf-validator"
+_VALIDATE = (
+    "const v=require(process.argv[1]);const fs=require('fs');"
+    "Promise.all(process.argv.slice(2).map(f=>v.validateBytes(new Uint8Array(fs.readFileSync(f)))))"
+    ".then(r=>console.log(JSON.stringify(r.map(x=>x.issues))))"
+)
+
+
+def assert_khronos_valid(*files: Path) -> None:
+    """The Khronos glTF validator (npm ``gltf-validator``, as ``.ci/run`` installs it) finds no error and no
+    warning in ``files``; skips the calling test when node or the package is absent."""
+    node = shutil.which("node")
+    if node is None or not VALIDATOR.is_dir():
+        pytest.skip(f"Khronos validator not run: needs node and `npm install gltf-validator` in {NPM}")
+    result = subprocess.run(
+        [node, "-e", _VALIDATE, str(VALIDATOR), *map(str, files)], capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 0, result.stderr
+    for path, issues in zip(files, json.loads(result.stdout)):
+        assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, (path, issues["messages"])
 
 
 def accessor(gltf: pygltflib.GLTF2, blob: bytes, index: int) -> np.ndarray:

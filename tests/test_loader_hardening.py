@@ -105,11 +105,20 @@ def _clip(pose_value=0.5, frame_indices=(1, 2)) -> dict:
     return {"data": frames, "label": "abseiling", "label_index": 0}
 
 
-@pytest.mark.parametrize("value", [float("nan"), float("inf"), 1e39])
-def test_kinetics_non_finite_pose_is_refused_with_its_entry(tmp_path, value):
+def test_kinetics_pose_beyond_float32_is_refused_with_its_entry(tmp_path):
     path = tmp_path / "clip.json"
-    path.write_text(json.dumps(_clip(value)))
+    path.write_text(json.dumps(_clip(1e39)))
     with pytest.raises(KineticsFileError, match=r"clip.json: data\[1\].skeleton\[0\].pose: value: .* 7"):
+        read_kinetics_clip(path)
+
+
+@pytest.mark.parametrize("value, token", [(float("nan"), "NaN"), (float("inf"), "Infinity")])
+def test_kinetics_non_finite_pose_is_refused_at_its_line_and_column(tmp_path, value, token):
+    path = tmp_path / "clip.json"
+    text = json.dumps(_clip(value))
+    path.write_text(text)
+    column = text.index(token) + 1  # one line of JSON: the column is the token's offset + 1
+    with pytest.raises(KineticsFileError, match=rf"clip.json:1:{column}: {token} is not a finite number"):
         read_kinetics_clip(path)
 
 
@@ -180,8 +189,12 @@ def test_render_refuses_frame_rates_that_would_grow_allocations(tmp_path, capsys
     with pytest.raises(ValueError, match="outside"):
         check_fps(0.001)
     motion = save_motion(tmp_path / "m.npz", MotionData(30.0, "smpl24", joints=np.zeros((3, 24, 3))))
-    assert sm_main(["render", str(motion), "--out", str(tmp_path / "a.mp4"), "--fps", "1e7"]) == 2
-    assert "--fps 1e+07 is outside 1-1000" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:  # range-checked where parsed: argparse's usage and error line
+        sm_main(["render", str(motion), "--out", str(tmp_path / "a.mp4"), "--fps", "1e7"])
+    assert info.value.code == 2
+    assert "argument --fps: expected a frame rate (frames per second) from 1 to 1000, got 1e7" in (
+        capsys.readouterr().err
+    )
     assert sm_main(["render", str(_bvh(tmp_path, frame_time="1e-9")), "--out", str(tmp_path / "b.mp4")]) == 2
     assert "Frame Time 1e-09 s is outside" in capsys.readouterr().err
     assert not (tmp_path / "a.mp4").exists() and not (tmp_path / "b.mp4").exists()

@@ -258,10 +258,10 @@ def test_sm_stream_compile_falls_back_to_the_eager_step_with_a_warning(checkpoin
 
     monkeypatch.setattr(CompiledStep, "__call__", no_compiler)
     wav = write_music(tmp_path / "song.wav", synthesize_music(120.0, 1.0, sr=22050, seed=4))
-    args = ["--ckpt", str(checkpoint), "--music", str(wav), "--no-render", "--out", str(tmp_path)]
+    args = ["--ckpt", str(checkpoint), "--music", str(wav), "--no-render", "--out", str(tmp_path / "live")]
     with pytest.warns(RuntimeWarning, match="compiling the frame step failed .*running it eagerly"):
         assert main([*args, "--compile"]) == 0
-    report = json.loads((tmp_path / "song_stream.json").read_text())
+    report = json.loads((tmp_path / "live" / "song_stream.json").read_text())
     assert not report["compiled"] and report["compile_seconds"] is None and report["frames"] == 30
 
 

@@ -11,6 +11,14 @@ from skeleton_mamba.tasks.motion.cli_options import (
     add_sampling_arguments,
     command_parser,
 )
+from skeleton_mamba.tasks.motion.option_types import (
+    MAX_FRAMES,
+    image_size_option,
+    int_option,
+    real_option,
+    seed_option,
+)
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 
 __all__ = ["DANCE_BF16_ERROR", "DEFAULT_BATCH_WINDOWS", "build_parser"]
 
@@ -29,14 +37,6 @@ EXAMPLES = """examples:
   sm dance --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt --list-samples
   sm dance --ckpt last.ckpt --sample runs/egodance_demo/data/ego/samples/<id> --out dance/
   sm dance --ckpt last.ckpt --music song.wav --video ego.mp4 --out dance/ --sampler ddpm"""
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
-    return width, height
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -72,15 +72,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", help="output folder (or FILE.npz: files named after FILE); required to dance")
     p.add_argument("--name", default="dance", help="file stem inside an output folder")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
     p.add_argument(
         "--render-size",
-        type=_size,
+        type=image_size_option,
         default=(640, 480),
         help="video WIDTHxHEIGHT, multiples of 16 (default: 640x480)",
     )
     add_sampling_arguments(p)
-    p.add_argument("--head-weight", type=float, default=None, help="head guidance step size (0: off)")
+    p.add_argument(
+        "--head-weight",
+        type=real_option(0.0, 1e3, "a step size"),
+        default=None,
+        help="head guidance step size (0: off)",
+    )
     p.add_argument(
         "--head",
         choices=("estimate", "oracle", "none"),
@@ -88,16 +94,26 @@ def build_parser() -> argparse.ArgumentParser:
         help="head guidance targets: estimated from the video (default for vision models), the ground-truth "
         "camera path of a --sample (oracle), or none (default for music-only models)",
     )
-    p.add_argument("--window", type=int, default=150, help="frames per window: the training length")
-    p.add_argument("--overlap", type=int, default=75, help="frames shared by consecutive long-form windows")
+    p.add_argument(
+        "--window",
+        type=int_option(1, MAX_FRAMES, "a frame count"),
+        default=150,
+        help="frames per window: the training length",
+    )
+    p.add_argument(
+        "--overlap",
+        type=int_option(0, MAX_FRAMES, "a frame count"),
+        default=75,
+        help="frames shared by consecutive long-form windows",
+    )
     p.add_argument(
         "--batch-windows",
-        type=int,
+        type=int_option(1, 10_000, "a window count"),
         default=DEFAULT_BATCH_WINDOWS,
         help="long-form windows denoised together (memory is bounded by this many windows)",
     )
     p.add_argument("--no-ema", action="store_true", help="use the raw weights instead of the EMA")
-    p.add_argument("--seed", type=int, default=0, help="noise seed of the sampler")
+    p.add_argument("--seed", type=seed_option, default=0, help="noise seed of the sampler")
     add_quiet_argument(p)
     p.add_argument(
         "--compile",

@@ -44,10 +44,12 @@ from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.export import dance_files
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.motion.music import BEAT
+from skeleton_mamba.tasks.motion.output_folder import claim_output_files, claim_output_folder, record_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
@@ -155,6 +157,17 @@ def _list_samples(ckpt: str, checkpoint: dict) -> int:
     return 0
 
 
+def claim_dance_output(out: str, name: str, render: bool, overwrite: bool) -> None:
+    """``--out DIR``: a folder this command may write into; ``--out FILE.npz``: no file beside it replaced
+    (:mod:`~skeleton_mamba.tasks.motion.output_folder`)."""
+    path = Path(out)
+    if path.suffix.lower() == ".npz":
+        siblings = [path.with_name(name) for name in dance_files(path.stem, render)]
+        claim_output_files(siblings, path, overwrite=overwrite)
+    else:
+        claim_output_folder(path, "sm dance", dance_files(name, render), overwrite=overwrite)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -162,6 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("the following arguments are required: --out")
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
+    if not args.list_samples:
+        claim_dance_output(args.out, args.name, not args.no_render, args.overwrite)
 
     if args.head == "oracle" and not args.sample:
         raise InputError("--head oracle needs the ground-truth camera path of a --sample")
@@ -185,6 +200,8 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
     width, height = args.render_size
+    if out.suffix.lower() != ".npz":
+        record_outputs(out_dir, "sm dance", dance_files(name, not args.no_render))
     files = write_dance(
         tokens,
         out_dir,

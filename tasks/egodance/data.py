@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
@@ -141,7 +142,7 @@ class EgoDanceDataset(Dataset):
         missing = _missing(folder)
         if missing:
             raise DatasetNotFoundError(f"{folder}: sample folder lacks {', '.join(missing)}")
-        meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+        meta = read_json(folder / "meta.json", error=DataFileError)
         motion = load_motion(folder / "motion.npz")
         if motion.poses is None or motion.trans is None:
             raise DataFileError(f"{folder / 'motion.npz'}: needs smpl_poses and smpl_trans")
@@ -270,7 +271,7 @@ class EgoDanceDataModule(SplitDataModule):
         folders = self.check_data()
         sources = []
         for folder in folders:
-            meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+            meta = read_json(folder / "meta.json", error=DataFileError)
             sources.append((meta.get("motion") or {}).get("source") or folder.name)
         split_of = self.assign_splits(sources)
         splits: dict[str, list[Path]] = {"train": [], "val": [], "test": []}
@@ -393,7 +394,7 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
                     "swing_side": hp.swing_side}  # fmt: skip
         record = motions / "generator.json"
         if motions.is_dir() and any(motions.glob("*.npz")):
-            found = json.loads(record.read_text(encoding="utf-8")) if record.is_file() else None
+            found = read_json(record, error=DataFileError) if record.is_file() else None
             if found != settings:
                 raise DataFileError(
                     f"{motions} holds dances generated with {found or 'unrecorded settings'}, "

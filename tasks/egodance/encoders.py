@@ -22,6 +22,7 @@ import torch
 from torch import nn
 from transformers import ResNetConfig, ResNetModel
 
+from skeleton_mamba.pretrained_checks import building_on_meta
 from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
@@ -58,6 +59,8 @@ def load_resnet(name_or_path: str) -> ResNetModel:
     local copy or to choose a random encoder explicitly.
     """
     path = Path(name_or_path).expanduser()
+    if building_on_meta():  # sizes only: the architecture of its config, no weights read
+        return ResNetModel(ResNetConfig.from_pretrained(path if path.is_dir() else name_or_path))
     if path.is_dir():
         return ResNetModel.from_pretrained(path)
     if path.exists() or name_or_path.startswith((".", "/", "~")) or name_or_path.count("/") != 1:

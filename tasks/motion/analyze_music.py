@@ -29,6 +29,7 @@ from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack, extract_music_features
+from skeleton_mamba.tasks.motion.option_types import real_option
 
 __all__ = ["build_parser", "main"]
 
@@ -43,7 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=int, choices=(30, 60), default=60, help="feature frame rate")
     p.add_argument("--out", type=Path, default=None, help="save the (T, 35) features to this .npy file")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
-    p.add_argument("--start-bpm", type=float, default=None, help="beat-tracker tempo prior (default: auto)")
+    p.add_argument(
+        "--start-bpm",
+        type=real_option(1.0, 1000.0, "a tempo (BPM)"),
+        default=None,
+        help="beat-tracker tempo prior (default: auto)",
+    )
     p.add_argument("--cache-dir", type=Path, default=None, help="feature cache folder")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the feature cache")
     return p

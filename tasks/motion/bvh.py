@@ -31,6 +31,9 @@ from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
 
 __all__ = ["BvhError", "BvhMotion", "load_bvh", "save_bvh", "smpl_to_bvh", "bvh_to_smpl"]
 
+# |value| of any BVH number (offsets and positions in file units, often centimetres: 1000 km; rotations in
+# degrees) beyond which a file is corrupt or hostile: sums of such values stay far inside float32
+MAX_BVH_VALUE = 1e8
 _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
@@ -127,6 +130,8 @@ def _floats(tokens: list[str], n: int, source: str, line: int) -> np.ndarray:
         raise _fail(source, line, f"expected {n} numbers, got {len(values)}")
     if not all(map(math.isfinite, values)):
         raise _fail(source, line, f"expected {n} finite numbers, got {' '.join(tokens)!r}")
+    if any(abs(v) > MAX_BVH_VALUE for v in values):
+        raise _fail(source, line, f"{' '.join(tokens)!r}: beyond the plausible {MAX_BVH_VALUE:g}")
     return np.asarray(values)
 
 
@@ -236,11 +241,15 @@ def _parse(text: str, source: str) -> BvhMotion:
     if values.shape[1] != num_channels:
         msg = f"motion lines have {values.shape[1]} values, channels need {num_channels}"
         raise _fail(source, i + 1, msg)
-    bad = np.argwhere(~np.isfinite(values))
+    with np.errstate(invalid="ignore"):
+        bad = np.argwhere(~(np.abs(values) <= MAX_BVH_VALUE))  # NaN fails the comparison too
     if len(bad):
         frame, column = bad[0]
-        msg = f"frame {frame + 1}, channel {column + 1}: {values[frame, column]} (NaN and Inf are refused)"
-        raise _fail(source, rows[frame][0], msg)
+        value = values[frame, column]
+        why = (
+            "NaN and Inf are refused" if not np.isfinite(value) else f"beyond the plausible {MAX_BVH_VALUE:g}"
+        )
+        raise _fail(source, rows[frame][0], f"frame {frame + 1}, channel {column + 1}: {value:g} ({why})")
     return BvhMotion(names, parents, np.stack(offsets), channels, frame_time, values, end_sites)
 
 

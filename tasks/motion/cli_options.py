@@ -14,6 +14,7 @@ import sys
 
 from skeleton_mamba.precision_names import PRECISION_HELP, PRECISIONS
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.option_types import real_option
 
 __all__ = [
     "SAMPLERS",
@@ -166,10 +167,15 @@ def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--steps", type=_steps, default=None, help="DDIM steps (alone: DDIM; default: the checkpoint's)"
     )
-    parser.add_argument("--eta", type=float, default=None, help="DDIM noise eta (default: the checkpoint's)")
+    parser.add_argument(
+        "--eta",
+        type=real_option(0.0, 10.0, "a DDIM eta"),
+        default=None,
+        help="DDIM noise eta (default: the checkpoint's)",
+    )
     parser.add_argument(
         "--guidance",
-        type=float,
+        type=real_option(0.0, 100.0, "a guidance weight"),
         default=None,
         help="classifier-free guidance weight (default: the checkpoint's)",
     )

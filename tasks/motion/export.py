@@ -22,7 +22,12 @@ from skeleton_mamba.tasks.motion.gltf import from_motion_data, write_glb
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 
-__all__ = ["DanceFiles", "write_motion", "write_music_slice"]
+__all__ = ["DanceFiles", "dance_files", "write_motion", "write_music_slice"]
+
+
+def dance_files(name: str, render: bool = True) -> list[str]:
+    """The names :func:`write_motion` writes for ``name`` (``render``: the mp4 and the music slice too)."""
+    return [f"{name}{suffix}" for suffix in (".npz", ".bvh", ".glb", *((".mp4", ".wav") if render else ()))]
 
 
 @dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.option_types import fps_option
 
 __all__ = ["build_parser"]
 
@@ -21,5 +22,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output .glb")
     p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
     p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the file's)")
+    p.add_argument(
+        "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the file's)"
+    )
+    p.add_argument(
+        "--overwrite", action="store_true", help="with --music: replace an existing .wav beside --out"
+    )
     return p

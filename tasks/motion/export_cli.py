@@ -16,6 +16,7 @@ from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.export_args import build_parser
 from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.output_folder import claim_output_files
 
 __all__ = ["main"]
 
@@ -27,6 +28,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if out.suffix.lower() != ".glb":
             raise InputError(f"{out}: the output must be a .glb file")
+        if args.music is not None:  # the .wav beside the .glb: not named by the user, so not replaced unasked
+            claim_output_files([out.with_suffix(".wav")], out, overwrite=args.overwrite)
         motion = load_skeleton_motion(args.motion, skeleton=args.skeleton, motion_fps=args.motion_fps)
         write_glb(motion, out, name=Path(args.motion).stem)
         print(f"wrote {out} ({len(motion.names)} joints, {motion.num_frames} frames at {motion.fps:g} fps)")

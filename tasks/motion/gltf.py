@@ -14,6 +14,12 @@ Every motion the toolkit reads (:func:`load_skeleton_motion`) becomes a :class:`
 
 A node's world transform is its parent's times ``T(translation) R(rotation)``, the glTF rule, which is the
 toolkit's forward kinematics (:mod:`.kinematics`), so the file reproduces the source's joint positions.
+
+Before anything is written a motion is checked (:func:`check_skeleton_motion`, naming the source file): at
+least one frame, a frame rate in :data:`~.value_checks.FPS_RANGE`, key times that still increase once stored
+as float32, at most :data:`MAX_JOINTS` joints (``JOINTS_0`` may only be ``UNSIGNED_BYTE`` or
+``UNSIGNED_SHORT`` in glTF 2.0, so more joints cannot be bound), and finite offsets, translations and
+rotations within :data:`~.value_checks.MAX_POSITION_M`.
 """
 
 from __future__ import annotations
@@ -30,12 +36,25 @@ from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.bvh import load_bvh
+from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
 from skeleton_mamba.tasks.motion.render_cli import load_joints
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_quaternion
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.value_checks import MAX_POSITION_M, check_finite, check_fps, check_magnitude
 
-__all__ = ["SkeletonMotion", "from_motion_data", "from_joints", "load_skeleton_motion", "write_glb"]
+__all__ = [
+    "MAX_JOINTS",
+    "SkeletonMotion",
+    "check_skeleton_motion",
+    "from_motion_data",
+    "from_joints",
+    "glb_bytes",
+    "load_skeleton_motion",
+    "write_glb",
+]
+
+MAX_JOINTS = 65_535  # JOINTS_0 as UNSIGNED_SHORT, the widest component type glTF 2.0 allows for it
 
 
 @dataclass
@@ -101,6 +120,35 @@ def from_joints(
     )
 
 
+def check_skeleton_motion(motion: SkeletonMotion, source: str) -> SkeletonMotion:
+    """``motion`` when glTF can hold it (module docstring), else :class:`InputError` naming ``source``."""
+    frames, joints = motion.num_frames, len(motion.names)
+    if frames < 1:
+        raise InputError(f"{source}: the motion has no frames")
+    if not 1 <= joints <= MAX_JOINTS:
+        raise InputError(
+            f"{source}: {joints:,} joints; a glTF skin binds 1 to {MAX_JOINTS:,} (16-bit JOINTS_0 indices)"
+        )
+    try:
+        check_fps(float(motion.fps), "frame rate")
+    except ValueError as err:
+        raise InputError(f"{source}: {err}") from None
+    times = (np.arange(frames) / motion.fps).astype(np.float32)
+    if frames > 1 and not np.all(np.diff(times) > 0):
+        raise InputError(f"{source}: {frames:,} frames at {motion.fps:g} fps: the key times stop increasing "
+                         "in float32 (glTF's time type); split the motion")  # fmt: skip
+    arrays = [
+        ("offsets", motion.offsets, ("joint",)),
+        ("translations", motion.translations, ("frame", "joint")),
+    ]
+    for what, array, axes in arrays:
+        check_finite(np.asarray(array), source, what, axes, InputError)
+        check_magnitude(np.asarray(array), MAX_POSITION_M, source, what, axes, InputError)
+    if motion.rotations is not None:
+        check_finite(np.asarray(motion.rotations), source, "rotations", ("frame", "joint"), InputError)
+    return motion
+
+
 def load_skeleton_motion(
     path: str | PathLike[str], skeleton: str | None = None, motion_fps: float | None = None
 ) -> SkeletonMotion:
@@ -113,16 +161,17 @@ def load_skeleton_motion(
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such motion file")
     suffix = path.suffix.lower()
-    if suffix == ".npz":
-        motion = load_motion(path)
-    elif suffix == ".pkl":
-        motion = load_aistpp_motion(path)
+    if suffix in (".npz", ".pkl"):
+        motion = load_motion(path) if suffix == ".npz" else load_aistpp_motion(path)
+        if motion_fps is not None:
+            motion.fps = motion_fps
+        skeleton_motion = from_motion_data(motion)
     elif suffix == ".bvh":
         bvh = load_bvh(path)
         root = bvh.parents.index(-1)
         has_position = [any(c.endswith("position") for c in chs) for chs in bvh.channels]
         has_position[root] = True
-        return SkeletonMotion(
+        skeleton_motion = SkeletonMotion(
             list(bvh.names),
             list(bvh.parents),
             motion_fps or bvh.fps,
@@ -133,10 +182,8 @@ def load_skeleton_motion(
         )
     else:
         clip = load_joints(path, skeleton=skeleton, motion_fps=motion_fps)
-        return from_joints(clip.joints, None, clip.fps, clip.parents, clip.names)
-    if motion_fps is not None:
-        motion.fps = motion_fps
-    return from_motion_data(motion)
+        skeleton_motion = from_joints(clip.joints, None, clip.fps, clip.parents, clip.names)
+    return check_skeleton_motion(skeleton_motion, str(path))
 
 
 def _quaternions_xyzw(rotations: np.ndarray) -> np.ndarray:
@@ -178,6 +225,12 @@ class _Buffer:
 
     def add(self, array: np.ndarray, kind: str, min_max: bool = False, target: int | None = None) -> int:
         integer = np.issubdtype(np.asarray(array).dtype, np.integer)
+        if (
+            integer
+            and np.asarray(array).size
+            and not 0 <= np.asarray(array).min() <= np.max(array) <= MAX_JOINTS
+        ):
+            raise ValueError(f"joint indices beyond UNSIGNED_SHORT (0 to {MAX_JOINTS}) cannot be stored")
         data = np.ascontiguousarray(array, np.uint16 if integer else np.float32)
         self.blob += b"\0" * (-len(self.blob) % 4)
         self.gltf.bufferViews.append(
@@ -199,11 +252,23 @@ class _Buffer:
 
 
 def write_glb(motion: SkeletonMotion, out: str | PathLike[str], name: str = "motion") -> Path:
-    """Write ``motion`` as a ``.glb`` (module docstring for the layout), atomically; returns the path."""
+    """Write ``motion`` as a ``.glb`` (module docstring for the layout), atomically; returns the path.
+
+    Raises:
+        InputError: a motion glTF cannot hold (:func:`check_skeleton_motion`), naming ``out``.
+    """
     out = Path(out)
+    data = glb_bytes(motion, name, str(out))
+    with atomic_path(out) as tmp:
+        tmp.write_bytes(data)
+    return out
+
+
+def glb_bytes(motion: SkeletonMotion, name: str = "motion", source: str = "motion") -> bytes:
+    """``motion`` as the bytes of a ``.glb`` (module docstring), checked first (:func:`check_skeleton_motion`,
+    errors naming ``source``)."""
+    check_skeleton_motion(motion, source)
     num_joints = len(motion.names)
-    if motion.num_frames < 1:
-        raise ValueError(f"{out}: the motion has no frames")
     gltf = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0", generator="skeleton-mamba"))
     buffer = _Buffer(gltf)
     rotations = None if motion.rotations is None else _quaternions_xyzw(motion.rotations)
@@ -264,6 +329,7 @@ def write_glb(motion: SkeletonMotion, out: str | PathLike[str], name: str = "mot
     gltf.animations.append(animation)
     gltf.buffers.append(pygltflib.Buffer(byteLength=len(buffer.blob)))
     gltf.set_binary_blob(bytes(buffer.blob))
-    with atomic_path(out) as tmp:
-        gltf.save_binary(str(tmp))
-    return out
+    try:
+        return b"".join(gltf.save_to_bytes())
+    except ValueError as err:  # pygltflib's strict JSON: a value the checks above let through
+        raise InputError(f"{source}: cannot be written as glTF ({err})") from err

@@ -37,7 +37,13 @@ from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.render_args import build_parser
 from skeleton_mamba.tasks.motion.resample import resample_linear
-from skeleton_mamba.tasks.motion.value_checks import check_finite, check_fps, load_npy
+from skeleton_mamba.tasks.motion.value_checks import (
+    MAX_POSITION_M,
+    check_finite,
+    check_fps,
+    check_magnitude,
+    load_npy,
+)
 
 __all__ = ["JointsClip", "load_joints", "render_file", "main"]
 
@@ -92,8 +98,11 @@ def load_joints(
         skel = get_skeleton(name)
         if skel.num_joints != joints.shape[1]:
             raise ValueError(f"{path}: {joints.shape[1]} joints, skeleton {skel.name} has {skel.num_joints}")
+        if joints.shape[0] == 0:
+            raise InputError(f"{path}: a joints file of zero frames")
         fps = motion_fps or _DEFAULT_FPS.get(skel.name, 30.0)
         joints = check_finite(joints.astype(np.float64), str(path), "joints", ("frame", "joint"))
+        check_magnitude(joints, MAX_POSITION_M, str(path), "joints", ("frame", "joint"), unit=" m")
         return _from_skeleton(joints, name, fps)
     if suffix == ".bvh":
         bvh = load_bvh(path)

@@ -25,6 +25,7 @@ from typing import BinaryIO
 import numpy as np
 
 from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.tasks.motion.option_types import FPS_RANGE  # the bound of options and files alike
 
 __all__ = [
     "FPS_RANGE",
@@ -44,7 +45,6 @@ __all__ = [
 # What a damaged .npy header makes numpy raise (its header is a Python literal parsed by ast).
 NPY_HEADER_ERRORS = (ValueError, OSError, EOFError, SyntaxError, tokenize.TokenError)
 
-FPS_RANGE = (1.0, 1000.0)
 MAX_NPZ_MEMBER_BYTES = 1 << 30  # one array of an .npz, inflated: at most 1 GiB
 MAX_NPZ_MEMBERS = 256  # arrays in one .npz
 MAX_POSITION_M = 1e6  # |coordinate| of a position in metres beyond this is a corrupt or hostile file

@@ -7,12 +7,22 @@ grid with shadows, fits an orbit camera to the whole motion, and has play / paus
 the audio element is the clock and a scrub moves it. Several motions stand side by side (or ``--overlay``),
 named and coloured, with the numeric metrics of a ``demo.json`` listed. ``window.smViewer`` exposes the
 clock, ``seek(t)``, the camera and the projection of each motion's root to canvas pixels.
+
+Hostile input cannot break the page: the embedded data is strict JSON (:func:`script_json`: a non-finite
+metric is written as ``null``, every ``<``, ``>`` and ``&`` of every string as a ``\\u`` escape, so no name,
+key or value can close the ``<script>`` element or open a comment, and U+2028 / U+2029 escaped too), the
+title is HTML-escaped, the metrics file is read by the project's bounded JSON reader (at most
+:data:`MAX_METRICS_BYTES`), and the music must be audio the project's reader accepts, at most
+:data:`MAX_MUSIC_BYTES` (it is embedded whole).
 """
 
 from __future__ import annotations
 
 import base64
+import html
 import json
+import math
+import re
 import sys
 from collections.abc import Sequence
 from importlib.resources import files
@@ -21,12 +31,19 @@ from pathlib import Path
 
 import numpy as np
 
+from skeleton_mamba.bounded_read import read_bytes, read_json
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
-from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, glb_bytes, load_skeleton_motion
 from skeleton_mamba.tasks.motion.view_args import build_parser
 
-__all__ = ["write_view", "main"]
+__all__ = ["MAX_METRICS_BYTES", "MAX_MUSIC_BYTES", "main", "script_json", "write_view"]
+
+MAX_METRICS_BYTES = 16 << 20  # a metrics file (a demo's demo.json is a few KiB)
+MAX_MUSIC_BYTES = 128 << 20  # music embedded in the page: 12 minutes of CD-quality WAV
+# Characters that could end the <script> element or start a comment inside it, or end a JS line
+_SCRIPT_ESCAPES = {"<": "\\u003c", ">": "\\u003e", "&": "\\u0026"}
 
 _AUDIO_TYPES = {
     ".wav": "audio/wav",
@@ -41,24 +58,36 @@ def _data_uri(data: bytes, mime: str) -> str:
     return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
 
 
-def _glb_bytes(motion: SkeletonMotion, name: str, folder: Path) -> bytes:
-    path = write_glb(motion, folder / f".{name}.view.glb", name=name)
-    try:
-        return path.read_bytes()
-    finally:
-        path.unlink()
+def script_json(data: object) -> str:
+    """``data`` as strict JSON (``NaN`` / ``Infinity`` refused) safe inside a ``<script>`` element: every
+    ``<``, ``>``, ``&``, U+2028 and U+2029 (which can only occur inside JSON strings) as its ``\\u`` escape,
+    which ``JSON.parse`` reads back unchanged."""
+    text = json.dumps(data, allow_nan=False, ensure_ascii=True)  # ASCII: U+2028 / U+2029 escaped already
+    for char, escape in _SCRIPT_ESCAPES.items():
+        text = text.replace(char, escape)
+    return text
 
 
-def _numeric_metrics(metrics: dict | None) -> dict[str, float | str]:
-    """Top-level numbers (and one level of nested numbers as ``outer.inner``) of a metrics dict."""
-    out: dict[str, float | str] = {}
+def _metric(value: object) -> bool:
+    """A value the page lists: a number, or ``None`` (a JSON ``null``, or a non-finite number read as one)."""
+    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
+
+
+def _number(value: float | None) -> float | None:
+    """A metric as the page lists it: ``None`` (shown as ``null``) for NaN, infinities and no value."""
+    number = None if value is None else float(value)
+    return number if number is not None and math.isfinite(number) else None
+
+
+def _numeric_metrics(metrics: dict | None) -> dict[str, float | None]:
+    """Top-level numbers (and one level of nested numbers as ``outer.inner``) of a metrics dict; non-finite
+    and null ones as ``None``."""
+    out: dict[str, float | None] = {}
     for key, value in (metrics or {}).items():
-        if isinstance(value, bool):
-            continue
-        if isinstance(value, (int, float)):
-            out[str(key)] = float(value)
+        if _metric(value):
+            out[str(key)] = _number(value)
         elif isinstance(value, dict):
-            out.update({f"{key}.{k}": float(v) for k, v in value.items() if isinstance(v, (int, float))})
+            out.update({f"{key}.{k}": _number(v) for k, v in value.items() if _metric(v)})
     return out
 
 
@@ -83,44 +112,40 @@ def write_view(
         raise ValueError(f"{out}: no motion to view")
     if isinstance(metrics, (str, PathLike)):
         path = Path(metrics)
-        try:
-            metrics = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: not a JSON file ({e.msg} at line {e.lineno})") from None
+        bounds = {"max_bytes": MAX_METRICS_BYTES, "non_finite": "null"}
+        metrics = read_json(path, **bounds, what="metrics file", error=InputError)
         if not isinstance(metrics, dict):
-            raise ValueError(f"{path}: expected a JSON object of metrics")
-    out.parent.mkdir(parents=True, exist_ok=True)
+            raise InputError(f"{path}: expected a JSON object of metrics")
+    entries = [  # checked and written first: the spacing below reads only checked motions
+        {"name": name, "glb": base64.b64encode(glb_bytes(m, f"m{i}", name)).decode("ascii")}
+        for i, (name, m) in enumerate(motions)
+    ]
     spacing = 0.0
     if not overlay:
         extents = [np.ptp(np.asarray(m.translations)[:, :, 0]) for _, m in motions]  # rough body width
         spacing = max(1.2, 1.5 * max(float(e) for e in extents))
-    floor = 0.0
-    entries = [
-        {"name": name, "glb": base64.b64encode(_glb_bytes(m, f"m{i}", out.parent)).decode("ascii")}
-        for i, (name, m) in enumerate(motions)
-    ]
     audio = ""
     if music is not None:
         music = Path(music)
-        if not music.is_file():
-            raise FileNotFoundError(f"{music}: no such music file")
         mime = _AUDIO_TYPES.get(music.suffix.lower())
         if mime is None:
-            raise ValueError(f"{music}: unsupported audio type {music.suffix!r} ({', '.join(_AUDIO_TYPES)})")
-        audio = f'<audio id="music" preload="auto" src="{_data_uri(music.read_bytes(), mime)}"></audio>'
+            raise InputError(f"{music}: unsupported audio type {music.suffix!r} ({', '.join(_AUDIO_TYPES)})")
+        probe_audio(music)  # audio the project's reader accepts (header checked), not any file
+        sound = read_bytes(music, max_bytes=MAX_MUSIC_BYTES, what="music file to embed", error=InputError)
+        audio = f'<audio id="music" preload="auto" src="{_data_uri(sound, mime)}"></audio>'
     assets = files("skeleton_mamba.tasks.motion.viewer")
-    data = {"motions": entries, "metrics": _numeric_metrics(metrics), "spacing": spacing, "floor": floor}
-    page = (
-        assets.joinpath("viewer.html")
-        .read_text(encoding="utf-8")
-        .replace("__TITLE__", " vs ".join(name for name, _ in motions).replace("<", "&lt;"))
-        .replace(
-            "__THREE__", _data_uri(assets.joinpath("three.module.min.js").read_bytes(), "text/javascript")
-        )
-        .replace("__ORBIT__", _data_uri(assets.joinpath("OrbitControls.js").read_bytes(), "text/javascript"))
-        .replace("__AUDIO__", audio)
-        .replace("__DATA__", json.dumps(data).replace("</", "<\\/"))
-    )
+    data = {"motions": entries, "metrics": _numeric_metrics(metrics), "spacing": spacing, "floor": 0.0}
+    fields = {
+        "__TITLE__": html.escape(" vs ".join(name for name, _ in motions)),
+        "__THREE__": _data_uri(assets.joinpath("three.module.min.js").read_bytes(), "text/javascript"),
+        "__ORBIT__": _data_uri(assets.joinpath("OrbitControls.js").read_bytes(), "text/javascript"),
+        "__AUDIO__": audio,
+        "__DATA__": script_json(data),
+    }
+    template = assets.joinpath("viewer.html").read_text(encoding="utf-8")
+    # one pass: a placeholder spelled inside a motion's name is not substituted again
+    page = re.sub("|".join(fields), lambda match: fields[match.group()], template)
+    out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(out, "w") as f:
         f.write(page)
     return out

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.option_types import fps_option
 
 __all__ = ["build_parser"]
 
@@ -19,5 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--metrics", default=None, help="a JSON file of metrics to list (e.g. demo.json)")
     p.add_argument("--overlay", action="store_true", help="draw the motions on top of one another")
     p.add_argument("--skeleton", default=None, help="skeleton of .npy joint files (smpl24, ntu25, ...)")
-    p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the files')")
+    p.add_argument(
+        "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the files')"
+    )
     return p

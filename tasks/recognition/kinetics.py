@@ -15,21 +15,21 @@ every frame the people are sorted by their summed joint score and the best ``num
 (slots are per frame, not tracked). Unlike ST-GCN's fixed 300-frame buffer indexed by ``frame_index``, the
 clip keeps its true length, PYSKL style: frame ``i`` lands at ``frame_index[i] - min(frame_index)``.
 
-Files are parsed with bounds: at most :data:`MAX_JSON_BYTES` bytes, nested at most :data:`MAX_JSON_DEPTH`
-levels (checked on the text before parsing), integers of at most :data:`MAX_INT_DIGITS` digits, label
-indices below :data:`MAX_LABEL_INDEX`, and pose / score values that are JSON numbers (not strings).
+Files are parsed by the project's bounded reader (:mod:`skeleton_mamba.bounded_read`: a regular file, finite
+numbers, integers of at most :data:`MAX_INT_DIGITS` digits) with Kinetics' bounds: at most
+:data:`MAX_JSON_BYTES` bytes, nested at most :data:`MAX_JSON_DEPTH` levels; label indices below
+:data:`MAX_LABEL_INDEX`, and pose / score values that are JSON numbers (not strings).
 """
 
 from __future__ import annotations
 
-import json
-import re
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from skeleton_mamba.bounded_read import MAX_INT_DIGITS, read_json
 from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
@@ -48,53 +48,17 @@ NUM_JOINTS = 18  # OpenPose COCO-18
 MAX_FRAMES = 100_000  # a frame_index span beyond this (~55 min at 30 fps) is refused, not allocated
 MAX_JSON_BYTES = 256 << 20  # a clip is about 1 MB; the train label file of Kinetics-400 about 30 MB
 MAX_JSON_DEPTH = 16  # the layout nests 5 levels (clip, data, frame, skeleton, person)
-MAX_INT_DIGITS = 18  # frame and label indices fit an int64
 MAX_LABEL_INDEX = 100_000  # Kinetics has 400 (to 700) classes; larger indices size label arrays absurdly
-_BRACKETS_OR_STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
 
 
 class KineticsFileError(DataFileError):
     """A Kinetics-skeleton JSON file does not follow the ST-GCN layout (the message names the file)."""
 
 
-def _check_depth(text: str, path: Path) -> None:
-    """Refuse nesting deeper than :data:`MAX_JSON_DEPTH` (brackets inside strings do not count)."""
-    depth = 0
-    for match in _BRACKETS_OR_STRINGS.finditer(text):
-        token = match.group()
-        if token in "[{":
-            depth += 1
-            if depth > MAX_JSON_DEPTH:
-                line = text.count("\n", 0, match.start()) + 1
-                raise KineticsFileError(f"{path}:{line}: nested more than {MAX_JSON_DEPTH} levels deep")
-        elif token in "]}":
-            depth -= 1
-
-
-def _parse_int(path: Path):
-    def parse(digits: str) -> int:
-        if len(digits.lstrip("-")) > MAX_INT_DIGITS:
-            raise KineticsFileError(f"{path}: an integer of {len(digits)} digits (at most {MAX_INT_DIGITS})")
-        return int(digits)
-
-    return parse
-
-
 def _load_json(path: Path) -> Any:
-    size = path.stat().st_size
-    if size > MAX_JSON_BYTES:
-        raise KineticsFileError(f"{path}: {size} bytes, more than a Kinetics JSON's {MAX_JSON_BYTES}")
-    try:
-        text = path.read_text(encoding="utf-8")
-        _check_depth(text, path)
-        return json.loads(text, parse_int=_parse_int(path))
-    except RecursionError:
-        raise KineticsFileError(f"{path}: nested too deeply") from None
-    except json.JSONDecodeError as e:
-        msg = f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})"
-        raise KineticsFileError(f"{path}: {msg}") from None
-    except UnicodeDecodeError as e:
-        raise KineticsFileError(f"{path}: not a UTF-8 JSON file ({e})") from None
+    """The clip or label file through the project's bounded JSON reader, with Kinetics' bounds."""
+    bounds = {"max_bytes": MAX_JSON_BYTES, "max_depth": MAX_JSON_DEPTH}
+    return read_json(path, **bounds, what="Kinetics file", error=KineticsFileError)
 
 
 def _numbers(values: Any, count: int, what: str) -> np.ndarray:

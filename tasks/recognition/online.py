@@ -25,7 +25,9 @@ import torch
 
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.ssd.precision import inference_precision
+from skeleton_mamba.tasks.motion.atomic import atomic_open, atomic_path
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
 from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
@@ -97,6 +99,9 @@ def _load_keypoints(path: Path) -> np.ndarray:
     return x.astype(np.float32)
 
 
+COMMAND = "sm stream --task recognition"
+
+
 def _plot(prob: np.ndarray, names: list[str], path: Path) -> None:
     import matplotlib  # lazy: matplotlib only for this figure
 
@@ -110,7 +115,8 @@ def _plot(prob: np.ndarray, names: list[str], path: Path) -> None:
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
     plt.close(fig)
 
 
@@ -127,6 +133,9 @@ def main(argv: list[str] | None = None) -> int:
 def stream_recognition(args: argparse.Namespace) -> int:
     """Feed ``args.skeleton`` frame by frame to the checkpoint's recognizer; write the table and the plot."""
     path = Path(args.skeleton)
+    name = args.name or path.stem
+    produced = [f"{name}_online.csv", f"{name}_online.png"]
+    claim_output_folder(args.out, COMMAND, produced, overwrite=args.overwrite)
     keypoints = _load_keypoints(path)
     module = load_module_from(ActionRecognitionModule, args.ckpt)
     model = module.model
@@ -147,11 +156,9 @@ def stream_recognition(args: argparse.Namespace) -> int:
             probs.append(online.push(frame)[0].numpy())
             latency.append(1e3 * (time.perf_counter() - start))
     prob = np.stack(probs)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    name = args.name or path.stem
+    out = record_outputs(args.out, COMMAND, produced)
     table = out / f"{name}_online.csv"
-    with open(table, "w", newline="", encoding="utf-8") as f:
+    with atomic_open(table, "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
         writer.writerow(["frame", "top_class", *names])
         for i, row in enumerate(prob):

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import add_precision_argument, command_parser
+from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, int_option
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.training.threads import THREADS_HELP
 
 __all__ = ["ONLINE_BF16_ERROR", "build_parser"]
@@ -26,7 +28,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--name", default=None, help="file stem (default: the skeleton file's stem)")
-    p.add_argument("--threads", type=int, default=None, help=THREADS_HELP)
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    p.add_argument(
+        "--threads", type=int_option(1, MAX_WORKERS, "a thread count"), default=None, help=THREADS_HELP
+    )
     p.add_argument("--compile", action="store_true", help="compile the frame step with torch.compile first")
     add_precision_argument(p, ONLINE_BF16_ERROR)
     return p

@@ -37,6 +37,7 @@ from tqdm import tqdm
 from skeleton_mamba.tasks.motion.cli_options import SmHelpFormatter, add_quiet_argument, command_parser
 from skeleton_mamba.tasks.motion.errors import SkeletonMambaError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
+from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, int_option
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,
@@ -260,7 +261,12 @@ def build_parser() -> argparse.ArgumentParser:
         )
         p.add_argument("--raw", type=Path, required=True, help="folder of the raw files")
         p.add_argument("--out", type=Path, required=True, help="annotation pickle to write")
-        p.add_argument("--workers", type=int, default=2, help="parallel processes")
+        p.add_argument(
+            "--workers",
+            type=int_option(1, MAX_WORKERS, "a worker count"),
+            default=2,
+            help="parallel processes",
+        )
         p.add_argument("--skip-bad", action="store_true", help="skip unreadable files with a warning")
         p.add_argument("--dtype", choices=KEYPOINT_DTYPES, default="float32",
                        help="keypoint storage (default: float32; float16 as PYSKL's own files)")  # fmt: skip
@@ -268,7 +274,12 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--labels", type=Path, nargs="+",
                            help="label jsons (default: RAW/kinetics_{train,val}_label.json)")  # fmt: skip
         else:
-            p.add_argument("--max-bodies", type=int, default=2, help="body slots per sample")
+            p.add_argument(
+                "--max-bodies",
+                type=int_option(1, 64, "a body count"),
+                default=2,
+                help="body slots per sample",
+            )
         add_quiet_argument(p, "progress bar")
     return parser
 

@@ -33,8 +33,10 @@ import numpy as np
 import soundfile as sf
 
 from skeleton_mamba.ssd.precision import inference_precision
+from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
-from skeleton_mamba.tasks.motion.export import write_motion
+from skeleton_mamba.tasks.motion.export import dance_files, write_motion
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.stream.cli_args import build_parser
@@ -64,14 +66,15 @@ def stream_dance(args: argparse.Namespace) -> int:
         raise InputError("--music FILE (or -) is required for --task dance")
     if args.compile and args.precision != "fp32":
         raise InputError(f"--compile steps in fp32 only: drop --compile or --precision {args.precision}")
+    name = args.name or ("stdin" if args.music == "-" else Path(args.music).stem)
+    produced = [*dance_files(name, not args.no_render), f"{name}_stream.json"]
+    out = claim_output_folder(args.out, "sm stream", produced, overwrite=args.overwrite)
     source = AudioSource(args.music, args.chunk_ms / 1e3, args.realtime, args.raw_rate)
     model = _load_dancer(args.ckpt)
     with inference_precision(args.precision):  # the warm-up frame too
         dancer = LiveDancer(model, source.sample_rate, compile=announce_compile(args.compile))
     report_compile(dancer.compile_seconds, args.compile)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    name = args.name or ("stdin" if args.music == "-" else Path(args.music).stem)
+    record_outputs(out, "sm stream", produced)
     # The music as received, for the video (a live input has no file of its own).
     recording = None if args.music != "-" else Path(tempfile.mkstemp(suffix=".wav", dir=out)[1])
     writer = None if recording is None else sf.SoundFile(recording, "w", source.sample_rate, 1, "PCM_16")
@@ -100,7 +103,7 @@ def stream_dance(args: argparse.Namespace) -> int:
                 raise InputError(message)
             print(f"sm stream: {message}", file=sys.stderr)
             return 130
-        width, height = (int(v) for v in args.render_size.lower().split("x"))
+        width, height = args.render_size
         files = write_motion(
             tokens_to_motion(dancer.tokens().float(), FPS),
             out,
@@ -129,7 +132,8 @@ def stream_dance(args: argparse.Namespace) -> int:
         "interrupted": interrupted,
         "files": {k: str(v) for k, v in vars(files).items() if v is not None},
     }
-    (out / f"{name}_stream.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
+    with atomic_open(out / f"{name}_stream.json", "w", encoding="utf-8") as f:
+        f.write(json.dumps(report, indent=2))
     print(f"sm stream: {dancer.num_frames} poses ({report['seconds']:.1f} s at {FPS} fps) written to {out}")
     print("\n".join(files.lines()))
     print(

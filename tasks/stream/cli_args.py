@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import add_precision_argument, command_parser
+from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, image_size_option, int_option, real_option
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.training.threads import THREADS_HELP
 
 __all__ = ["STREAM_BF16_ERROR", "build_parser"]
@@ -40,21 +42,35 @@ def build_parser() -> argparse.ArgumentParser:
         "--ckpt", required=True, help="a checkpoint of stream_dance*.yaml or a causal recognition recipe"
     )
     p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--name", default=None, help="file stem (default: the music's / skeleton file's stem)")
     p.add_argument("--music", help="dance: audio file, or - for a WAV stream on standard input")
     p.add_argument(
-        "--raw-rate", type=int, default=None, help="with --music -: headerless s16le mono PCM at this rate"
+        "--raw-rate",
+        type=int_option(8_000, 192_000, "a sample rate (Hz)"),
+        default=None,
+        help="with --music -: headerless s16le mono PCM at this rate",
     )
     p.add_argument("--realtime", action="store_true", help="pace the input at the music's rate")
-    p.add_argument("--chunk-ms", type=float, default=20.0, help="audio chunk length in ms")
+    p.add_argument(
+        "--chunk-ms",
+        type=real_option(1.0, 10_000.0, "milliseconds"),
+        default=20.0,
+        help="audio chunk length in ms",
+    )
     p.add_argument("--no-render", action="store_true", help="skip the mp4")
     p.add_argument(
-        "--render-size", default="480x352", help="video WIDTHxHEIGHT, multiples of 16 (default: 480x352)"
+        "--render-size",
+        type=image_size_option,
+        default=(480, 352),
+        help="video WIDTHxHEIGHT, multiples of 16 (default: 480x352)",
     )
     p.add_argument(
         "--skeleton", help="recognition: a skeleton file (NTU .skeleton, PYSKL-style .npy (T, J, C))"
     )
-    p.add_argument("--threads", type=int, default=None, help=THREADS_HELP)
+    p.add_argument(
+        "--threads", type=int_option(1, MAX_WORKERS, "a thread count"), default=None, help=THREADS_HELP
+    )
     p.add_argument(
         "--compile",
         action="store_true",

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import add_quiet_argument, add_sampling_arguments, command_parser
+from skeleton_mamba.tasks.motion.option_types import int_option, seed_option
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 
 __all__ = ["build_parser"]
 
@@ -19,9 +21,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--text", action="append", required=True, help="caption (repeat for several)")
     p.add_argument("--length", default="6s", help="duration: '6s' (20 fps) or a frame count (default: 6s)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--num", type=int, default=1, help="samples per caption")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    p.add_argument(
+        "--num", type=int_option(1, 10_000, "a sample count"), default=1, help="samples per caption"
+    )
     add_sampling_arguments(p)
-    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--seed", type=seed_option, default=0, help="noise seed")
     p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
     add_quiet_argument(p, "progress bar")
     return p

@@ -30,6 +30,7 @@ from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.value_checks import non_finite_message
 from skeleton_mamba.tasks.text2motion.generate_args import build_parser
@@ -123,16 +124,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         frames = parse_length(args.length)
     except ValueError as e:
         raise InputError(str(e)) from e  # names the text given
-    if args.num < 1:
-        raise InputError(f"--num {args.num}: need at least one sample per caption")
-    if Path(args.out).is_file():
-        raise InputError(f"{args.out}: is a file (a folder is expected)")
+    captions = [c for c in args.text for _ in range(args.num)]
+    stems = [f"{i:03d}_{slug(caption)}" for i, caption in enumerate(captions)]
+    suffixes = (".npy", "_features.npy", ".glb", *((f".{args.render}",) if args.render else ()))
+    produced = [stem + suffix for stem in stems for suffix in suffixes]
+    claim_output_folder(args.out, "sm generate", produced, overwrite=args.overwrite)
     overrides = sampling_overrides(args)
     check_model_source(args.checkpoint)  # the text as given: a URL is refused as one
 
     with _no_loading_bar():  # a refused checkpoint leaves one line on stderr, not a bar above it
         module = load_module_from(TextToMotionModule, args.checkpoint).eval()
-    captions = [c for c in args.text for _ in range(args.num)]
     features, _ = module.generate(
         captions,
         [frames] * len(captions),
@@ -147,8 +148,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{args.checkpoint}: the model generated non-finite motion for {caption!r} ({message}); "
                 "nothing written"
             )
-    out = Path(args.out)
+    out = record_outputs(args.out, "sm generate", produced)
     for i, caption in enumerate(captions):
-        paths = save_generated(features[i], caption, out / f"{i:03d}_{slug(caption)}", args.render)
+        paths = save_generated(features[i], caption, out / stems[i], args.render)
         print(f"wrote {paths['joints']}  ({frames} frames: {caption!r})")
     return 0

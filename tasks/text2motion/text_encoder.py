@@ -13,12 +13,15 @@ gradients), as MDM freezes CLIP.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import torch
 from torch import nn
+
+from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.pretrained_checks import building_on_meta
+from skeleton_mamba.tasks.motion.errors import InputError
 
 __all__ = ["TextEncoder", "default_model_path"]
 
@@ -48,13 +51,14 @@ class TextEncoder(nn.Module):
 
     def __init__(self, model_path: str | None = None, max_tokens: int = 77, freeze: bool = True) -> None:
         super().__init__()
-        from transformers import AutoModel, AutoTokenizer  # lazy: transformers' import is slow
+        from transformers import AutoConfig, AutoModel, AutoTokenizer  # lazy: transformers' import is slow
 
         self.model_dir = Path(model_path).expanduser() if model_path else default_model_path()
         config_file = self.model_dir / "config.json"
         if not config_file.is_file():
             raise FileNotFoundError(f"{config_file}: not a transformers model folder (no config.json)")
-        model_type = json.loads(config_file.read_text()).get("model_type", "")
+        config = read_json(config_file, max_bytes=1 << 20, what="transformers config", error=InputError)
+        model_type = config.get("model_type", "") if isinstance(config, dict) else ""
         if model_type in _CLIP_TYPES:
             from transformers import CLIPTextModel  # lazy: transformers' import is slow
 
@@ -62,7 +66,10 @@ class TextEncoder(nn.Module):
         else:
             loader = AutoModel
         self.tokenizer = AutoTokenizer.from_pretrained(self.model_dir, local_files_only=True)
-        self.model = loader.from_pretrained(self.model_dir, local_files_only=True)
+        if building_on_meta():  # sizes only: the architecture of its config, no weights read
+            self.model = loader.from_config(AutoConfig.from_pretrained(self.model_dir, local_files_only=True))
+        else:
+            self.model = loader.from_pretrained(self.model_dir, local_files_only=True)
         self.max_tokens = max_tokens
         self.frozen = freeze
         if freeze:

@@ -28,6 +28,8 @@ reads through :func:`load_checkpoint`, writes through a temporary file in the ch
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import inspect
 import io
 import os
@@ -42,6 +44,7 @@ from typing import Any, TypeVar
 import torch
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
+from skeleton_mamba.pretrained_checks import MAX_PARAMETERS, check_finite_weights, check_sizes, dtype_fits
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import CheckpointError, RandomWeightsWarning
 
@@ -150,8 +153,12 @@ def _torch_load(data: bytes | Path, source: str, map_location: Any) -> Any:
         raise CheckpointError(
             f"{source}: not a plain-data checkpoint, refused (weights_only load: {detail.strip()})"
         ) from None
-    except OSError:  # the file itself (permissions, a read error): its own one-line message
-        raise
+    except OSError as err:
+        if err.filename is not None:  # the file itself (permissions, a read error): its own one-line message
+            raise
+        raise CheckpointError(  # torch's zip reader on a truncated file: errno 22, "Invalid argument"
+            f"{source}: not a readable PyTorch checkpoint (truncated or damaged: {err.strerror or err})"
+        ) from None
     except Exception as err:  # any failure to parse untrusted bytes (IndexError, struct.error, ...)
         first = str(err).strip().splitlines()
         raise CheckpointError(
@@ -180,10 +187,27 @@ def _too_deep(value: Any, limit: int) -> str | None:
     return None
 
 
+def _expanded_tensor(value: Any) -> tuple[str, torch.Tensor] | None:
+    """The first tensor under ``value`` (walked without recursion) with more elements than its storage
+    holds (a broadcast ``expand``: a few bytes in the file, any size once touched), and where it is."""
+    stack: list[tuple[Any, str]] = [(value, "the checkpoint")]
+    while stack:
+        item, where = stack.pop()
+        if isinstance(item, torch.Tensor):
+            stored = item.untyped_storage().nbytes() // max(item.element_size(), 1)
+            if item.numel() > max(stored, 0):
+                return where, item
+        elif isinstance(item, Mapping):
+            stack.extend((child, f"{where}[{key!r}]") for key, child in item.items())
+        elif isinstance(item, (list, tuple)):
+            stack.extend((child, f"{where}[{i}]") for i, child in enumerate(item))
+    return None
+
+
 def check_checkpoint_structure(checkpoint: Any, source: str) -> None:
     """Refuse a checkpoint whose structure no loader may walk: not a dict, containers nested deeper than
     :data:`MAX_NESTING`, a ``state_dict`` that is not a mapping of names to tensors, hyper-parameters that
-    are not a mapping.
+    are not a mapping, a tensor with more elements than its storage holds (a lazily expanded view).
 
     Raises:
         CheckpointError: naming ``source`` and the entry at fault.
@@ -209,6 +233,13 @@ def check_checkpoint_structure(checkpoint: Any, source: str) -> None:
                     f"{'' if isinstance(key, str) else f' under a {type(key).__name__} key'}, "
                     "not a tensor under a name"
                 )
+    expanded = _expanded_tensor(checkpoint)
+    if expanded is not None:
+        where, tensor = expanded
+        raise CheckpointError(
+            f"{source}: {where} is a tensor of {tensor.numel():,} elements over a storage of "
+            f"{tensor.untyped_storage().nbytes():,} bytes (an expanded view); refused"
+        )
     for key in _MAPPING_KEYS:
         value = checkpoint.get(key)
         if value is not None and not isinstance(value, Mapping):
@@ -343,32 +374,31 @@ def load_module_and_checkpoint(
             f"not {_a(_task_of(f'{cls.__module__}.{cls.__qualname__}'))} one)"
         )
     check_settings_known(cls, checkpoint.get("hyper_parameters", {}), str(p))
+    check_sizes(checkpoint.get("hyper_parameters", {}), f"{p}: hyper_parameters", CheckpointError)
     state = checkpoint["state_dict"]
     check_finite_tensors(state, str(p))
     # The module as Lightning builds it from the hyper-parameters (its instantiator, old hparams keys),
-    # with no weights: they are checked against it, then copied.
+    # first on the meta device (shapes, no memory): the tensors are checked against it before the module
+    # is built for real, whose memory is then that of the tensors the file holds.
     shell = {k: v for k, v in checkpoint.items() if k not in _TRAINING_STATE_KEYS}
     buffer = io.BytesIO()
     torch.save({**shell, "state_dict": {}}, buffer)
-    buffer.seek(0)
     built = " (as built from the checkpoint's hyper-parameters)" if checkpoint.get("hyper_parameters") else ""
-    try:
-        with warnings.catch_warnings():  # the checkpoint's weights replace any random initialisation
-            warnings.simplefilter("ignore", RandomWeightsWarning)
-            for built_empty in (
-                "The state dict in .* contains no parameters",
-                "Found keys that are in the model",
-            ):
-                warnings.filterwarnings("ignore", message=built_empty)
-            module = cls.load_from_checkpoint(  # type: ignore[attr-defined]
-                buffer, map_location=map_location, weights_only=True, strict=False
-            )
-    except (KeyError, TypeError, ValueError, RuntimeError) as err:
-        first = str(err).strip().splitlines()
+    shape = _build_module(cls, buffer.getvalue(), "meta", p)
+    values = sum(t.numel() for t in shape.state_dict().values())
+    if values > MAX_PARAMETERS:
         raise CheckpointError(
-            f"{p}: does not fit {cls.__name__} ({type(err).__name__}: {first[0] if first else ''})"
-        ) from err
-    check_state_fits(module, state_shapes(state), str(p), built)
+            f"{p}: its hyper-parameters build a {cls.__name__} of {values:,} values, more than "
+            f"{MAX_PARAMETERS:,}"
+        )
+    check_state_fits(shape, state_shapes(state), str(p), built)
+    for name, tensor in shape.state_dict().items():
+        if not dtype_fits(state[name].dtype, tensor.dtype):
+            raise CheckpointError(
+                f"{p}: {name} is stored as {state[name].dtype}, {cls.__name__} holds {tensor.dtype} "
+                "(a weight of the wrong type is refused, not cast)"
+            )
+    module = _build_module(cls, buffer.getvalue(), map_location, p)
     try:
         module.load_state_dict(state, strict=True)
     except RuntimeError as err:  # names and shapes fit; a dtype that does not (complex into real)
@@ -376,6 +406,32 @@ def load_module_and_checkpoint(
         raise CheckpointError(f"{p}: does not fit {cls.__name__} ({' '.join(first[-1:]).strip()})") from err
     device = next((t.device for t in state.values()), None)
     return (module if device is None else module.to(device)), checkpoint
+
+
+def _build_module(cls: type[ModuleT], shell: bytes, map_location: Any, path: Path) -> ModuleT:
+    """``cls.load_from_checkpoint`` of a checkpoint without tensors (``shell``), with no weights; on the
+    ``meta`` device when ``map_location`` is ``"meta"``."""
+    meta = map_location == "meta"
+    try:
+        with warnings.catch_warnings(), torch.device("meta") if meta else contextlib.nullcontext():
+            warnings.simplefilter("ignore", RandomWeightsWarning)  # the checkpoint's weights replace them
+            for built_empty in (
+                "The state dict in .* contains no parameters",
+                "Found keys that are in the model",
+            ):
+                warnings.filterwarnings("ignore", message=built_empty)
+            return cls.load_from_checkpoint(  # type: ignore[attr-defined]
+                io.BytesIO(shell), map_location=map_location, weights_only=True, strict=False
+            )
+    except argparse.ArgumentError as err:  # jsonargparse (Lightning's instantiator) refusing a value
+        text = " ".join(str(err).split())
+        text = text if len(text) <= 300 else text[:297] + "..."
+        raise CheckpointError(f"{path}: its hyper-parameters do not fit {cls.__name__} ({text})") from err
+    except (KeyError, TypeError, ValueError, RuntimeError, NotImplementedError) as err:
+        first = str(err).strip().splitlines()
+        raise CheckpointError(
+            f"{path}: does not fit {cls.__name__} ({type(err).__name__}: {first[0] if first else ''})"
+        ) from err
 
 
 def checked_state_shapes(checkpoint: dict, source: str) -> dict[str, tuple[int, ...]]:
@@ -398,12 +454,9 @@ def check_finite_tensors(
     """Raise :class:`CheckpointError` naming the first floating tensor of ``tensors`` (a state dict, or
     ``(name, tensor)`` pairs) holding NaN or Inf (such a model only produces non-finite output, which no
     command writes)."""
-    for name, tensor in tensors.items() if isinstance(tensors, Mapping) else tensors:
-        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
-            bad = int((~torch.isfinite(tensor)).sum())
-            raise CheckpointError(
-                f"{source}: weights are not finite ({name}: {bad} of {tensor.numel()} values NaN or Inf)"
-            )
+    check_finite_weights(
+        dict(tensors) if not isinstance(tensors, Mapping) else tensors, source, CheckpointError
+    )
 
 
 def check_finite_state(module: torch.nn.Module, source: str) -> None:

@@ -19,16 +19,25 @@ Example::
 from __future__ import annotations
 
 import csv
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
 
+from lightning.pytorch import LightningModule
 from safetensors.torch import save
 
-from skeleton_mamba.pretrained import PretrainedMixin, push_folder_to_hub
+from skeleton_mamba.pretrained import (
+    CARD_NAME,
+    CONFIG_NAME,
+    WEIGHTS_NAME,
+    PretrainedError,
+    PretrainedMixin,
+    push_folder_to_hub,
+    read_pretrained_config,
+)
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.export_pretrained_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import MODULE_WEIGHTS_NAME, import_project_class, module_record
@@ -72,17 +81,33 @@ def test_metrics(checkpoint_path: Path) -> dict[str, float]:
     return metrics
 
 
+def is_pretrained_folder(folder: Path) -> bool:
+    """Whether ``folder`` holds a pretrained folder's ``config.json`` (this command's earlier output)."""
+    try:
+        read_pretrained_config(folder)
+    except (PretrainedError, OSError):
+        return False
+    return True
+
+
 def export_pretrained(
     ckpt: str | Path,
     out: str | Path,
     module_class: str | None = None,
     recipe: str | None = None,
+    overwrite: bool = False,
 ) -> Path:
     """Write the folder of the checkpoint ``ckpt`` into ``out``; returns ``out``.
 
+    ``out`` must be missing, empty or an earlier export (its four files and nothing else), unless
+    ``overwrite`` (:func:`~skeleton_mamba.tasks.motion.output_folder.claim_output_folder`).
+
     Raises:
         CheckpointError: as the checker, or a checkpoint that does not name its module class.
+        InputError: ``out`` holds other files.
     """
+    names = (CONFIG_NAME, WEIGHTS_NAME, CARD_NAME, MODULE_WEIGHTS_NAME)
+    claim_output_folder(out, "sm export-pretrained", names, overwrite=overwrite, marker=is_pretrained_folder)
     checkpoint = load_checkpoint(ckpt)
     hparams = checkpoint.get("hyper_parameters") or {}
     class_path = module_class or (hparams.get("_class_path") if isinstance(hparams, dict) else None)
@@ -90,7 +115,7 @@ def export_pretrained(
         raise CheckpointError(
             f"{ckpt}: its hyper-parameters name no module class (_class_path); pass --module"
         )
-    cls = import_project_class(class_path, str(ckpt))
+    cls = import_project_class(class_path, str(ckpt), LightningModule)
     module, checkpoint = load_module_and_checkpoint(cls, ckpt)
     attribute = network_attribute(module)
     record = module_record(module, checkpoint, attribute)
@@ -109,7 +134,6 @@ def export_pretrained(
         "trained": {k: record[k] for k in ("epoch", "global_step") if k in record},
     }
     folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
     with atomic_path(folder / MODULE_WEIGHTS_NAME) as tmp:
         tmp.write_bytes(save(rest, metadata={"format": "pt", "module": record["class_path"]}))
     network.save_pretrained(folder, card_info=card, extra_config={"module": record})
@@ -119,8 +143,8 @@ def export_pretrained(
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-pretrained``; returns the exit code."""
     args = build_parser().parse_args(list(argv) if argv is not None else None)
-    folder = export_pretrained(args.ckpt, args.out, args.module, args.recipe)
-    config = json.loads((folder / "config.json").read_text())
+    folder = export_pretrained(args.ckpt, args.out, args.module, args.recipe, args.overwrite)
+    config = read_pretrained_config(folder)
     print(f"wrote {folder}/ ({config['class'].rsplit('.', 1)[-1]} of {config['module']['class_path']})")
     if args.push_to_hub:
         try:

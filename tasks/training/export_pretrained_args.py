@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 
 __all__ = ["build_parser"]
 
@@ -22,7 +23,11 @@ def build_parser() -> argparse.ArgumentParser:
         EXAMPLES,
     )
     p.add_argument("--ckpt", required=True, help="a Lightning checkpoint (.ckpt) of a task recipe")
-    p.add_argument("--out", required=True, help="the folder to write (created)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="the folder to write (created; an existing one must be an earlier export)",
+    )
     p.add_argument(
         "--module", default=None, help="the LightningModule class path, when the checkpoint names none"
     )
@@ -33,4 +38,5 @@ def build_parser() -> argparse.ArgumentParser:
         "--push-to-hub", default=None, metavar="ORG/NAME", help="also upload the folder to the Hub"
     )
     p.add_argument("--private", action="store_true", help="create the Hub repository private")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p

@@ -33,7 +33,7 @@ from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCLI
 
 from skeleton_mamba import __version__
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.training.checkpoints import (
     check_state_fits,
     checked_state_shapes,
@@ -228,11 +228,16 @@ class SkeletonMambaCLI(LightningCLI):
             if str(ckpt_path) == "last":
                 ckpt_path = str(find_last_checkpoint(config.trainer))
                 config.ckpt_path = ckpt_path
+            source = str(ckpt_path)  # what messages name: the folder, not the checkpoint written from it
             if subcommand != "fit" and not is_checkpoint_source(ckpt_path):  # an exported folder, a Hub id
                 ckpt_path = config.ckpt_path = str(checkpoint_file_from(ckpt_path))
-            self.checkpoint_shapes = (ckpt_path, checked_state_shapes(load_checkpoint(ckpt_path), ckpt_path))
+            try:
+                shapes = checked_state_shapes(load_checkpoint(ckpt_path), ckpt_path)
+            except CheckpointError as err:
+                raise CheckpointError(str(err).replace(str(ckpt_path), source)) from err
+            self.checkpoint_shapes = (source, shapes)
             if isinstance(parser, OneLineErrorParser):  # Lightning parses its hyper-parameters next
-                parser.error_source = f"{ckpt_path} (hyper-parameters)"
+                parser.error_source = f"{source} (hyper-parameters)"
             if subcommand == "fit":
                 resume_in_run_folder(config.trainer, Path(ckpt_path))
 

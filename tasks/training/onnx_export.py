@@ -52,18 +52,21 @@ from pathlib import Path
 import numpy as np
 import onnxruntime
 import torch
-import yaml
+from lightning.pytorch import LightningModule
 from torch import nn
 from torch.export import Dim
 
-from skeleton_mamba import SkeletonMamba
+from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.pretrained import PretrainedError, decode_value
+from skeleton_mamba.pretrained_checks import check_sizes
 from skeleton_mamba.streaming import frame_forward
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
-from skeleton_mamba.tasks.training.backbone_config import backbone_config
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.onnx_export_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
+from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
 
 __all__ = [
     "NETWORK_SPECS",
@@ -403,7 +406,7 @@ def network_from_checkpoint(ckpt: str) -> nn.Module:
     class_path = hparams.get("_class_path") if isinstance(hparams, dict) else None
     if not isinstance(class_path, str):
         raise CheckpointError(f"{ckpt}: its hyper-parameters name no module class (_class_path)")
-    module, _ = load_module_and_checkpoint(import_project_class(class_path, ckpt), ckpt)
+    module, _ = load_module_and_checkpoint(import_project_class(class_path, ckpt, LightningModule), ckpt)
     for m in module.modules():
         if type(m).__name__ in NETWORK_SPECS or isinstance(m, SkeletonMamba):
             return m
@@ -424,24 +427,38 @@ def backbone_of(network: nn.Module, source: str) -> SkeletonMamba:
 
 
 def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
-    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides."""
-    p = Path(path)
-    try:
-        fields = yaml.safe_load(p.read_text()) or {}
-    except yaml.YAMLError as err:
-        raise InputError(f"{p}: not valid YAML ({' '.join(str(err).split())})") from err
+    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides.
+
+    The file is read by the bounded YAML reader; its fields are decoded with the types of
+    :class:`SkeletonMambaConfig` (an unknown field, a list where a number belongs, a mixer that is not a
+    mapping are refused naming the field) and its sizes checked against their bounds before anything is
+    built.
+
+    Raises:
+        InputError: naming the file and what is wrong.
+    """
+    fields = read_yaml_file(path, "backbone file")
+    fields = {} if fields is None else fields
     if not isinstance(fields, dict):
-        raise InputError(f"{p}: a backbone file holds a mapping of SkeletonMambaConfig fields")
+        raise InputError(f"{path}: a backbone file holds a mapping of SkeletonMambaConfig fields")
+    merged = {**fields, **{k: v for k, v in overrides.items() if v is not None}}
     try:
-        config = backbone_config({**fields, **{k: v for k, v in overrides.items() if v is not None}})
-    except TypeError as err:
-        raise InputError(f"{p}: not a SkeletonMambaConfig ({err})") from err
-    return SkeletonMamba(config)
+        config = decode_value(merged, SkeletonMambaConfig, f"{path}: SkeletonMambaConfig")
+    except PretrainedError as err:
+        raise InputError(str(err)) from err
+    check_sizes(config, f"{path}: SkeletonMambaConfig", InputError)
+    try:
+        return SkeletonMamba(config)
+    except (TypeError, ValueError, KeyError, RuntimeError) as err:
+        raise InputError(f"{path}: not a usable backbone ({err})") from err
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-onnx``; returns the exit code."""
     args = build_parser().parse_args(list(argv) if argv is not None else None)
+    graphs = [f"{g}.onnx{data}" for g in ("sequence", "step", "denoiser") for data in ("", ".data")]
+    claim_output_folder(args.out, "sm export-onnx", [*graphs, "export.json"], overwrite=args.overwrite,
+                        marker=lambda folder: (folder / "export.json").is_file())  # fmt: skip
     if args.ckpt is not None:
         network, source = network_from_checkpoint(args.ckpt), args.ckpt
     elif args.pretrained is not None:
@@ -452,7 +469,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.part == "backbone":
         network = backbone_of(network, source)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     specs = network_specs(network, frames=args.frames)
     backbone = backbone_of(network, source)
     record = {

@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from skeleton_mamba.size_bounds import SIZE_BOUNDS
 from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.option_types import int_option
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 
-__all__ = ["PART_HELP", "build_parser"]
+__all__ = ["MAX_EXAMPLE_FRAMES", "PART_HELP", "build_parser"]
+
+MAX_EXAMPLE_FRAMES = 4096  # frames of the example input: the graphs' SSD is quadratic in the frames
 
 PART_HELP = (
     "network (default): a task network's own graphs (the streaming dancer: sequence and step; the "
@@ -36,11 +41,24 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
     p.add_argument("--part", choices=("network", "backbone"), default="network", help=PART_HELP)
     p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
-    p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
-    p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
-    p.add_argument("--out", required=True, help="the folder to write (created)")
     p.add_argument(
-        "--frames", type=int, default=20, help="frames of the example input; the graphs take any length"
+        "--in-channels",
+        type=int_option(1, SIZE_BOUNDS["in_channels"], "a channel count"),
+        default=None,
+        help="with --backbone: input features per joint",
+    )
+    p.add_argument("--causal", action="store_true", default=None, help="with --backbone: a causal backbone")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="the folder to write (created; an existing one must be an earlier export)",
+    )
+    p.add_argument(
+        "--frames",
+        type=int_option(2, MAX_EXAMPLE_FRAMES, "a frame count"),
+        default=20,
+        help="frames of the example input; the graphs take any length",
     )
     p.add_argument("--check", action="store_true", help="compare onnxruntime with eager PyTorch")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p

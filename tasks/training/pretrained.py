@@ -41,10 +41,12 @@ from skeleton_mamba.pretrained import (
     read_pretrained_config,
     resolve_pretrained,
 )
+from skeleton_mamba.pretrained_checks import check_sizes, read_safetensors_header
 from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.training.checkpoints import (
     check_checkpoint_path,
     check_class_paths,
+    check_finite_tensors,
     load_module_and_checkpoint,
 )
 
@@ -101,8 +103,9 @@ def _resolve(source: str | os.PathLike[str]) -> tuple[Path, dict]:
         raise CheckpointError(str(err)) from err
 
 
-def import_project_class(path: str, source: str) -> type:
-    """The class a config names: checked as text (project modules only) before its module is imported."""
+def import_project_class(path: str, source: str, base: type | None = None) -> type:
+    """The class a config names: checked as text (project modules only) before its module is imported,
+    then checked to be a class (a subclass of ``base`` when given)."""
     check_class_paths({"class_path": path}, source)
     if not path.startswith("skeleton_mamba.") or "." not in path:
         raise CheckpointError(f"{source}: names {path!r}, not a class of the project")
@@ -111,26 +114,33 @@ def import_project_class(path: str, source: str) -> type:
         cls = getattr(importlib.import_module(module_name), name)
     except (ImportError, AttributeError):
         raise CheckpointError(f"{source}: names an unknown class {path!r}") from None
+    if not isinstance(cls, type) or (base is not None and not issubclass(cls, base)):
+        kind = base.__name__ if base is not None else "class"
+        raise CheckpointError(f"{source}: names {path!r}, which is not a {kind}")
+    return cls
+
+
+def _network_class(config: dict, where: str) -> type:
+    """The network class ``config.json`` names, one with ``from_pretrained``."""
+    cls = import_project_class(config["class"], where)
+    if not hasattr(cls, "check_pretrained_folder") or not hasattr(cls, "load_pretrained_weights"):
+        raise CheckpointError(f"{where}: names {config['class']!r}, not a network with from_pretrained")
     return cls
 
 
 def load_network(source: str | os.PathLike[str], device: str | torch.device = "cpu") -> torch.nn.Module:
-    """The network in a ``from_pretrained`` folder or Hub id, whatever its class (the backbone or a task's).
+    """The network in a ``from_pretrained`` folder or Hub id, whatever its class (the backbone or a task's),
+    checked before anything is allocated (``from_pretrained``'s checks).
 
     Raises:
         CheckpointError: not such a folder, an unknown class, config or tensors that do not fit.
     """
     folder, config = _resolve(source)
-    where = str(folder / CONFIG_NAME)
-    cls = import_project_class(config["class"], where)
-    if not hasattr(cls, "from_config") or not hasattr(cls, "load_pretrained_weights"):
-        raise CheckpointError(f"{where}: names {config['class']!r}, not a network with from_pretrained")
+    cls = _network_class(config, str(folder / CONFIG_NAME))
     try:
-        model = cls.from_config(config, where)
-        model.load_pretrained_weights(folder / WEIGHTS_NAME, device)
+        return cls.from_folder(folder, device)
     except PretrainedError as err:
         raise CheckpointError(str(err)) from err
-    return model.to(device).eval()
 
 
 def _plain(value: Any) -> Any:
@@ -214,12 +224,22 @@ def _folder_checkpoint(source: str | os.PathLike[str], cls: type | None = None) 
     stored = str(record.get("class_path", ""))
     if cls is not None and stored.rsplit(".", 1)[-1] != cls.__name__:
         raise CheckpointError(f"{where}: holds a {stored}, not a {cls.__name__}")
-    module_cls = cls or import_project_class(stored, where)
-    try:
-        network = {f"{record['network']}.{k}": v for k, v in load_file(str(folder / WEIGHTS_NAME)).items()}
-        extra = (
-            load_file(str(folder / MODULE_WEIGHTS_NAME)) if (folder / MODULE_WEIGHTS_NAME).exists() else {}
-        )
+    check_class_paths(record, where)  # nested class paths too (an optimizer's), before anything is imported
+    module_cls = cls or import_project_class(stored, where, LightningModule)
+    network_cls = _network_class(config, where)
+    try:  # the network's sizes, its values and its weights' header, before any tensor is read
+        network_cls.check_pretrained_folder(folder, config)
+        check_sizes(record.get("hparams") or {}, f"{where}: module hparams", CheckpointError)
+        extra_path = folder / MODULE_WEIGHTS_NAME
+        if extra_path.exists():
+            read_safetensors_header(extra_path, CheckpointError)
+        weights = load_file(str(folder / WEIGHTS_NAME))
+        extra = load_file(str(extra_path)) if extra_path.exists() else {}
+        check_finite_tensors(weights, str(folder / WEIGHTS_NAME))
+        check_finite_tensors(extra, str(extra_path))
+        network = {f"{record['network']}.{k}": v for k, v in weights.items()}
+    except PretrainedError as err:
+        raise CheckpointError(str(err)) from err
     except (SafetensorError, OSError) as err:
         raise CheckpointError(f"{folder}: unreadable weights ({err})") from None
     checkpoint = {

@@ -28,6 +28,7 @@ from typing import Any
 from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
 from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
 from skeleton_mamba.tasks.training.checkpoints import TRUSTED_CLASS_PREFIXES
 
@@ -51,10 +52,7 @@ TRUSTED_MODULES: tuple[str, ...] = tuple(prefix.rstrip(".") for prefix in TRUSTE
 
 MAX_COUNT = 2**31 - 1  # epochs, steps, intervals: a C int, what Lightning's loops, torch and numpy index with
 MAX_BATCH_SIZE = 1 << 16  # samples per batch
-MAX_WORKERS = 1024  # DataLoader worker processes
-MAX_FRAMES = 1_000_000  # frames of a window, clip or sequence: 9 hours at 30 fps
 MAX_SAMPLES = 10_000_000  # sample counts of generated data sets (per class, clips, sequences)
-MAX_IMAGE_SIZE = 4096  # pixels on a side
 MAX_CLASSES = 100_000
 MAX_OPTION_DURATION_S = 86_400.0  # durations given in seconds (generated tracks, offsets): one day
 MAX_TIME_DAYS = 3650  # --trainer.max_time: ten years

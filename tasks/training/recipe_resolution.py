@@ -28,6 +28,7 @@ import jsonargparse
 import yaml
 from jsonargparse import ActionConfigFile
 
+from skeleton_mamba.bounded_read import read_text
 from skeleton_mamba.tasks.motion.errors import InputError
 
 RECIPE_PACKAGE = "skeleton_mamba.recipes"
@@ -49,6 +50,8 @@ __all__ = [
     "bounded_yaml_load",
     "check_yaml_bounds",
     "install_bounded_yaml_loader",
+    "read_recipe_text",
+    "read_yaml_file",
     "packaged_recipe_dir",
     "packaged_recipes",
     "recipe_description",
@@ -90,8 +93,8 @@ def recipe_description(path: Path) -> str:
 def resolve_recipe(value: str) -> Path | None:
     """The file a ``--recipe`` value names: an existing path, else a packaged recipe; ``None`` if neither."""
     candidate = Path(value).expanduser()
-    if candidate.is_file():
-        return candidate
+    if candidate.is_file() or (candidate.exists() and not candidate.is_dir()):
+        return candidate  # a FIFO or a device too: the bounded reader refuses it, naming what it is
     recipes = packaged_recipes()
     for name in (value, *(value + s for s in RECIPE_SUFFIXES)):
         if name in recipes:
@@ -146,6 +149,25 @@ def check_yaml_bounds(text: str, source: str = "YAML value") -> None:
             continue
         stack.append((node, True))
         stack.extend((c, False) for c in children if id(c) not in sizes)
+
+
+def read_recipe_text(path: str | os.PathLike[str], what: str = "recipe") -> str:
+    """The text of a YAML file (a recipe, a backbone file) through the project's bounded reader: a regular
+    file of at most :data:`MAX_RECIPE_BYTES`, UTF-8 (:mod:`skeleton_mamba.bounded_read`)."""
+    return read_text(path, max_bytes=MAX_RECIPE_BYTES, what=what, error=InputError)
+
+
+def read_yaml_file(path: str | os.PathLike[str], what: str = "recipe"):
+    """A YAML file read by :func:`read_recipe_text` and loaded within the recipe bounds; a syntax error is
+    one :class:`InputError` naming the file, line and column."""
+    text = read_recipe_text(path, what)
+    try:
+        return bounded_yaml_load(text, str(path))
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise InputError(f"{where}: YAML syntax error in the {what}: {problem}") from None
 
 
 def bounded_yaml_load(text: str, source: str = "YAML value"):
@@ -203,7 +225,7 @@ class RecipeConfigAction(ActionConfigFile):
 
     def _apply_recipe(self, parser, cfg, path: Path, option_string, overlays: tuple[Path, ...]) -> None:
         """Apply the recipe at ``path``: its ``base`` recipes first (recursively), then its own keys."""
-        content = bounded_yaml_load(path.read_text(encoding="utf-8"), str(path))
+        content = bounded_yaml_load(read_recipe_text(path), str(path))
         if content is not None and not isinstance(content, dict):
             parser.error(
                 f"{path}: not a recipe (a YAML mapping of `key: value` lines is expected, the file holds a "
@@ -247,13 +269,8 @@ class RecipeConfigAction(ActionConfigFile):
 def _check_yaml(parser, path: Path) -> None:
     """``parser.error`` naming ``path`` and the line of a YAML syntax error (jsonargparse names neither)."""
     try:
-        if path.stat().st_size > MAX_RECIPE_BYTES:
-            parser.error(f"{path}: {path.stat().st_size:,} bytes, more than a recipe's {MAX_RECIPE_BYTES:,}")
-        bounded_yaml_load(path.read_text(encoding="utf-8"), str(path))
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
-        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        parser.error(f"{where}: YAML syntax error in the recipe: {problem}")
-    except (OSError, UnicodeDecodeError) as err:
+        read_yaml_file(path)
+    except InputError as err:
+        parser.error(str(err))
+    except OSError as err:
         parser.error(f"{path}: cannot read the recipe ({err})")

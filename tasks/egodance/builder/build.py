@@ -21,7 +21,6 @@ The manual verification step of [EgoMusic] supp. Sec. 5 is left to the user (``m
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing
 import shutil
@@ -35,6 +34,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
@@ -45,6 +45,7 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
+from skeleton_mamba.tasks.egodance.builder.scene_check import MAX_SCENE_FACES, check_scene_file
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.errors import DataFileError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
@@ -203,12 +204,12 @@ _SCENES: dict[tuple[str, str], SceneMesh] = {}
 _WINDOWS: dict[tuple, list[MotionData]] = {}
 
 
-def get_scene(key: str, up_axis: str) -> SceneMesh:
+def get_scene(key: str, up_axis: str, max_faces: int = MAX_SCENE_FACES) -> SceneMesh:
     if (key, up_axis) not in _SCENES:
         if key.startswith("procedural:"):
             _SCENES[key, up_axis] = procedural_room(int(key.split(":", 1)[1]))
         else:
-            scene = load_scene(key, up_axis)
+            scene = load_scene(key, up_axis, max_faces)
             if scene.name == "mesh":  # Replica: <scene>/mesh.ply -> name the scene after its folder
                 scene.name = Path(key).parent.name
             _SCENES[key, up_axis] = scene
@@ -266,7 +267,7 @@ def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
     local = axis_angle_to_matrix(poses)  # (T, 24, 3, 3)
     joints_t, world_t = forward_kinematics(local, root, smpl_rest_offsets(torch.float64), SMPL24.parents)
     joints, world = joints_t.numpy(), world_t.numpy()
-    scene = get_scene(task.scene_key, cfg.up_axis)
+    scene = get_scene(task.scene_key, cfg.up_axis, cfg.max_faces)
     rng = np.random.default_rng([cfg.seed, zlib.crc32(task.sample_id.encode())])
     body = pose_body(get_body_model(cfg.smpl_model), poses, root) if cfg.smpl_model else None
     scores: list[float] = []
@@ -371,7 +372,7 @@ def _check_settings(cfg: BuildConfig) -> None:
     path = Path(cfg.out) / "build.json"
     settings = {k: getattr(cfg, k) for k in _FIXED_SETTINGS}
     if path.is_file():
-        old = json.loads(path.read_text(encoding="utf-8"))
+        old = read_json(path, error=DataFileError)
         diff = {k: (old.get(k), v) for k, v in settings.items() if old.get(k) != v}
         if diff:
             raise ValueError(f"{cfg.out} was built with other settings {diff} (old, new): use another --out")
@@ -380,8 +381,30 @@ def _check_settings(cfg: BuildConfig) -> None:
 
 
 def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
-    """Build (or resume) a dataset; returns the counts also written to ``summary.json``."""
+    """Build (or resume) a dataset; returns the counts also written to ``summary.json``.
+
+    Every scene file's declared size is checked before anything is written or loaded; a build that stops
+    before it wrote a sample removes the output folder it created (a bad scene found when it is loaded).
+    """
     out = Path(cfg.out)
+    for key in scene_keys(cfg):
+        if not key.startswith("procedural:"):
+            check_scene_file(key, cfg.max_faces)
+    created = not out.exists()
+    try:
+        return _run_build(cfg, motion, out)
+    except BaseException:
+        if (
+            created
+            and out.is_dir()
+            and not layout.complete_samples(out)
+            and not (out / layout.SKIPPED).exists()
+        ):
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def _run_build(cfg: BuildConfig, motion: str | Path, out: Path) -> BuildSummary:
     if cfg.smpl_model is not None:  # fail early on a bad model file, and record it by absolute path
         cfg.smpl_model = str(Path(cfg.smpl_model).resolve())
         get_body_model(cfg.smpl_model)

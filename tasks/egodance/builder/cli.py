@@ -15,12 +15,19 @@ Re-running the same command resumes an interrupted build. The output layout is d
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
+from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import run_build
 from skeleton_mamba.tasks.egodance.builder.cli_args import build_parser
 from skeleton_mamba.tasks.egodance.builder.config import BuildConfig
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
 
 __all__ = ["main", "build_parser"]
+
+
+def _is_build(folder: Path) -> bool:
+    return (folder / "build.json").is_file()
 
 
 def main(argv: list[str]) -> int:
@@ -31,7 +38,11 @@ def main(argv: list[str]) -> int:
         level=logging.INFO if args.pop("verbose") else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    overwrite = args.pop("overwrite")
     cfg = BuildConfig(**args)
+    # an earlier build (its build.json) is resumed; any other non-empty folder is the user's
+    own = ("build.json", "summary.json", layout.SAMPLES, layout.SKIPPED)
+    claim_output_folder(cfg.out, "sm make-ego", own, overwrite=overwrite, marker=_is_build)
     summary = run_build(cfg, motion)
     print(
         f"make-ego: {summary.planned} windows planned; this run placed {summary.placed}, "

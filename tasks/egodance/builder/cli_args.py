@@ -6,8 +6,22 @@ import argparse
 
 from skeleton_mamba.tasks.egodance.builder.config import BuildConfig, default_workers
 from skeleton_mamba.tasks.motion.cli_options import add_quiet_argument, command_parser
+from skeleton_mamba.tasks.motion.option_types import (
+    MAX_FRAMES,
+    MAX_IMAGE_SIZE,
+    MAX_WORKERS,
+    fps_option,
+    int_option,
+    real_option,
+    seed_option,
+)
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 
 __all__ = ["build_parser"]
+
+SECONDS = real_option(0.0, 86_400.0, "seconds", low_open=True)
+PIXELS = int_option(1, MAX_IMAGE_SIZE, "pixels")
+METRES = real_option(-10.0, 10.0, "metres")
 
 EXAMPLES = """examples:
   sm make-ego --motion aistpp/motions --scenes replica/ --scene-pattern '*/mesh.ply' --up-axis z \\
@@ -38,34 +52,52 @@ def build_parser() -> argparse.ArgumentParser:
         help="glob of the scene files under a --scenes folder (Replica: '*/mesh.ply'); default: all meshes",
     )
     p.add_argument("--up-axis", default=d.up_axis, choices=["x", "y", "z"], help="up axis of the scene files")
-    p.add_argument("--num-rooms", type=int, default=d.num_rooms, help="procedural rooms to cycle through")
-    p.add_argument("--fps", type=float, default=d.fps, help="frame rate of motion and frames")
     p.add_argument(
-        "--window", type=float, default=d.window_s, dest="window_s", metavar="SECONDS", help="window length"
+        "--num-rooms",
+        type=int_option(1, 10_000, "a room count"),
+        default=d.num_rooms,
+        help="procedural rooms to cycle through",
+    )
+    p.add_argument("--fps", type=fps_option, default=d.fps, help="frame rate of motion and frames")
+    p.add_argument(
+        "--window", type=SECONDS, default=d.window_s, dest="window_s", metavar="SECONDS", help="window length"
     )
     p.add_argument(
         "--stride",
-        type=float,
+        type=SECONDS,
         default=d.stride_s,
         dest="stride_s",
         metavar="SECONDS",
         help="window stride (default: the window length)",
     )
-    p.add_argument("--width", type=int, default=d.width, help="image width in pixels")
-    p.add_argument("--height", type=int, default=d.height, help="image height in pixels")
-    p.add_argument("--fov", type=float, default=d.fov, help="horizontal field of view in degrees")
+    p.add_argument("--width", type=PIXELS, default=d.width, help="image width in pixels")
+    p.add_argument("--height", type=PIXELS, default=d.height, help="image height in pixels")
+    p.add_argument(
+        "--fov",
+        type=real_option(0.0, 180.0, "degrees", low_open=True, high_open=True),
+        default=d.fov,
+        help="horizontal field of view in degrees",
+    )
     p.add_argument(
         "--threshold",
-        type=float,
+        type=real_option(0.0, 1e6, "centimetres"),
         default=d.threshold,
         help="reject placements whose penetration score S_p (cm) is above this",
     )
-    p.add_argument("--max-attempts", type=int, default=d.max_attempts, help="placements tried per window")
     p.add_argument(
-        "--penetration-stride", type=int, default=d.penetration_stride, help="score every n-th frame only"
+        "--max-attempts",
+        type=int_option(1, 1_000_000, "an attempt count"),
+        default=d.max_attempts,
+        help="placements tried per window",
     )
     p.add_argument(
-        "--seed", type=int, default=d.seed, help="random seed of the placements and procedural rooms"
+        "--penetration-stride",
+        type=int_option(1, MAX_FRAMES, "a frame stride"),
+        default=d.penetration_stride,
+        help="score every n-th frame only",
+    )
+    p.add_argument(
+        "--seed", type=seed_option, default=d.seed, help="random seed of the placements and procedural rooms"
     )
     p.add_argument(
         "--frames",
@@ -76,12 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--camera-forward",
-        type=float,
+        type=METRES,
         default=d.camera_forward,
         help="eye offset forward of the head joint in metres",
     )
     p.add_argument(
-        "--camera-up", type=float, default=d.camera_up, help="eye offset above the head joint in metres"
+        "--camera-up", type=METRES, default=d.camera_up, help="eye offset above the head joint in metres"
     )
     p.add_argument(
         "--smpl-model",
@@ -94,7 +126,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--skip-bad", action="store_true", help="go on past corrupt motion files and list them at the end"
     )
-    p.add_argument("--workers", type=int, default=default_workers(), help="worker processes")
+    p.add_argument(
+        "--workers",
+        type=int_option(0, MAX_WORKERS, "a worker count"),
+        default=default_workers(),
+        help="worker processes",
+    )
+    p.add_argument(
+        "--max-faces",
+        type=int_option(1, 1_000_000_000, "a triangle count"),
+        default=d.max_faces,
+        help="the most triangles a scene file may hold (checked from its header before it is loaded)",
+    )
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     add_quiet_argument(p, "progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="log every skipped window and cleanup")
     return p

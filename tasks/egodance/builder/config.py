@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from skeleton_mamba.tasks.egodance.builder.scene_check import MAX_SCENE_FACES
 from skeleton_mamba.tasks.training.threads import available_cores
 
 __all__ = ["BuildConfig", "default_workers"]
@@ -43,6 +44,7 @@ class BuildConfig:
     skip_bad: bool = False  # go on past corrupt motion files and list them at the end
     workers: int = 1
     progress: bool = True
+    max_faces: int = MAX_SCENE_FACES  # triangles a scene file may hold (checked before it is loaded)
 
     @property
     def stride(self) -> float:

@@ -53,7 +53,9 @@ import imageio.v3 as iio
 import imageio_ffmpeg
 import numpy as np
 
+from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header
@@ -158,7 +160,7 @@ def sample_problem(folder: str | Path) -> str | None:
     """
     folder = Path(folder)
     try:
-        meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+        meta = read_json(folder / "meta.json", error=DataFileError)
         frames = meta["frames"]
         count, fmt = int(frames["count"]), frames["format"]
         size = (int(frames["height"]), int(frames["width"]))
@@ -255,7 +257,7 @@ def read_sample(folder: str | Path, load_frames: bool = True) -> EgoSample:
     folder = Path(folder)
     if not is_complete(folder):
         raise ValueError(f"{folder}: not a complete sample (no {COMPLETE} marker)")
-    meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+    meta = read_json(folder / "meta.json", error=DataFileError)
     camera = load_npz(folder / "camera.npz")
     for key in ("width", "height"):
         camera[key] = int(camera[key])

@@ -21,6 +21,13 @@ import numpy as np
 import trimesh
 
 from skeleton_mamba.tasks.egodance.builder.ray_caster import RayCaster
+from skeleton_mamba.tasks.egodance.builder.scene_check import (
+    MAX_SCENE_FACES,
+    SceneFileError,
+    check_face_count,
+    check_scene_file,
+    check_scene_mesh,
+)
 
 __all__ = ["SceneMesh", "load_scene", "to_y_up", "UP_AXES"]
 
@@ -110,8 +117,9 @@ def _part_colors(geom: trimesh.Trimesh) -> np.ndarray:
     return np.tile(color, (len(geom.vertices), 1))
 
 
-def _flatten(loaded, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices (world frame), faces and vertex colours of everything ``trimesh.load`` returned."""
+def _flatten(loaded, path: Path, max_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices (world frame), faces and vertex colours of everything ``trimesh.load`` returned (refused
+    before they are copied when the instanced parts hold more than ``max_faces`` triangles)."""
     if isinstance(loaded, trimesh.Trimesh):
         parts = [(loaded, np.eye(4))]
     elif isinstance(loaded, trimesh.Scene):
@@ -122,9 +130,12 @@ def _flatten(loaded, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             if isinstance(geom, trimesh.Trimesh):
                 parts.append((geom, transform))
     else:
-        raise ValueError(f"{path}: not a triangle mesh or scene (trimesh returned {type(loaded).__name__})")
+        raise SceneFileError(
+            f"{path}: not a triangle mesh or scene (trimesh returned {type(loaded).__name__})"
+        )
     if not parts or all(len(g.faces) == 0 for g, _ in parts):
-        raise ValueError(f"{path}: the scene contains no triangles")
+        raise SceneFileError(f"{path}: the scene contains no triangles")
+    check_face_count(path, sum(len(g.faces) for g, _ in parts), max_faces)  # instances counted, not copied
     verts, faces, colors, offset = [], [], [], 0
     for geom, transform in parts:
         v = trimesh.transformations.transform_points(np.asarray(geom.vertices), transform)
@@ -172,27 +183,32 @@ def make_scene(
     return SceneMesh(name=name, mesh=mesh, floor_height=floor, floor_faces=floor_faces, source=source)
 
 
-def load_scene(path: str | Path, up_axis: str = "y") -> SceneMesh:
+def load_scene(path: str | Path, up_axis: str = "y", max_faces: int = MAX_SCENE_FACES) -> SceneMesh:
     """Load a scene mesh file and convert it to y-up.
 
     Args:
         path: any mesh or scene file trimesh can load (``.glb``, ``.obj``, ``.ply``, ...).
         up_axis: the file's up axis, ``"y"`` (glTF default), ``"z"`` (Replica, Habitat) or ``"x"``.
+        max_faces: the most triangles it may hold, checked from its header before it is loaded
+            (:mod:`.scene_check`) and on what was loaded.
 
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: the file is not a triangle mesh, is empty, or has no floor.
+        SceneFileError: the file is not a triangle mesh, is empty, too large, holds a non-finite vertex or
+            has no floor.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file not found: {path}")
     rotation = to_y_up(up_axis)
+    check_scene_file(path, max_faces)
     try:
         loaded = trimesh.load(path, process=False)
     except Exception as err:  # trimesh raises many types for broken files
-        raise ValueError(f"{path}: trimesh cannot load this scene ({err})") from err
-    vertices, faces, colors = _flatten(loaded, path)
+        raise SceneFileError(f"{path}: trimesh cannot load this scene ({err})") from err
+    vertices, faces, colors = _flatten(loaded, path, max_faces)
+    check_scene_mesh(path, vertices, faces, max_faces)
     try:
         return make_scene(path.stem, vertices @ rotation.T, faces, colors, source=str(path))
     except ValueError as err:
-        raise ValueError(f"{path}: {err}") from err
+        raise SceneFileError(f"{path}: {err}") from err
