@@ -12,6 +12,7 @@ from scipy.io import wavfile
 
 from skeleton_mamba.skeletons import HUMANML3D22, SMPL24
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.render import (
     RenderStyle,
     fit_cameras,
@@ -19,7 +20,7 @@ from skeleton_mamba.tasks.motion.render import (
     render_frames,
     render_motion,
 )
-from skeleton_mamba.tasks.motion.render_cli import load_joints, main
+from skeleton_mamba.tasks.motion.render_cli import main
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 from skeleton_mamba.tasks.training.cli import main as sm_main
 

@@ -32,7 +32,7 @@ from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion
+from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.view import write_view

@@ -18,7 +18,7 @@ from os import PathLike
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_open", "atomic_path", "check_writable"]
+__all__ = ["atomic_open", "atomic_path", "check_writable", "output_file"]
 
 
 def check_writable(path: str | PathLike[str]) -> Path:
@@ -41,6 +41,24 @@ def check_writable(path: str | PathLike[str]) -> Path:
     if not os.access(path.parent, os.W_OK):
         raise PermissionError(13, "Permission denied", str(path.parent))
     return path
+
+
+def output_file(path: str | PathLike[str], option: str = "--out") -> Path:
+    """A user's output *file* (``sm render --out clip.mp4``): its folder must exist.
+
+    The commands' policy: an output file goes into an existing folder (a typo such as ``/nonexistnt/x.mp4``
+    must not create folders at the root); a command whose ``--out`` is a folder (``sm dance --out DIR``)
+    creates that folder, with its parents. Raises a one-line :class:`OSError` (``sm`` exits with 2).
+    """
+    path = Path(path)
+    parent = path.parent
+    if not parent.is_dir():
+        what = "is not a folder" if parent.exists() else "does not exist"
+        raise FileNotFoundError(
+            2, f"the folder {parent} {what}; create it first ({option} FILE must be in an existing folder)",
+            str(path),
+        )  # fmt: skip
+    return check_writable(path)
 
 
 def _new_file_mode() -> int:

@@ -29,8 +29,8 @@ from skeleton_mamba.tasks.motion.aistpp import music_id
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
+from skeleton_mamba.tasks.motion.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.music import audio_stack
-from skeleton_mamba.tasks.motion.render_cli import load_joints
 
 __all__ = ["evaluate_folders", "main"]
 

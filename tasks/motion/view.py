@@ -1,12 +1,16 @@
-"""``sm view MOTION [MOTION ...] [--music FILE] [--metrics demo.json] [--overlay] --out view.html``.
+"""``sm view MOTION [MOTION ...] [--music FILE] [--metrics demo.json] [--overlay] [--units U|--scale S]
+--out view.html``.
 
 Writes ONE self-contained HTML page (opens from disk, no network): three.js r170 and its OrbitControls (the
 npm package ``three``, MIT, bundled in :mod:`.viewer`) as data-URI modules, each motion as its glTF binary
 (:mod:`.gltf`, base64), the music as a data-URI ``<audio>`` element. The page draws the skeletons on a ground
 grid with shadows, fits an orbit camera to the whole motion, and has play / pause / scrub / speed; with music
 the audio element is the clock and a scrub moves it. Several motions stand side by side (or ``--overlay``),
-named and coloured, with the numeric metrics of a ``demo.json`` listed. ``window.smViewer`` exposes the
-clock, ``seek(t)``, the camera and the projection of each motion's root to canvas pixels.
+named and coloured, with the metrics of a ``demo.json`` listed by their full names (nested objects as
+``scores.dance.mpjpe_m``, whole numbers as such, booleans as yes / no, short texts as they are) and the scale
+each file was read with when it is not metres by its format (:mod:`.units`). Motions are read by
+:mod:`.motion_reader` (our ``.glb`` exports too). ``window.smViewer`` exposes the clock, ``seek(t)``, the
+camera, the projection of a world point to canvas pixels, each motion's root and joints in world space.
 """
 
 from __future__ import annotations
@@ -22,11 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.atomic import atomic_open, output_file
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
-from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, write_glb
+from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.units import METRES, add_unit_arguments
 
-__all__ = ["write_view", "main"]
+__all__ = ["MAX_TEXT", "listed_metrics", "write_view", "main"]
 
 _AUDIO_TYPES = {
     ".wav": "audio/wav",
@@ -49,16 +55,26 @@ def _glb_bytes(motion: SkeletonMotion, name: str, folder: Path) -> bytes:
         path.unlink()
 
 
-def _numeric_metrics(metrics: dict | None) -> dict[str, float | str]:
-    """Top-level numbers (and one level of nested numbers as ``outer.inner``) of a metrics dict."""
-    out: dict[str, float | str] = {}
+MAX_TEXT = 60  # longer texts of a metrics file (paths, descriptions) are not listed
+
+
+def listed_metrics(metrics: dict | None, prefix: str = "") -> dict[str, float | int | str]:
+    """The entries of a metrics dict the page lists, by full dotted name: numbers (whole numbers as ints),
+    booleans as ``yes`` / ``no``, texts of at most :data:`MAX_TEXT` characters; nested dicts at any depth
+    (``scores.dance.mpjpe_m``); lists and longer texts are left out."""
+    out: dict[str, float | int | str] = {}
     for key, value in (metrics or {}).items():
+        name = f"{prefix}{key}"
         if isinstance(value, bool):
-            continue
-        if isinstance(value, (int, float)):
-            out[str(key)] = float(value)
+            out[name] = "yes" if value else "no"
+        elif isinstance(value, int):
+            out[name] = value
+        elif isinstance(value, float):
+            out[name] = value if np.isfinite(value) else str(value)
+        elif isinstance(value, str) and len(value) <= MAX_TEXT:
+            out[name] = value
         elif isinstance(value, dict):
-            out.update({f"{key}.{k}": float(v) for k, v in value.items() if isinstance(v, (int, float))})
+            out.update(listed_metrics(value, f"{name}."))
     return out
 
 
@@ -75,7 +91,8 @@ def write_view(
         motions: (name, motion) pairs, drawn left to right (all at the origin with ``overlay``).
         out: the ``.html`` to write.
         music: an audio file played in sync from the motions' first frame.
-        metrics: a dict or the path of a JSON file (e.g. a demo's ``demo.json``); numbers are listed.
+        metrics: a dict or the path of a JSON file (e.g. a demo's ``demo.json``), listed by
+            :func:`listed_metrics`.
         overlay: draw every motion at its own place instead of side by side.
     """
     out = Path(out)
@@ -109,7 +126,9 @@ def write_view(
             raise ValueError(f"{music}: unsupported audio type {music.suffix!r} ({', '.join(_AUDIO_TYPES)})")
         audio = f'<audio id="music" preload="auto" src="{_data_uri(music.read_bytes(), mime)}"></audio>'
     assets = files("skeleton_mamba.tasks.motion.viewer")
-    data = {"motions": entries, "metrics": _numeric_metrics(metrics), "spacing": spacing, "floor": floor}
+    notes = [f"{name}: {m.scale.describe()}" for name, m in motions if m.scale != METRES]
+    data = {"motions": entries, "metrics": listed_metrics(metrics), "notes": notes, "spacing": spacing,
+            "floor": floor}  # fmt: skip
     page = (
         assets.joinpath("viewer.html")
         .read_text(encoding="utf-8")
@@ -128,13 +147,16 @@ def write_view(
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sm view", description="Write a self-contained HTML viewer of motions.")
-    p.add_argument("motions", nargs="+", help="motion files: .npz, .pkl, .bvh, .npy (T,J,3), .skeleton")
-    p.add_argument("--out", required=True, help="output .html")
+    p.add_argument(
+        "motions", nargs="+", help="motion files: .npz, .pkl, .bvh, .npy (T,J,3) or (T,263), .skeleton, .glb"
+    )
+    p.add_argument("--out", required=True, help="output .html, in an existing folder")
     p.add_argument("--music", default=None, help="audio file played in sync (.wav, .mp3, .ogg, .flac)")
     p.add_argument("--metrics", default=None, help="a JSON file of metrics to list (e.g. demo.json)")
     p.add_argument("--overlay", action="store_true", help="draw the motions on top of one another")
     p.add_argument("--skeleton", default=None, help="skeleton of .npy joint files (smpl24, ntu25, ...)")
     p.add_argument("--motion-fps", type=float, default=None, help="input frame rate (overrides the files')")
+    add_unit_arguments(p)
     return p
 
 
@@ -142,10 +164,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm view``; returns 0 on success (bad input raises: `sm` prints one line)."""
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
-        motions = [
-            (Path(m).stem, load_skeleton_motion(m, skeleton=args.skeleton, motion_fps=args.motion_fps))
-            for m in args.motions
-        ]
+        output_file(args.out)
+        motions = []
+        for m in args.motions:
+            motion = load_skeleton_motion(m, args.skeleton, args.motion_fps, args.units, args.scale)
+            if motion.scale != METRES:
+                print(motion.scale.line(m), file=sys.stderr)
+            motions.append((Path(m).stem, motion))
         out = write_view(motions, args.out, music=args.music, metrics=args.metrics, overlay=args.overlay)
     except (ValueError, KeyError) as e:  # the readers' argument checks name the file too: one line, exit 2
         raise InputError(one_line_message(e)) from e
