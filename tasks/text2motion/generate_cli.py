@@ -167,5 +167,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.out)
     for i, caption in enumerate(captions):
         paths = save_generated(features[i], caption, out / f"{i:03d}_{slug(caption)}", args.render)
-        print(f"wrote {paths['joints']}  ({frames} frames: {caption!r})")
+        print(f"{caption!r}: {frames} frames at {FPS:g} fps")
+        print("\n".join(f"  {kind:8s} {path}" for kind, path in paths.items()))
     return 0
