@@ -37,7 +37,7 @@ outputs, state shapes and the skeleton. Inside an exported graph the SSD runs as
 
 Example::
 
-    sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
+    sm export-onnx --backbone backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
         --causal --out onnx/ --check
     sm export-onnx --ckpt runs/stream_demo/version_0/checkpoints/last.ckpt --out onnx/
 """
@@ -64,6 +64,11 @@ from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.training.backbone_config import backbone_config
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
+from skeleton_mamba.tasks.training.recipe_resolution import (
+    bounded_yaml_load,
+    packaged_recipe_dir,
+    resolve_backbone,
+)
 
 __all__ = [
     "NETWORK_SPECS",
@@ -424,10 +429,14 @@ def backbone_of(network: nn.Module, source: str) -> SkeletonMamba:
 
 
 def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
-    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides."""
-    p = Path(path)
+    """A fresh SkeletonMamba from a backbone YAML file and overrides: a path, or a packaged fragment as a
+    recipe names it (``backbones/skeleton_mamba_tiny.yaml``, or ``skeleton_mamba_tiny``)."""
+    p = resolve_backbone(path)
+    if p is None:
+        names = sorted(f.stem for f in (packaged_recipe_dir() / "backbones").glob("*.yaml"))
+        raise InputError(f"{path}: no such backbone file, nor a packaged one (packaged: {', '.join(names)})")
     try:
-        fields = yaml.safe_load(p.read_text()) or {}
+        fields = bounded_yaml_load(p.read_text(), str(p)) or {}
     except yaml.YAMLError as err:
         raise InputError(f"{p}: not valid YAML ({' '.join(str(err).split())})") from err
     if not isinstance(fields, dict):
@@ -453,7 +462,11 @@ def _parser() -> argparse.ArgumentParser:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--ckpt", help="a Lightning checkpoint: its task network (see --part) is exported")
     src.add_argument("--pretrained", help="a from_pretrained folder or Hub id (a backbone or a task network)")
-    src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
+    src.add_argument(
+        "--backbone",
+        help="a backbone YAML (fresh weights): a path, or a packaged one as recipes name it "
+        "(backbones/skeleton_mamba_tiny.yaml, or skeleton_mamba_tiny)",
+    )
     p.add_argument("--part", choices=("network", "backbone"), default="network", help=PART_HELP)
     p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
     p.add_argument("--in-channels", type=int, default=None, help="with --backbone: input features per joint")
