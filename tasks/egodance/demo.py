@@ -28,6 +28,7 @@ from pathlib import Path
 import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
+from skeleton_mamba.tasks.egodance.builder.layout import read_meta
 from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
@@ -109,7 +110,7 @@ class DanceDemo(Callback):
             beats.append(item["music"][:, BEAT])
             if index >= self.num_samples:
                 continue
-            meta = json.loads((Path(dataset.folders[index]) / "meta.json").read_text(encoding="utf-8"))
+            meta = read_meta(dataset.folders[index])
             music = meta.get("music") or {}
             sid = str(item["sample_id"])
             name = sid if sid.startswith("synthetic") else f"synthetic_{sid}"
