@@ -18,6 +18,7 @@ import argparse
 import logging
 
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, default_workers, run_build
+from skeleton_mamba.tasks.motion.errors import InputError
 
 __all__ = ["main", "build_parser"]
 
@@ -59,6 +60,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--threshold", type=float, default=d.threshold, help="reject placements with S_p above (cm)"
     )
     p.add_argument("--max-attempts", type=int, default=d.max_attempts, help="placements tried per window")
+    p.add_argument(
+        "--min-view-hits",
+        type=float,
+        default=d.min_view_hits,
+        help="reject placements whose first camera view hits geometry on fewer rays than this share "
+        "(feet beyond the floor are always rejected)",
+    )
     p.add_argument(
         "--penetration-stride", type=int, default=d.penetration_stride, help="score every n-th frame only"
     )
@@ -103,6 +111,8 @@ def main(argv: list[str]) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     cfg = BuildConfig(**args)
+    if not 0.0 <= cfg.min_view_hits <= 1.0:
+        raise InputError(f"--min-view-hits {cfg.min_view_hits:g}: a share of rays, from 0 to 1")
     summary = run_build(cfg, motion)
     print(
         f"make-ego: {summary.planned} windows planned; this run placed {summary.placed}, "
@@ -111,6 +121,11 @@ def main(argv: list[str]) -> int:
         f"{summary.complete} complete samples in {cfg.out}"
         + (f"; rebuilt {summary.rebuilt} damaged samples" if summary.rebuilt else "")
     )
+    if summary.rejected:
+        reasons = {"penetration": "penetrated the scene", "feet": "feet beyond the floor",
+                   "view": "first view mostly empty"}  # fmt: skip
+        counts = ", ".join(f"{n} {reasons.get(why, why)}" for why, n in summary.rejections.items() if n)
+        print(f"make-ego: rejected placements: {counts}")
     if summary.bad_inputs:
         print(f"make-ego: skipped {len(summary.bad_inputs)} corrupt motion files:")
         print("\n".join(f"  {message}" for message in summary.bad_inputs))
