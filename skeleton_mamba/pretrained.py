@@ -544,7 +544,7 @@ class PretrainedMixin:
     @classmethod
     def pretrained_kwargs(cls, config: Mapping[str, Any], source: str = CONFIG_NAME) -> dict[str, Any]:
         """The ``__init__`` arguments a ``config.json`` dict stores, decoded and checked: its class must be
-        ``cls`` and every size within :data:`~skeleton_mamba.pretrained_checks.SIZE_BOUNDS`. Nothing is built.
+        ``cls`` and every size within :data:`~skeleton_mamba.size_bounds.SIZE_BOUNDS`. Nothing is built.
 
         Raises:
             PretrainedError: naming ``source`` and the argument at fault.

@@ -12,6 +12,7 @@ chain outwards) and are this project's choice.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "DEFAULT_GROUP_PATHS",
     "GROUP_MIRROR",
     "get_skeleton",
+    "parents_first_order",
 ]
 
 # The authors' eight group orders: arms, spine, legs or legs, spine, arms ([EgoMusic] code,
@@ -101,15 +103,7 @@ class Skeleton:
     @property
     def topological_order(self) -> tuple[int, ...]:
         """Joint indices with every parent before its children (for forward kinematics)."""
-        order: list[int] = []
-        placed: set[int] = set()
-        while len(order) < len(self.parents):
-            ready = [i for i, p in enumerate(self.parents) if i not in placed and (p < 0 or p in placed)]
-            if not ready:
-                raise ValueError(f"{self.name}: parents contain a cycle")
-            order += ready
-            placed.update(ready)
-        return tuple(order)
+        return parents_first_order(self.parents, self.name)
 
     def bones(self) -> list[tuple[int, int]]:
         """(parent, child) pairs, for drawing."""
@@ -117,6 +111,22 @@ class Skeleton:
 
     def index(self, name: str) -> int:
         return self.joint_names.index(name)
+
+
+def parents_first_order(parents: Sequence[int], name: str = "skeleton") -> tuple[int, ...]:
+    """Joint indices with every parent before its children; raises ``ValueError`` on a cycle or a parent
+    index out of range (any number of roots, ``-1``)."""
+    if any(not -1 <= p < len(parents) for p in parents):
+        raise ValueError(f"{name}: a parent index is out of range (0 to {len(parents) - 1}, or -1)")
+    order: list[int] = []
+    placed: set[int] = set()
+    while len(order) < len(parents):
+        ready = [i for i, p in enumerate(parents) if i not in placed and (p < 0 or p in placed)]
+        if not ready:
+            raise ValueError(f"{name}: parents contain a cycle")
+        order += ready
+        placed.update(ready)
+    return tuple(order)
 
 
 def _mirror_from_pairs(n: int, pairs: list[tuple[int, int]]) -> tuple[int, ...]:

@@ -174,6 +174,14 @@ def test_sm_fit_fast_dev_run_on_the_synthetic_recipe(tmp_path):
     assert "Traceback" not in result.stderr
 
 
+def test_a_fit_that_trains_nothing_leaves_no_run_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    args = ["fit", "--recipe", "recognition_synthetic.yaml", "--data.init_args.batch_size=1000"]
+    assert sm_main([*args, "--trainer.max_epochs=1", "--trainer.enable_progress_bar=false"]) == 2
+    assert "the training data gives no batch" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()  # neither runs/<name>/version_0 nor an empty runs/<name>/
+
+
 def test_sm_fit_ddp_over_two_cpu_processes(tmp_path):
     result = run_sm(
         [

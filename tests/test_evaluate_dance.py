@@ -65,10 +65,15 @@ def test_evaluate_dance_json_matches_the_evaluation_of_the_same_files(folders, t
 def test_evaluate_dance_edge_reports_pfc_and_clip_counts(folders, capsys):
     gen, real, _ = folders
     assert sm_main(["evaluate-dance", str(gen), str(real), "--protocol", "edge", "--json", "--quiet"]) == 0
-    result = json.loads(capsys.readouterr().out)
+    printed = capsys.readouterr()
+    result = json.loads(printed.out)
     # 700 frames at 60 fps -> 350 at 30 fps -> clips at 0, 75, 150 (3 per file); 600 -> 300 -> 0, 75, 150
     assert result["generated_clips"] == 9 and result["real_clips"] == 9
     assert "PFC" in result and "BeatAlign" not in result  # no music given
+    # 9 clips a set, under the 20 of AIST++'s test set: said on stderr and in the JSON
+    assert len(result["warnings"]) == 2 and "only 9 generated clips" in result["warnings"][0]
+    err = printed.err
+    assert "sm evaluate-dance: warning: only 9 generated clips: FID and Div need at least 20 per set" in err
 
 
 def test_evaluate_dance_errors_name_the_file(folders, tmp_path, capsys):

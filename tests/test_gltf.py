@@ -15,11 +15,11 @@ from gltf_reader import accessor, assert_khronos_valid, glb_joint_positions
 
 from skeleton_mamba.tasks.motion.bvh import load_bvh, save_bvh, smpl_to_bvh
 from skeleton_mamba.tasks.motion.export_cli import main as export_main
-from skeleton_mamba.tasks.motion.gltf import from_joints, from_motion_data, load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.gltf import from_joints, from_motion_data, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.motion_reader import load_joints, load_skeleton_motion
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
-from skeleton_mamba.tasks.motion.render_cli import load_joints
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 from skeleton_mamba.tasks.text2motion.convert_cli import convert_file
 from skeleton_mamba.tasks.training.cli import main as sm_main
@@ -77,14 +77,13 @@ def test_sample_files(tmp_path, name):
         pytest.skip(f"sample data {path} absent")
     out = write_glb(load_skeleton_motion(path), tmp_path / "s.glb")
     _, positions = glb_joint_positions(out)
-    if path.suffix == ".bvh":
-        truth = load_bvh(path).joint_positions()
+    if path.suffix == ".bvh":  # CMU's unit, 1/0.45 inch, detected from the figure: metres in the file
+        truth = load_bvh(path).joint_positions(scale=0.0254 / 0.45)
     else:
         truth = np.concatenate(list(read_skeleton_file(path).keypoints(max_bodies=2)), axis=1)
     assert positions.shape == truth.shape
-    scale = max(1.0, float(np.abs(truth).max()))  # BVH in file units (centimetres for CMU)
-    np.testing.assert_allclose(positions, truth, atol=1e-5 * scale, rtol=0)
-    np.testing.assert_allclose(positions, load_joints(path).joints, atol=1e-5 * scale, rtol=0)
+    np.testing.assert_allclose(positions, truth, atol=1e-5, rtol=0)
+    np.testing.assert_allclose(positions, load_joints(path).joints, atol=1e-5, rtol=0)
 
 
 def _rules_by_rereading(path: Path) -> None:

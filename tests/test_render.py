@@ -12,6 +12,7 @@ from scipy.io import wavfile
 
 from skeleton_mamba.skeletons import HUMANML3D22, SMPL24
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.render import (
     RenderStyle,
     fit_cameras,
@@ -19,7 +20,7 @@ from skeleton_mamba.tasks.motion.render import (
     render_frames,
     render_motion,
 )
-from skeleton_mamba.tasks.motion.render_cli import load_joints, main
+from skeleton_mamba.tasks.motion.render_cli import main
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -191,3 +192,33 @@ def test_bad_joints_fail_before_writing(tmp_path):
     with pytest.raises(ValueError, match=r"joints must be \(T>0, 24, 3\)"):
         render_motion(np.zeros((5, 22, 3)), SMPL24.parents, tmp_path / "bad.mp4", 30.0, progress=False)
     assert not (tmp_path / "nan.mp4").exists() and not (tmp_path / "bad.mp4").exists()
+
+
+def test_fast_motion_rendered_at_30_fps_unless_asked(tmp_path, capsys):
+    motion = dancing_smpl(48, 120.0)  # 0.4 s at 120 fps
+    save_motion(tmp_path / "fast.npz", motion)
+    assert main([str(tmp_path / "fast.npz"), "--out", str(tmp_path / "a.gif"), "--quiet"]) == 0
+    assert "120 fps rendered at 30 fps (frames resampled; --fps N to change)" in capsys.readouterr().err
+    with Image.open(tmp_path / "a.gif") as image:  # frames at 0, 1/30, ... up to 47/120 s
+        assert image.n_frames == 12
+    assert (
+        main([str(tmp_path / "fast.npz"), "--out", str(tmp_path / "b.gif"), "--quiet", "--fps", "120"]) == 0
+    )
+    assert "resampled" not in capsys.readouterr().err
+    with Image.open(tmp_path / "b.gif") as image:
+        assert image.n_frames == 48
+
+
+def test_output_file_needs_an_existing_folder(tmp_path, capsys):
+    save_motion(tmp_path / "m.npz", dancing_smpl(4, 30.0))
+    out = tmp_path / "no" / "such" / "clip.mp4"
+    assert sm_main(["render", str(tmp_path / "m.npz"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"sm render: error: {out}: the folder {out.parent} does not exist; create it first "
+                   "(--out FILE must be in an existing folder)"]  # fmt: skip
+    assert not (tmp_path / "no").exists()
+    for command in (["export"], ["view"]):
+        target = tmp_path / "no" / f"x.{'glb' if command == ['export'] else 'html'}"
+        assert sm_main([*command, str(tmp_path / "m.npz"), "--out", str(target)]) == 2
+        assert "does not exist; create it first" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()

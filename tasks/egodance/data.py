@@ -38,7 +38,7 @@ from torch.utils.data import Dataset
 
 from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
-from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames
+from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames, read_meta
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
@@ -142,7 +142,7 @@ class EgoDanceDataset(Dataset):
         missing = _missing(folder)
         if missing:
             raise DatasetNotFoundError(f"{folder}: sample folder lacks {', '.join(missing)}")
-        meta = read_json(folder / "meta.json", error=DataFileError)
+        meta = read_meta(folder)
         motion = load_motion(folder / "motion.npz")
         if motion.poses is None or motion.trans is None:
             raise DataFileError(f"{folder / 'motion.npz'}: needs smpl_poses and smpl_trans")
@@ -271,7 +271,7 @@ class EgoDanceDataModule(SplitDataModule):
         folders = self.check_data()
         sources = []
         for folder in folders:
-            meta = read_json(folder / "meta.json", error=DataFileError)
+            meta = read_meta(folder)
             sources.append((meta.get("motion") or {}).get("source") or folder.name)
         split_of = self.assign_splits(sources)
         splits: dict[str, list[Path]] = {"train": [], "val": [], "test": []}
@@ -377,6 +377,16 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
             full_sequences,
         )
         self.source_root = Path(root).resolve()
+
+    def check_data(self) -> list[Path]:
+        """The complete sample folders; a missing set says how the demo builds it (not ``sm make-ego``)."""
+        if not complete_samples(self.root):
+            raise DatasetNotFoundError(
+                f"the generated set {self.root} is missing or unfinished: the first `sm fit` of the recipe "
+                f"(e.g. `sm fit --recipe egodance_demo.yaml`) generates it; a run folder copied without "
+                f"its data folder ({self.source_root}) cannot find it"
+            )
+        return super().check_data()
 
     def assign_splits(self, sources: list[str]) -> dict[str, str]:
         """Generated dance -> split, stratified by style (class docstring)."""

@@ -32,14 +32,13 @@ from pathlib import Path
 import torch
 from lightning.pytorch import Callback, LightningModule, Trainer
 
-from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.tasks.egodance.builder.layout import read_meta
 from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_demo import format_long_scores, long_sample, score_long_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import DataFileError
-from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion
+from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.view import write_view
@@ -100,7 +99,7 @@ class DanceDemo(Callback):
         data = trainer.datamodule
         if self.long_sample_s <= 0 or not hasattr(data, "source_root"):
             return None
-        meta = json.loads((Path(dataset.folders[0]) / "meta.json").read_text(encoding="utf-8"))
+        meta = read_meta(dataset.folders[0])
         source = (meta.get("motion") or {}).get("source") or ""
         folder = long_sample(data, source, self.long_sample_s)
         mean_pose = torch.cat([clip.reshape(-1, *clip.shape[-2:]) for clip in train]).mean(0)
@@ -144,7 +143,7 @@ class DanceDemo(Callback):
             beats.append(item["music"][:, BEAT])
             if index >= self.num_samples:
                 continue
-            meta = read_json(Path(dataset.folders[index]) / "meta.json", error=DataFileError)
+            meta = read_meta(dataset.folders[index])
             music = meta.get("music") or {}
             sid = str(item["sample_id"])
             name = sid if sid.startswith("synthetic") else f"synthetic_{sid}"

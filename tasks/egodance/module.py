@@ -20,7 +20,8 @@ dance-evaluation ``protocol`` (:mod:`~skeleton_mamba.tasks.motion.metrics.protoc
 Div_k / Div_g of the sampled windows against the ground-truth windows (with at least 2 windows); plus the
 estimator's own errors ``test/head_estimator/{position_mm, rotation_deg}``. The protocol's music beats come
 from each window's music file (``music_path``, ``music_start_s`` of the batch, which the data module
-provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on).
+provides) by the protocol's own recipe; ``"fact"`` here has no seed (frame 0 on). ``sm predict`` samples the
+test windows and writes each dance as files (:mod:`.prediction_writer`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
+from skeleton_mamba.tasks.egodance.prediction_writer import DancePredictionWriter
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
@@ -474,6 +476,10 @@ class EgoDanceModule(BackboneModule):
                 self.log_dict({f"test/{name}/{k}": v for k, v in values.items()})
             group.reset()
             evaluation.reset(keep_real=False)
+
+    def configure_callbacks(self) -> list:
+        """``sm predict`` writes every dance as files in the log dir (:class:`DancePredictionWriter`)."""
+        return [DancePredictionWriter()]
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         """``sample_id``, ``tokens`` (B, T, 24, 10), FK ``joints`` (B, T, 24, 3) of sampled dances, and the

@@ -6,7 +6,8 @@ with an ``OFFSET x y z`` (from the parent, in the parent's rest frame) and, exce
 values in hierarchy order. Rotation channels are degrees; a joint's local rotation is the product of
 its elementary rotations in channel order (``Zrotation Xrotation Yrotation`` -> ``Rz @ Rx @ Ry``).
 Position channels replace the joint's offset (the usual reading: the root's channels are its
-position). Units are the file's own (CMU files are not in metres): pass ``scale`` to convert.
+position). Units are the file's own (CMU files are not in metres): pass ``scale`` to convert;
+:meth:`BvhMotion.rest_height` is what :mod:`.units` detects the unit from.
 """
 
 from __future__ import annotations
@@ -108,6 +109,17 @@ class BvhMotion:
                 if c in _POS:
                     out[:, j, _POS[c]] = self.values[:, col]
         return out
+
+    def rest_height(self) -> float:
+        """The figure's size at rest in file units: the largest extent, over x, y and z, of the rest pose's
+        joints and end sites (its height whichever axis is up; a T-pose's arm span is about the same)."""
+        rotations = torch.eye(3, dtype=torch.float64).expand(len(self.names), 3, 3)
+        offsets = torch.from_numpy(np.asarray(self.offsets, np.float64))
+        root = torch.zeros(3, dtype=torch.float64)
+        positions = forward_kinematics(rotations, root, offsets, self.parents)[0]
+        points = [positions.numpy()] + [positions[j].numpy() + site for j, site in self.end_sites.items()]
+        points = np.vstack([np.reshape(p, (-1, 3)) for p in points])
+        return float(np.ptp(points, axis=0).max())
 
     def joint_positions(self, scale: float = 1.0) -> np.ndarray:
         """(T, J, 3) world joint positions (file units times ``scale``) by forward kinematics."""

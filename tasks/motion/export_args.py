@@ -6,6 +6,7 @@ import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.option_types import fps_option
+from skeleton_mamba.tasks.motion.units import add_unit_arguments
 
 __all__ = ["build_parser"]
 
@@ -17,9 +18,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "motion",
         help="motion file: .npz (ours), .pkl (AIST++), .npy: (T,J,3) joints or (T,263) HumanML3D features, "
-        ".bvh, .skeleton",
+        ".bvh, .skeleton, .glb",
     )
-    p.add_argument("--out", required=True, help="output .glb")
+    p.add_argument("--out", required=True, help="output .glb, in an existing folder")
     p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
     p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
     p.add_argument(
@@ -28,4 +29,5 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--overwrite", action="store_true", help="with --music: replace an existing .wav beside --out"
     )
+    add_unit_arguments(p)
     return p

@@ -1,9 +1,11 @@
-"""``sm export MOTION --out dance.glb [--music FILE] [--skeleton NAME] [--motion-fps N]``.
+"""``sm export MOTION --out dance.glb [--music FILE] [--skeleton J] [--motion-fps N] [--units U|--scale S]``.
 
-Writes any motion file the toolkit reads (``.npz``, AIST++ ``.pkl``, ``.bvh``, joints ``.npy``, HumanML3D
-features ``.npy`` (T, 263), NTU ``.skeleton``) as a glTF 2.0 binary (:mod:`.gltf`): a skinned skeleton and
-one animation. ``--music`` writes the track's slice of the motion's length beside it (``dance.wav``), as
-glTF has no audio.
+Writes any motion file the toolkit reads (:mod:`.motion_reader`: ``.npz``, AIST++ ``.pkl``, ``.bvh``, joints
+``.npy``, HumanML3D features ``.npy`` (T, 263), NTU ``.skeleton``, ``.glb``) as a glTF 2.0 binary
+(:mod:`.gltf`): a skinned skeleton and one animation, in metres. A scale other than metres by the file's
+format (a BVH's detected unit, ``--units``, ``--scale``) is stated on stderr; every file records it in its
+``asset.extras``. ``--music`` writes the track's slice of the motion's length beside it (``dance.wav``), as
+glTF has no audio. ``--out``'s folder must exist.
 """
 
 from __future__ import annotations
@@ -12,11 +14,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from skeleton_mamba.tasks.motion.atomic import output_file
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.export_args import build_parser
-from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion, write_glb
+from skeleton_mamba.tasks.motion.gltf import write_glb
+from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.output_folder import claim_output_files
+from skeleton_mamba.tasks.motion.units import METRES
 
 __all__ = ["main"]
 
@@ -28,9 +33,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if out.suffix.lower() != ".glb":
             raise InputError(f"{out}: the output must be a .glb file")
+        output_file(out)
         if args.music is not None:  # the .wav beside the .glb: not named by the user, so not replaced unasked
             claim_output_files([out.with_suffix(".wav")], out, overwrite=args.overwrite)
-        motion = load_skeleton_motion(args.motion, skeleton=args.skeleton, motion_fps=args.motion_fps)
+        motion = load_skeleton_motion(args.motion, args.skeleton, args.motion_fps, args.units, args.scale)
+        if motion.scale != METRES:
+            print(motion.scale.line(args.motion), file=sys.stderr)
         write_glb(motion, out, name=Path(args.motion).stem)
         print(f"wrote {out} ({len(motion.names)} joints, {motion.num_frames} frames at {motion.fps:g} fps)")
         if args.music is not None:

@@ -1,7 +1,8 @@
 """Motions as glTF 2.0 binary files (``.glb``): a skinned skeleton with one animation, written with pygltflib.
 
-Every motion the toolkit reads (:func:`load_skeleton_motion`) becomes a :class:`SkeletonMotion`: a joint tree
-(names, parents), its rest offsets and per-frame local transforms. The glTF file holds:
+Every motion the toolkit reads (:func:`~.motion_reader.load_skeleton_motion`) becomes a
+:class:`SkeletonMotion`: a joint tree (names, parents), its rest offsets and per-frame local transforms.
+The glTF file holds:
 
 - one node per joint, named as the skeleton's joint, children under their parent (several roots allowed,
   e.g. the two bodies of an NTU file); node translation = rest offset, metres, +Y up (glTF's axes);
@@ -10,16 +11,20 @@ Every motion the toolkit reads (:func:`load_skeleton_motion`) becomes a :class:`
 - one animation, linear interpolation, one key per frame at ``t = i / fps``: a ``rotation`` channel
   (unit quaternion, x y z w) per joint and a ``translation`` channel for the root when the source has
   rotations (SMPL poses, BVH); a ``translation`` channel per joint when it has only joint positions
-  (then a joint's translation is its position minus its parent's, parents unrotated).
+  (then a joint's translation is its position minus its parent's, parents unrotated);
+- ``asset.extras``: ``fps``, ``units`` (``metres``) and the scale the reader applied to the source
+  (``metres_per_source_unit``, ``source_units``: how it was chosen, :mod:`.units`).
 
 A node's world transform is its parent's times ``T(translation) R(rotation)``, the glTF rule, which is the
 toolkit's forward kinematics (:mod:`.kinematics`), so the file reproduces the source's joint positions.
 
 Before anything is written a motion is checked (:func:`check_skeleton_motion`, naming the source file): at
-least one frame, a frame rate in :data:`~.value_checks.FPS_RANGE`, key times that still increase once stored
+least one frame, a frame rate in :data:`~.option_types.FPS_RANGE`, key times that still increase once stored
 as float32, at most :data:`MAX_JOINTS` joints (``JOINTS_0`` may only be ``UNSIGNED_BYTE`` or
 ``UNSIGNED_SHORT`` in glTF 2.0, so more joints cannot be bound), and finite offsets, translations and
 rotations within :data:`~.value_checks.MAX_POSITION_M`.
+
+:mod:`.gltf_read` reads such a file back.
 """
 
 from __future__ import annotations
@@ -32,15 +37,14 @@ import numpy as np
 import pygltflib
 import torch
 
-from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
+from skeleton_mamba.skeletons import get_skeleton, parents_first_order
 from skeleton_mamba.tasks.motion.atomic import atomic_path
-from skeleton_mamba.tasks.motion.bvh import load_bvh
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
-from skeleton_mamba.tasks.motion.render_cli import load_joints
+from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_quaternion
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.units import METRES, UnitScale
 from skeleton_mamba.tasks.motion.value_checks import MAX_POSITION_M, check_finite, check_fps, check_magnitude
 
 __all__ = [
@@ -50,7 +54,6 @@ __all__ = [
     "from_motion_data",
     "from_joints",
     "glb_bytes",
-    "load_skeleton_motion",
     "write_glb",
 ]
 
@@ -69,6 +72,7 @@ class SkeletonMotion:
         translations: (T, J, 3) per-frame local translations (rest offsets where a joint has no channel).
         rotations: (T, J, 3, 3) local rotations, or None for a positions-only motion.
         translated: J flags, True where the joint has an animated translation channel.
+        scale: the metres per unit the reader applied (:mod:`.units`), stated in the written file.
     """
 
     names: list[str]
@@ -78,10 +82,35 @@ class SkeletonMotion:
     translations: np.ndarray
     rotations: np.ndarray | None
     translated: list[bool]
+    scale: UnitScale = METRES
 
     @property
     def num_frames(self) -> int:
         return len(self.translations)
+
+    def joint_positions(self) -> np.ndarray:
+        """(T, J, 3) world positions by the glTF rule ``world = parent @ T(translation) R(rotation)``.
+
+        Forward kinematics (:mod:`.kinematics`) under a virtual root at the origin, so that every root
+        (several for two bodies) sits at its own translation.
+        """
+        t = torch.from_numpy(np.asarray(self.translations, np.float64))
+        frames, joints = t.shape[:2]
+        eye = torch.eye(3, dtype=torch.float64).expand(frames, 1, 3, 3)
+        if self.rotations is None:
+            rotations = eye.expand(frames, joints, 3, 3)
+        else:
+            rotations = torch.from_numpy(np.asarray(self.rotations, np.float64))
+        parents = [-1] + [p + 1 if p >= 0 else 0 for p in self.parents]
+        order = parents_first_order(parents, "motion")
+        positions, _ = forward_kinematics(
+            torch.cat([eye, rotations], dim=1),
+            torch.zeros(frames, 3, dtype=torch.float64),
+            torch.cat([torch.zeros(frames, 1, 3, dtype=torch.float64), t], dim=1),
+            parents,
+            order,
+        )
+        return positions[:, 1:].numpy()
 
 
 def from_motion_data(motion: MotionData) -> SkeletonMotion:
@@ -147,43 +176,6 @@ def check_skeleton_motion(motion: SkeletonMotion, source: str) -> SkeletonMotion
     if motion.rotations is not None:
         check_finite(np.asarray(motion.rotations), source, "rotations", ("frame", "joint"), InputError)
     return motion
-
-
-def load_skeleton_motion(
-    path: str | PathLike[str], skeleton: str | None = None, motion_fps: float | None = None
-) -> SkeletonMotion:
-    """Any motion file the toolkit reads (``.npz``, AIST++ ``.pkl``, ``.bvh``, ``.npy``, NTU ``.skeleton``).
-
-    Rotations are kept where the file has them (our SMPL ``.npz``, ``.pkl``, ``.bvh``; BVH in file units);
-    the others go through :func:`~skeleton_mamba.tasks.motion.render_cli.load_joints` as joint positions.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such motion file")
-    suffix = path.suffix.lower()
-    if suffix in (".npz", ".pkl"):
-        motion = load_motion(path) if suffix == ".npz" else load_aistpp_motion(path)
-        if motion_fps is not None:
-            motion.fps = motion_fps
-        skeleton_motion = from_motion_data(motion)
-    elif suffix == ".bvh":
-        bvh = load_bvh(path)
-        root = bvh.parents.index(-1)
-        has_position = [any(c.endswith("position") for c in chs) for chs in bvh.channels]
-        has_position[root] = True
-        skeleton_motion = SkeletonMotion(
-            list(bvh.names),
-            list(bvh.parents),
-            motion_fps or bvh.fps,
-            np.asarray(bvh.offsets, np.float64),
-            bvh.local_translations(),
-            bvh.local_rotations().numpy(),
-            has_position,
-        )
-    else:
-        clip = load_joints(path, skeleton=skeleton, motion_fps=motion_fps)
-        skeleton_motion = from_joints(clip.joints, None, clip.fps, clip.parents, clip.names)
-    return check_skeleton_motion(skeleton_motion, str(path))
 
 
 def _quaternions_xyzw(rotations: np.ndarray) -> np.ndarray:
@@ -269,7 +261,14 @@ def glb_bytes(motion: SkeletonMotion, name: str = "motion", source: str = "motio
     errors naming ``source``)."""
     check_skeleton_motion(motion, source)
     num_joints = len(motion.names)
-    gltf = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0", generator="skeleton-mamba"))
+    extras = {
+        "fps": float(motion.fps),
+        "units": "metres",
+        "metres_per_source_unit": motion.scale.metres_per_unit,
+        "source_units": motion.scale.note,
+    }
+    asset = pygltflib.Asset(version="2.0", generator="skeleton-mamba", extras=extras)
+    gltf = pygltflib.GLTF2(asset=asset)
     buffer = _Buffer(gltf)
     rotations = None if motion.rotations is None else _quaternions_xyzw(motion.rotations)
     children: list[list[int]] = [[] for _ in range(num_joints)]

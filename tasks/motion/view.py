@@ -1,12 +1,16 @@
-"""``sm view MOTION [MOTION ...] [--music FILE] [--metrics demo.json] [--overlay] --out view.html``.
+"""``sm view MOTION [MOTION ...] [--music FILE] [--metrics demo.json] [--overlay] [--units U|--scale S]
+--out view.html``.
 
 Writes ONE self-contained HTML page (opens from disk, no network): three.js r170 and its OrbitControls (the
 npm package ``three``, MIT, bundled in :mod:`.viewer`) as data-URI modules, each motion as its glTF binary
 (:mod:`.gltf`, base64), the music as a data-URI ``<audio>`` element. The page draws the skeletons on a ground
 grid with shadows, fits an orbit camera to the whole motion, and has play / pause / scrub / speed; with music
 the audio element is the clock and a scrub moves it. Several motions stand side by side (or ``--overlay``),
-named and coloured, with the numeric metrics of a ``demo.json`` listed. ``window.smViewer`` exposes the
-clock, ``seek(t)``, the camera and the projection of each motion's root to canvas pixels.
+named and coloured, with the metrics of a ``demo.json`` listed by their full names (nested objects as
+``scores.dance.mpjpe_m``, whole numbers as such, booleans as yes / no, short texts as they are) and the scale
+each file was read with when it is not metres by its format (:mod:`.units`). Motions are read by
+:mod:`.motion_reader` (our ``.glb`` exports too). ``window.smViewer`` exposes the clock, ``seek(t)``, the
+camera, the projection of a world point to canvas pixels, each motion's root and joints in world space.
 
 Hostile input cannot break the page: the embedded data is strict JSON (:func:`script_json`: a non-finite
 metric is written as ``null``, every ``<``, ``>`` and ``&`` of every string as a ``\\u`` escape, so no name,
@@ -32,16 +36,27 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.bounded_read import read_bytes, read_json
-from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.atomic import atomic_open, output_file
 from skeleton_mamba.tasks.motion.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
-from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, glb_bytes, load_skeleton_motion
+from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, glb_bytes
+from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.units import METRES
 from skeleton_mamba.tasks.motion.view_args import build_parser
 
-__all__ = ["MAX_METRICS_BYTES", "MAX_MUSIC_BYTES", "main", "script_json", "write_view"]
+__all__ = [
+    "MAX_METRICS_BYTES",
+    "MAX_MUSIC_BYTES",
+    "MAX_TEXT",
+    "listed_metrics",
+    "main",
+    "script_json",
+    "write_view",
+]
 
 MAX_METRICS_BYTES = 16 << 20  # a metrics file (a demo's demo.json is a few KiB)
 MAX_MUSIC_BYTES = 128 << 20  # music embedded in the page: 12 minutes of CD-quality WAV
+MAX_TEXT = 60  # longer texts of a metrics file (paths, descriptions) are not listed
 # Characters that could end the <script> element or start a comment inside it, or end a JS line
 _SCRIPT_ESCAPES = {"<": "\\u003c", ">": "\\u003e", "&": "\\u0026"}
 
@@ -68,26 +83,26 @@ def script_json(data: object) -> str:
     return text
 
 
-def _metric(value: object) -> bool:
-    """A value the page lists: a number, or ``None`` (a JSON ``null``, or a non-finite number read as one)."""
-    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
-
-
-def _number(value: float | None) -> float | None:
-    """A metric as the page lists it: ``None`` (shown as ``null``) for NaN, infinities and no value."""
-    number = None if value is None else float(value)
-    return number if number is not None and math.isfinite(number) else None
-
-
-def _numeric_metrics(metrics: dict | None) -> dict[str, float | None]:
-    """Top-level numbers (and one level of nested numbers as ``outer.inner``) of a metrics dict; non-finite
-    and null ones as ``None``."""
-    out: dict[str, float | None] = {}
+def listed_metrics(metrics: dict | None, prefix: str = "") -> dict[str, float | int | str | None]:
+    """The entries of a metrics dict the page lists, by full dotted name: numbers (whole numbers as ints;
+    NaN, infinities and JSON ``null`` as ``None``, shown as ``null``), booleans as ``yes`` / ``no``, texts of
+    at most :data:`MAX_TEXT` characters; nested dicts at any depth (``scores.dance.mpjpe_m``); lists and
+    longer texts are left out."""
+    out: dict[str, float | int | str | None] = {}
     for key, value in (metrics or {}).items():
-        if _metric(value):
-            out[str(key)] = _number(value)
+        name = f"{prefix}{key}"
+        if isinstance(value, bool):
+            out[name] = "yes" if value else "no"
+        elif isinstance(value, int):
+            out[name] = value
+        elif isinstance(value, float):
+            out[name] = value if math.isfinite(value) else None
+        elif value is None:
+            out[name] = None
+        elif isinstance(value, str) and len(value) <= MAX_TEXT:
+            out[name] = value
         elif isinstance(value, dict):
-            out.update({f"{key}.{k}": _number(v) for k, v in value.items() if _metric(v)})
+            out.update(listed_metrics(value, f"{name}."))
     return out
 
 
@@ -104,7 +119,8 @@ def write_view(
         motions: (name, motion) pairs, drawn left to right (all at the origin with ``overlay``).
         out: the ``.html`` to write.
         music: an audio file played in sync from the motions' first frame.
-        metrics: a dict or the path of a JSON file (e.g. a demo's ``demo.json``); numbers are listed.
+        metrics: a dict or the path of a JSON file (e.g. a demo's ``demo.json``), listed by
+            :func:`listed_metrics`.
         overlay: draw every motion at its own place instead of side by side.
     """
     out = Path(out)
@@ -134,7 +150,9 @@ def write_view(
         sound = read_bytes(music, max_bytes=MAX_MUSIC_BYTES, what="music file to embed", error=InputError)
         audio = f'<audio id="music" preload="auto" src="{_data_uri(sound, mime)}"></audio>'
     assets = files("skeleton_mamba.tasks.motion.viewer")
-    data = {"motions": entries, "metrics": _numeric_metrics(metrics), "spacing": spacing, "floor": 0.0}
+    notes = [f"{name}: {m.scale.describe()}" for name, m in motions if m.scale != METRES]
+    data = {"motions": entries, "metrics": listed_metrics(metrics), "notes": notes, "spacing": spacing,
+            "floor": 0.0}  # fmt: skip
     fields = {
         "__TITLE__": html.escape(" vs ".join(name for name, _ in motions)),
         "__THREE__": _data_uri(assets.joinpath("three.module.min.js").read_bytes(), "text/javascript"),
@@ -145,7 +163,6 @@ def write_view(
     template = assets.joinpath("viewer.html").read_text(encoding="utf-8")
     # one pass: a placeholder spelled inside a motion's name is not substituted again
     page = re.sub("|".join(fields), lambda match: fields[match.group()], template)
-    out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(out, "w") as f:
         f.write(page)
     return out
@@ -155,10 +172,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm view``; returns 0 on success (bad input raises: `sm` prints one line)."""
     args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
-        motions = [
-            (Path(m).stem, load_skeleton_motion(m, skeleton=args.skeleton, motion_fps=args.motion_fps))
-            for m in args.motions
-        ]
+        output_file(args.out)
+        motions = []
+        for m in args.motions:
+            motion = load_skeleton_motion(m, args.skeleton, args.motion_fps, args.units, args.scale)
+            if motion.scale != METRES:
+                print(motion.scale.line(m), file=sys.stderr)
+            motions.append((Path(m).stem, motion))
         out = write_view(motions, args.out, music=args.music, metrics=args.metrics, overlay=args.overlay)
     except (ValueError, KeyError) as e:  # the readers' argument checks name the file too: one line, exit 2
         raise InputError(one_line_message(e)) from e

@@ -6,6 +6,7 @@ import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.option_types import fps_option
+from skeleton_mamba.tasks.motion.units import add_unit_arguments
 
 __all__ = ["build_parser"]
 
@@ -14,8 +15,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = command_parser(
         "sm view", "Write a self-contained HTML viewer of motions (opens from disk, no network)."
     )
-    p.add_argument("motions", nargs="+", help="motion files: .npz, .pkl, .bvh, .npy (T,J,3), .skeleton")
-    p.add_argument("--out", required=True, help="output .html")
+    p.add_argument(
+        "motions", nargs="+", help="motion files: .npz, .pkl, .bvh, .npy (T,J,3) or (T,263), .skeleton, .glb"
+    )
+    p.add_argument("--out", required=True, help="output .html, in an existing folder")
     p.add_argument("--music", default=None, help="audio file played in sync (.wav, .mp3, .ogg, .flac)")
     p.add_argument("--metrics", default=None, help="a JSON file of metrics to list (e.g. demo.json)")
     p.add_argument("--overlay", action="store_true", help="draw the motions on top of one another")
@@ -23,4 +26,5 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the files')"
     )
+    add_unit_arguments(p)
     return p

@@ -6,9 +6,11 @@ a running mean of the joint-averaged features per body, then the linear head ove
 so far. This is :func:`skeleton_mamba.tasks.recognition.early.online_probabilities` computed
 incrementally, in constant memory.
 
-``sm stream --task recognition --ckpt CKPT --skeleton FILE.npy --out DIR`` (:func:`main`) reads keypoints
-in the network's input convention (as the recipe's data pipeline hands them to the model: (T, J, C) for
-one body or (M, T, J, C)), feeds them frame by frame, and writes ``DIR/<name>_online.csv`` (frame,
+``sm stream --task recognition --ckpt CKPT --skeleton FILE --out DIR`` (:func:`main`) reads a raw NTU RGB+D
+``.skeleton`` file (its bodies chosen as ``sm prepare`` does, then normalised as the recipes' pipeline does:
+PYSKL ``PreNormalize3D``, :func:`~.transforms.pre_normalize_3d`) or a ``.npy`` of keypoints in the network's
+input convention (as the recipe's data pipeline hands them to the model: (T, J, C) for one body or
+(M, T, J, C)), feeds them frame by frame, and writes ``DIR/<name>_online.csv`` (frame,
 top class, probability of each class), ``DIR/<name>_online.png`` (probabilities over time) and
 prints the top class after the last frame.
 """
@@ -27,11 +29,13 @@ from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.atomic import atomic_open, atomic_path
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
 from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.recognition.online_args import build_parser
+from skeleton_mamba.tasks.recognition.transforms import pre_normalize_3d
 from skeleton_mamba.tasks.training.frame_timing import (
     announce_compile,
     latency_summary,
@@ -84,11 +88,20 @@ class OnlineRecognizer:
 
 
 def _load_keypoints(path: Path) -> np.ndarray:
-    """(M, T, J, C) float32 keypoints from a ``.npy`` of (T, J, C) or (M, T, J, C)."""
-    if path.suffix.lower() != ".npy":
-        raise ValueError(f"{path}: expected a .npy of keypoints (T, J, C) or (M, T, J, C)")
+    """(M, T, J, C) float32 keypoints from an NTU ``.skeleton`` (normalised as the recipes' pipeline) or a
+    ``.npy`` of (T, J, C) or (M, T, J, C) (already in the network's input convention)."""
+    suffix = path.suffix.lower()
+    if suffix not in (".npy", ".skeleton"):
+        raise ValueError(
+            f"{path}: expected an NTU .skeleton file or a .npy of keypoints (T, J, C) or (M, T, J, C)"
+        )
     if not path.is_file():
         raise FileNotFoundError(f"{path}: skeleton file not found")
+    if suffix == ".skeleton":
+        raw = read_skeleton_file(path).keypoints(max_bodies=2)  # (M, T, 25, 3), bodies as sm prepare
+        if raw.shape[1] == 0:
+            raise ValueError(f"{path}: no frame lists a body")
+        return pre_normalize_3d(raw).astype(np.float32)
     x = load_npy(path)
     if x.ndim == 3:
         x = x[None]

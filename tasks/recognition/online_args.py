@@ -24,7 +24,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--task", choices=("recognition",), default="recognition", help=argparse.SUPPRESS)
     p.add_argument("--ckpt", required=True, help="a checkpoint of a causal recognition recipe")
     p.add_argument(
-        "--skeleton", required=True, help="keypoints: a .npy of (T, J, C) or (M, T, J, C), the model's input"
+        "--skeleton",
+        required=True,
+        help="an NTU RGB+D .skeleton file (normalised as in training), or a .npy of keypoints (T, J, C) or "
+        "(M, T, J, C) already in the model's input convention",
     )
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--name", default=None, help="file stem (default: the skeleton file's stem)")

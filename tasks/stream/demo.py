@@ -31,12 +31,12 @@ from skeleton_mamba.tasks.motion.aistpp import music_id
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints
-from skeleton_mamba.tasks.motion.gltf import load_skeleton_motion
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,
     held_out_dynamics_checks,
 )
+from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.stream.features import FPS

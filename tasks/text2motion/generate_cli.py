@@ -151,5 +151,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = record_outputs(args.out, "sm generate", produced)
     for i, caption in enumerate(captions):
         paths = save_generated(features[i], caption, out / stems[i], args.render)
-        print(f"wrote {paths['joints']}  ({frames} frames: {caption!r})")
+        print(f"{caption!r}: {frames} frames at {FPS:g} fps")
+        print("\n".join(f"  {kind:8s} {path}" for kind, path in paths.items()))
     return 0

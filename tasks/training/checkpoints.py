@@ -24,6 +24,13 @@ the first shape that differs, both shapes). The Lightning CLI checks ``--ckpt_pa
 Lightning reads it, checks its tensors against the instantiated model, and passes ``weights_only=True``
 to Lightning's own load. :class:`CheckedCheckpointIO` is the trainer's checkpoint reader and writer:
 reads through :func:`load_checkpoint`, writes through a temporary file in the checkpoint's own folder.
+
+Data paths (:data:`DATA_PATH_KEYS` of ``datamodule_hyper_parameters``) given relative to the folder ``sm fit``
+ran in are stored relative to the checkpoint file (:func:`store_paths_relative`; the keys listed under
+:data:`RELATIVE_PATHS_KEY`), and every read resolves them against the file's folder
+(:func:`resolve_stored_paths`), so a run folder moved or copied with its data still finds it. An older
+checkpoint's working-folder-relative path is looked up from the checkpoint's folders upwards when the
+current folder does not hold it.
 """
 
 from __future__ import annotations
@@ -49,7 +56,9 @@ from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import CheckpointError, RandomWeightsWarning
 
 __all__ = [
+    "DATA_PATH_KEYS",
     "MAX_NESTING",
+    "RELATIVE_PATHS_KEY",
     "TRUSTED_CLASS_PREFIXES",
     "CheckedCheckpointIO",
     "check_checkpoint_path",
@@ -63,7 +72,9 @@ __all__ = [
     "load_checkpoint",
     "load_module",
     "load_module_and_checkpoint",
+    "resolve_stored_paths",
     "state_shapes",
+    "store_paths_relative",
     "use_checked_checkpoint_io",
 ]
 
@@ -90,6 +101,10 @@ _DOTTED_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$"
 _CLASS_KEYS = ("class_path", "_class_path", "_instantiator")
 
 ModuleT = TypeVar("ModuleT")
+
+# The data module arguments that name files or folders.
+DATA_PATH_KEYS = ("root", "ann_file", "music_dir", "music_cache_dir", "predict_seed", "predict_music")
+RELATIVE_PATHS_KEY = "datamodule_paths_relative_to_checkpoint"
 
 
 def check_checkpoint_path(path: str | PathLike[str]) -> Path:
@@ -263,7 +278,7 @@ def load_checkpoint(path: str | PathLike[str], map_location: Any = "cpu") -> dic
         FileNotFoundError / IsADirectoryError: the path is missing or a folder.
     """
     p = check_checkpoint_path(path)
-    return _checked(_torch_load(p, str(p), map_location), str(p))
+    return resolve_stored_paths(_checked(_torch_load(p, str(p), map_location), str(p)), p)
 
 
 def _checked(checkpoint: Any, source: str) -> dict:
@@ -273,6 +288,48 @@ def _checked(checkpoint: Any, source: str) -> dict:
 
 
 _TASK_NAMES = {"egodance": "EgoDance", "stream": "streaming", "text2motion": "text-to-motion", "qean": "QEAN"}
+
+
+def store_paths_relative(checkpoint: dict, path: str | PathLike[str]) -> dict:
+    """``checkpoint`` with each relative data path (:data:`DATA_PATH_KEYS`, relative to the working folder,
+    existing) rewritten relative to the folder of ``path`` (where it is being saved), the keys listed under
+    :data:`RELATIVE_PATHS_KEY`; absolute paths stay as they are. The input is not changed."""
+    hparams = checkpoint.get("datamodule_hyper_parameters")
+    if not isinstance(hparams, Mapping):
+        return checkpoint
+    folder = Path(path).absolute().parent
+    stored, keys = dict(hparams), []
+    for key in DATA_PATH_KEYS:
+        value = hparams.get(key)
+        if isinstance(value, str) and value and not _URL.match(value) and not Path(value).is_absolute():
+            if Path(value).exists():
+                stored[key] = Path(os.path.relpath(Path(value).absolute(), folder)).as_posix()
+                keys.append(key)
+    if not keys:
+        return checkpoint
+    return {**checkpoint, "datamodule_hyper_parameters": stored, RELATIVE_PATHS_KEY: keys}
+
+
+def resolve_stored_paths(checkpoint: dict, path: Path) -> dict:
+    """The data paths of a checkpoint read from ``path`` as usable paths (module docstring), in place."""
+    hparams = checkpoint.get("datamodule_hyper_parameters")
+    if not isinstance(hparams, dict):
+        return checkpoint
+    folder = Path(path).absolute().parent
+    keys = checkpoint.get(RELATIVE_PATHS_KEY)
+    if isinstance(keys, list):
+        for key in keys:
+            if isinstance(key, str) and isinstance(hparams.get(key), str):
+                hparams[key] = os.path.normpath(folder / hparams[key])
+        return checkpoint
+    for key in DATA_PATH_KEYS:  # an older checkpoint: relative to the folder sm fit ran in
+        value = hparams.get(key)
+        if not isinstance(value, str) or not value or Path(value).is_absolute() or Path(value).exists():
+            continue
+        found = next((f / value for f in folder.parents if (f / value).exists()), None)
+        if found is not None:
+            hparams[key] = os.path.normpath(found)
+    return checkpoint
 
 
 def _task_of(class_path: str) -> str:
@@ -364,7 +421,7 @@ def load_module_and_checkpoint(
     """:func:`load_module`, and the checkpoint's dict as read (e.g. its ``datamodule_hyper_parameters``),
     from one read of the file."""
     p = check_checkpoint_path(path)
-    checkpoint = _checked(_torch_load(p, str(p), map_location), str(p))
+    checkpoint = resolve_stored_paths(_checked(_torch_load(p, str(p), map_location), str(p)), p)
     if "state_dict" not in checkpoint:
         raise CheckpointError(f"{p}: not a Lightning checkpoint (no 'state_dict')")
     stored = checkpoint.get("hyper_parameters", {}).get("_class_path")
@@ -481,7 +538,7 @@ class CheckedCheckpointIO(TorchCheckpointIO):
         if storage_options is not None:
             raise TypeError(f"{type(self).__name__} writes local files: storage_options is not supported")
         with atomic_open(os.fspath(path), "wb") as handle:
-            torch.save(checkpoint, handle)
+            torch.save(store_paths_relative(checkpoint, path), handle)
 
     def load_checkpoint(
         self, path: Any, map_location: Callable | Any = None, weights_only: bool | None = None

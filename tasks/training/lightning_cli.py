@@ -279,12 +279,10 @@ class SkeletonMambaCLI(LightningCLI):
         for logger in trainer.loggers:
             _ = logger.version
         recorder = next((c for c in trainer.callbacks if isinstance(c, InterruptRecorder)), None)
-        if recorder is not None:
-            recorder.new_run_dirs = [
-                Path(logger.log_dir)
-                for logger in trainer.loggers
-                if logger.log_dir and not Path(logger.log_dir).exists()
-            ]
+        if recorder is not None:  # each new run folder, then its new parents (runs/<name>/, runs/)
+            new = [Path(logger.log_dir) for logger in trainer.loggers if logger.log_dir]
+            new = [p for folder in new for p in (folder, *folder.parents) if not p.exists()]
+            recorder.new_run_dirs = sorted(set(new), key=lambda p: -len(p.parts))
         open_csv_logs(trainer.loggers)
         return trainer
 

@@ -37,7 +37,7 @@ outputs, state shapes and the skeleton. Inside an exported graph the SSD runs as
 
 Example::
 
-    sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
+    sm export-onnx --backbone backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
         --causal --out onnx/ --check
     sm export-onnx --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out onnx/
 """
@@ -66,7 +66,11 @@ from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.onnx_export_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import import_project_class, load_network
-from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
+from skeleton_mamba.tasks.training.recipe_resolution import (
+    packaged_recipe_dir,
+    read_yaml_file,
+    resolve_backbone,
+)
 
 __all__ = [
     "NETWORK_SPECS",
@@ -427,7 +431,8 @@ def backbone_of(network: nn.Module, source: str) -> SkeletonMamba:
 
 
 def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
-    """A fresh SkeletonMamba from a backbone YAML file (``recipes/backbones/*.yaml``) and overrides.
+    """A fresh SkeletonMamba from a backbone YAML file and overrides: a path, or a packaged fragment as a
+    recipe names it (``backbones/skeleton_mamba_tiny.yaml``, or ``skeleton_mamba_tiny``).
 
     The file is read by the bounded YAML reader; its fields are decoded with the types of
     :class:`SkeletonMambaConfig` (an unknown field, a list where a number belongs, a mixer that is not a
@@ -437,7 +442,12 @@ def backbone_from_yaml(path: str, overrides: dict) -> SkeletonMamba:
     Raises:
         InputError: naming the file and what is wrong.
     """
-    fields = read_yaml_file(path, "backbone file")
+    p = resolve_backbone(path)
+    if p is None:
+        names = sorted(f.stem for f in (packaged_recipe_dir() / "backbones").glob("*.yaml"))
+        raise InputError(f"{path}: no such backbone file, nor a packaged one (packaged: {', '.join(names)})")
+    path = str(p)
+    fields = read_yaml_file(p, "backbone file")
     fields = {} if fields is None else fields
     if not isinstance(fields, dict):
         raise InputError(f"{path}: a backbone file holds a mapping of SkeletonMambaConfig fields")

@@ -22,7 +22,7 @@ PART_HELP = (
 )
 
 EXAMPLES = """examples:
-  sm export-onnx --backbone recipes/backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
+  sm export-onnx --backbone backbones/skeleton_mamba_tiny.yaml --skeleton ntu25 --in-channels 3 \\
       --causal --out onnx/ --check
   sm export-onnx --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out onnx/"""
 
@@ -38,7 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--ckpt", help="a Lightning checkpoint: its task network (see --part) is exported")
     src.add_argument("--pretrained", help="a from_pretrained folder or Hub id (a backbone or a task network)")
-    src.add_argument("--backbone", help="a backbone YAML (fresh weights), e.g. recipes/backbones/*.yaml")
+    src.add_argument(
+        "--backbone",
+        help="a backbone YAML (fresh weights): a path, or a packaged one as recipes name it "
+        "(backbones/skeleton_mamba_tiny.yaml, or skeleton_mamba_tiny)",
+    )
     p.add_argument("--part", choices=("network", "backbone"), default="network", help=PART_HELP)
     p.add_argument("--skeleton", default=None, help="with --backbone: the skeleton")
     p.add_argument(

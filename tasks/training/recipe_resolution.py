@@ -55,6 +55,7 @@ __all__ = [
     "packaged_recipe_dir",
     "packaged_recipes",
     "recipe_description",
+    "resolve_backbone",
     "resolve_recipe",
 ]
 
@@ -99,6 +100,25 @@ def resolve_recipe(value: str) -> Path | None:
     for name in (value, *(value + s for s in RECIPE_SUFFIXES)):
         if name in recipes:
             return recipes[name]
+    return None
+
+
+def resolve_backbone(value: str) -> Path | None:
+    """The file a backbone value names (``sm export-onnx --backbone``): an existing path, else a packaged
+    fragment as a recipe names it (``backbones/skeleton_mamba_tiny.yaml``) or by its name alone
+    (``skeleton_mamba_tiny``, with or without ``.yaml``); ``None`` if neither."""
+    candidate = Path(value).expanduser()
+    if candidate.is_file():
+        return candidate
+    parts = Path(value).parts
+    if parts[:1] == ("backbones",):
+        parts = parts[1:]
+    if len(parts) != 1:
+        return None
+    folder = packaged_recipe_dir() / "backbones"
+    for name in (parts[0], *(parts[0] + s for s in RECIPE_SUFFIXES)):
+        if (folder / name).is_file() and (folder / name).suffix in RECIPE_SUFFIXES:
+            return folder / name
     return None
 
 

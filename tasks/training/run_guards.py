@@ -114,7 +114,8 @@ class InterruptRecorder(pl.Callback):
     Attributes:
         stopped_by: ``"interrupt"``, ``"sigterm"`` or ``None``.
         saved: the checkpoint written on SIGTERM (``None`` when none was written).
-        new_run_dirs: the ``version_N`` folders this run created (removed if it fails before writing).
+        new_run_dirs: the ``version_N`` folders this run created and their new parents (``runs/<name>/``,
+            ``runs/``), deepest first: removed if the run fails before writing.
     """
 
     def __init__(self) -> None:

@@ -3,8 +3,10 @@
 For every motion file, the motion is resampled to ``fps`` and cut into ``window_s`` windows (5 s,
 non-overlapping by default: "we divide the motion sequences into multiple 5-second subsequences"). Each
 window gets a scene (scene files round-robin, or procedural rooms) and up to ``max_attempts`` random
-placements (:mod:`.placement`); the first whose penetration score ``S_p`` (:mod:`.penetration`) is at
-most ``threshold`` (2, [EgoMusic]'s value) is kept, the window is skipped with a logged reason otherwise.
+placements (:mod:`.placement`); the first whose feet stay over the floor and whose first view sees the scene
+on at least ``min_view_hits`` of its rays (:mod:`.placement_checks`), and whose penetration score ``S_p``
+(:mod:`.penetration`) is at most ``threshold`` (2, [EgoMusic]'s value), is kept; the window is skipped with a
+logged reason otherwise (the rejections are counted by reason in the summary).
 The body scored is the capsule body, or the SMPL mesh when ``smpl_model`` names a model file
 (:mod:`.body_mesh`; its lowest vertex then touches the floor, and the mesh score stops at the first
 frames above the threshold, so the scores of rejected placements are lower bounds).
@@ -38,16 +40,21 @@ from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
-from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
+from skeleton_mamba.tasks.egodance.builder.camera import CameraTrajectory, head_camera, intrinsics
 from skeleton_mamba.tasks.egodance.builder.config import BuildConfig
 from skeleton_mamba.tasks.egodance.builder.penetration import mesh_penetration_score, penetration_score
 from skeleton_mamba.tasks.egodance.builder.placement import place_points, random_placement
+from skeleton_mamba.tasks.egodance.builder.placement_checks import (
+    REJECTIONS,
+    feet_off_floor,
+    view_hit_share,
+)
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
 from skeleton_mamba.tasks.egodance.builder.scene_check import MAX_SCENE_FACES, check_scene_file
 from skeleton_mamba.tasks.motion import aistpp
-from skeleton_mamba.tasks.motion.errors import DataFileError, worker_ignores_ctrl_c
+from skeleton_mamba.tasks.motion.errors import DataFileError, InputError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
@@ -102,6 +109,7 @@ class BuildSummary:
     already_skipped: int = 0
     rebuilt: int = 0  # complete samples whose files failed layout.sample_problem on resume
     skip_reasons: list[str] = field(default_factory=list)
+    rejections: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REJECTIONS, 0))  # by reason
     bad_inputs: list[str] = field(default_factory=list)  # corrupt motion files passed over (--skip-bad)
 
 
@@ -271,13 +279,23 @@ def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
     rng = np.random.default_rng([cfg.seed, zlib.crc32(task.sample_id.encode())])
     body = pose_body(get_body_model(cfg.smpl_model), poses, root) if cfg.smpl_model else None
     scores: list[float] = []
+    rejections = dict.fromkeys(REJECTIONS, 0)
     placement = None
+    K = intrinsics(cfg.width, cfg.height, cfg.fov)
+
+    def first_view(candidate) -> CameraTrajectory:  # the head camera of the window's first frame
+        head = place_points(joints[:1, 15], candidate), candidate.rotation @ world[:1, 15]
+        return head_camera(*head, K, cfg.width, cfg.height, cfg.camera_forward, cfg.camera_up)
+
     for _ in range(cfg.max_attempts):
         if body is None:
             candidate = random_placement(joints, scene, rng)
-            score = penetration_score(scene, place_points(joints, candidate), cfg.penetration_stride)
         else:
             candidate = random_placement(joints, scene, rng, 0.0, float(body.vertices[..., 1].min()))
+        placed = place_points(joints, candidate)
+        if body is None:
+            score = penetration_score(scene, placed, cfg.penetration_stride)
+        else:
             score = mesh_penetration_score(
                 scene,
                 place_points(body.vertices, candidate),
@@ -287,25 +305,37 @@ def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
                 stop_above=cfg.threshold,
             )
         scores.append(score)
-        if score <= cfg.threshold:
+        if score > cfg.threshold:
+            rejections["penetration"] += 1
+        elif feet_off_floor(scene, placed, cfg.penetration_stride):  # a foot beyond the floor's edge
+            rejections["feet"] += 1
+        elif (
+            view_hit_share(scene, first_view(candidate)) < cfg.min_view_hits
+        ):  # the eyes see (almost) nothing
+            rejections["view"] += 1
+        else:
             placement = candidate
             break
     if placement is None:
+        best = f" (best S_p {min(scores):.2f} cm)" if scores else ""
+        counts = ", ".join(f"{n} {why}" for why, n in rejections.items())
         reason = (
-            f"no placement with S_p <= {cfg.threshold} in {cfg.max_attempts} attempts "
-            f"(best S_p {min(scores):.2f} cm) in scene {scene.name}"
+            f"no placement with S_p <= {cfg.threshold}, feet over the floor and at least "
+            f"{cfg.min_view_hits:.0%} of the first view on geometry in {cfg.max_attempts} attempts "
+            f"(rejected: {counts}){best} in scene {scene.name}"
         )
         skipped = Path(cfg.out) / layout.SKIPPED
         skipped.mkdir(parents=True, exist_ok=True)
         layout.write_json(
             skipped / f"{task.sample_id}.json",
-            {"sample_id": task.sample_id, "reason": reason, "scores": scores, "scene": scene.name},
-        )
-        return {"status": "skipped", "sample_id": task.sample_id, "rejected": len(scores), "reason": reason}
+            {"sample_id": task.sample_id, "reason": reason, "scores": scores, "scene": scene.name,
+             "rejections": rejections},
+        )  # fmt: skip
+        return {"status": "skipped", "sample_id": task.sample_id, "rejected": cfg.max_attempts,
+                "rejections": rejections, "reason": reason}  # fmt: skip
 
     rot = placement.rotation
     placed = place_points(joints, placement)
-    K = intrinsics(cfg.width, cfg.height, cfg.fov)
     camera = head_camera(
         placed[:, 15], rot @ world[:, 15], K, cfg.width, cfg.height, cfg.camera_forward, cfg.camera_up
     )
@@ -363,7 +393,8 @@ def build_window(task: WindowTask, cfg: BuildConfig) -> dict:
         "fps": cfg.fps,
     }
     layout.write_sample(cfg.out, layout.EgoSample(meta, motion, cam, rgb, depth), cfg.frame_format)
-    return {"status": "placed", "sample_id": task.sample_id, "rejected": len(scores) - 1, "score": scores[-1]}
+    return {"status": "placed", "sample_id": task.sample_id, "rejected": sum(rejections.values()),
+            "rejections": rejections, "score": scores[-1]}  # fmt: skip
 
 
 # ---------------------------------------------------------------- the whole build
@@ -375,7 +406,7 @@ def _check_settings(cfg: BuildConfig) -> None:
         old = read_json(path, error=DataFileError)
         diff = {k: (old.get(k), v) for k, v in settings.items() if old.get(k) != v}
         if diff:
-            raise ValueError(f"{cfg.out} was built with other settings {diff} (old, new): use another --out")
+            raise InputError(f"{cfg.out} was built with other settings {diff} (old, new): use another --out")
     else:
         layout.write_json(path, settings)
 
@@ -435,6 +466,8 @@ def _run_build(cfg: BuildConfig, motion: str | Path, out: Path) -> BuildSummary:
     def record(result: dict) -> None:
         counts[result["status"]] += 1
         counts["rejected"] += result["rejected"]
+        for why, n in result.get("rejections", {}).items():
+            summary.rejections[why] = summary.rejections.get(why, 0) + n
         if result["status"] == "skipped":
             log.warning("skipped %s: %s", result["sample_id"], result["reason"])
             summary.skip_reasons.append(f"{result['sample_id']}: {result['reason']}")

@@ -51,6 +51,11 @@ def main(argv: list[str]) -> int:
         f"{summary.complete} complete samples in {cfg.out}"
         + (f"; rebuilt {summary.rebuilt} damaged samples" if summary.rebuilt else "")
     )
+    if summary.rejected:
+        reasons = {"penetration": "penetrated the scene", "feet": "feet beyond the floor",
+                   "view": "first view mostly empty"}  # fmt: skip
+        counts = ", ".join(f"{n} {reasons.get(why, why)}" for why, n in summary.rejections.items() if n)
+        print(f"make-ego: rejected placements: {counts}")
     if summary.bad_inputs:
         print(f"make-ego: skipped {len(summary.bad_inputs)} corrupt motion files:")
         print("\n".join(f"  {message}" for message in summary.bad_inputs))

@@ -91,6 +91,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="placements tried per window",
     )
     p.add_argument(
+        "--min-view-hits",
+        type=real_option(0.0, 1.0, "a share of rays"),
+        default=d.min_view_hits,
+        help="reject placements whose first camera view hits geometry on fewer rays than this share "
+        "(feet beyond the floor are always rejected)",
+    )
+    p.add_argument(
         "--penetration-stride",
         type=int_option(1, MAX_FRAMES, "a frame stride"),
         default=d.penetration_stride,

@@ -33,6 +33,12 @@ null when unknown), ``start_s``, ``end_s``}: the slice of the track that plays d
 computed for; ``penetration_score`` (``S_p`` in cm, ``builder/penetration.py``), ``threshold``, ``attempts``;
 ``frames`` {``format`` "mp4" or "png", ``count``, ``width``, ``height``, ``fps``}.
 
+Paths in ``meta.json`` (:data:`META_PATHS`: the motion source, the music, the scene, the SMPL model file) are
+written twice: as found (absolute for the demo's data), and relative to the sample's folder under the key
+with ``_relative`` appended (``music.path_relative``), so a built set (with the files it points to) can be
+moved or copied as a whole. :func:`read_meta` gives each path from its relative form when that file is
+there, else as written (the samples of earlier builds, which have no relative form).
+
 Atomicity: a sample is written into ``samples/.tmp-<id>-<pid>/``, the ``COMPLETE`` marker is written
 last, then the folder is renamed to ``samples/<id>`` (``os.replace``, atomic on one file system). A
 reader lists only folders holding ``COMPLETE`` (:func:`complete_samples`), so an interrupted build never
@@ -62,6 +68,9 @@ from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, load_npz
 
 __all__ = [
     "COMPLETE",
+    "META_PATHS",
+    "read_meta",
+    "relative_meta",
     "SAMPLES",
     "EgoSample",
     "sample_dir",
@@ -98,6 +107,37 @@ class EgoSample:
     camera: dict
     rgb: np.ndarray | None = None
     depth: np.ndarray | None = None
+
+
+META_PATHS = (("motion", "source"), ("music", "path"), ("scene", "source"), ("body", "file"))
+
+
+def relative_meta(meta: dict, folder: str | Path) -> dict:
+    """``meta`` with ``<key>_relative`` beside each existing file of :data:`META_PATHS`: its path relative to
+    ``folder`` (POSIX form). The input is not changed."""
+    out = dict(meta)
+    for section, key in META_PATHS:
+        entry = out.get(section)
+        value = entry.get(key) if isinstance(entry, dict) else None
+        if isinstance(value, str) and Path(value).exists():  # not "procedural", nor a missing file
+            relative = Path(os.path.relpath(Path(value).resolve(), Path(folder).resolve())).as_posix()
+            out[section] = {**entry, f"{key}_relative": relative}
+    return out
+
+
+def read_meta(folder: str | Path) -> dict:
+    """A sample's ``meta.json`` with each path of :data:`META_PATHS` taken from its relative form (resolved
+    against the sample folder) when that file exists, else as written (module docstring)."""
+    folder = Path(folder)
+    meta = read_json(folder / "meta.json", error=DataFileError)  # the bounded reader
+    if not isinstance(meta, dict):
+        raise DataFileError(f"{folder / 'meta.json'}: expected a JSON object")
+    for section, key in META_PATHS:
+        entry = meta.get(section)
+        relative = entry.get(f"{key}_relative") if isinstance(entry, dict) else None
+        if isinstance(relative, str) and not Path(relative).is_absolute() and (folder / relative).exists():
+            meta[section] = {**entry, key: os.path.normpath(folder / relative)}
+    return meta
 
 
 def write_json(path: Path, data: dict) -> None:
@@ -231,7 +271,8 @@ def write_sample(root: str | Path, sample: EgoSample, frame_format: str = "mp4")
     _write_frames(tmp, sample.rgb, float(cam["fps"]), frame_format)
     depth_mm = np.clip(np.round(sample.depth * 1000.0), 0, np.iinfo(np.uint16).max).astype(np.uint16)
     np.savez_compressed(tmp / "depth.npz", depth=depth_mm)
-    (tmp / "meta.json").write_text(json.dumps(sample.meta, indent=2, sort_keys=True), encoding="utf-8")
+    meta = relative_meta(sample.meta, base / sample_id)  # where the folder ends up
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=2, sort_keys=True), encoding="utf-8")
     (tmp / COMPLETE).write_text("ok\n", encoding="utf-8")
     final = base / sample_id
     if final.exists():  # an incomplete leftover (complete samples are never rebuilt)
@@ -257,7 +298,7 @@ def read_sample(folder: str | Path, load_frames: bool = True) -> EgoSample:
     folder = Path(folder)
     if not is_complete(folder):
         raise ValueError(f"{folder}: not a complete sample (no {COMPLETE} marker)")
-    meta = read_json(folder / "meta.json", error=DataFileError)
+    meta = read_meta(folder)
     camera = load_npz(folder / "camera.npz")
     for key in ("width", "height"):
         camera[key] = int(camera[key])

@@ -1,0 +1,114 @@
+"""A viewer page in a real headless Chromium, driven over the Chrome DevTools Protocol (websocket-client:
+a few kilobytes of pure Python talking to the system browser, where Playwright would bring its own driver
+and browser builds). Tests call :func:`browser_or_skip` first: it skips without Chromium or the client."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import re
+import shutil
+import subprocess
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BROWSER = next((b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
+
+
+def browser_or_skip() -> str:
+    """The Chromium executable; skips the calling test when it or the CDP client is missing."""
+    pytest.importorskip("websocket", reason="websocket-client (pip) drives Chromium over CDP")
+    pytest.importorskip("PIL.Image", reason="Pillow decodes the screenshots")
+    if BROWSER is None:
+        pytest.skip("no Chromium on PATH (apt-get install chromium; .ci/run installs it where apt works)")
+    return BROWSER
+
+
+class Page:
+    def __init__(self, url: str, tmp: Path):
+        import websocket
+
+        self.proc = subprocess.Popen(
+            [
+                browser_or_skip(),
+                "--headless=new",
+                "--no-sandbox",
+                "--use-angle=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--autoplay-policy=no-user-gesture-required",
+                "--remote-debugging-port=0",
+                f"--user-data-dir={tmp / 'profile'}",
+                "--window-size=800,600",
+                url,
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        port = None
+        deadline = time.time() + 60
+        while port is None and time.time() < deadline:
+            line = self.proc.stderr.readline()
+            match = re.search(r"DevTools listening on ws://[^:]+:(\d+)/", line)
+            port = match and int(match.group(1))
+        assert port, "Chromium did not open its DevTools port"
+        for _ in range(100):
+            targets = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list"))
+            pages = [t for t in targets if t["type"] == "page"]
+            if pages:
+                break
+            time.sleep(0.1)
+        self.ws = websocket.create_connection(
+            pages[0]["webSocketDebuggerUrl"], timeout=60, suppress_origin=True
+        )
+        self.next_id, self.errors = 0, []
+        self.call("Runtime.enable")
+        self.call("Log.enable")
+
+    def call(self, method: str, **params):
+        self.next_id += 1
+        self.ws.send(json.dumps({"id": self.next_id, "method": method, "params": params}))
+        while True:
+            message = json.loads(self.ws.recv())
+            if message.get("method") == "Runtime.exceptionThrown":
+                self.errors.append(message["params"]["exceptionDetails"])
+            elif message.get("method") == "Runtime.consoleAPICalled" and message["params"]["type"] == "error":
+                self.errors.append(message["params"]["args"])
+            elif message.get("method") == "Log.entryAdded" and message["params"]["entry"]["level"] == "error":
+                self.errors.append(message["params"]["entry"])
+            if message.get("id") == self.next_id:
+                assert "error" not in message, message
+                return message["result"]
+
+    def js(self, expression: str):
+        result = self.call("Runtime.evaluate", expression=expression, returnByValue=True, awaitPromise=True)
+        assert "exceptionDetails" not in result, result
+        return result["result"].get("value")
+
+    def screenshot(self) -> np.ndarray:
+        from PIL import Image
+
+        png = base64.b64decode(self.call("Page.captureScreenshot", format="png")["data"])
+        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")), png
+
+    def close(self):
+        self.ws.close()
+        self.proc.kill()
+        self.proc.wait()
+
+    def open(self, url: str, timeout: float = 60.0) -> None:
+        """Load ``url`` in this page and wait until the viewer has set ``window.smViewer``."""
+        self.js("window.smViewer = undefined")
+        self.call("Page.navigate", url=url)
+        self.wait_for_viewer(timeout)
+
+    def wait_for_viewer(self, timeout: float = 60.0) -> None:
+        deadline = time.time() + timeout
+        while not self.js("typeof window.smViewer === 'object' && window.smViewer !== null"):
+            assert time.time() < deadline, "the viewer did not start"
+            time.sleep(0.1)
