@@ -261,10 +261,9 @@ def test_music_must_be_audio_of_bounded_size(tmp_path, monkeypatch):
 
 def test_a_page_of_hostile_names_and_metrics_opens_and_runs_in_chromium(tmp_path):
     """The page whose names, keys and values tried to close its script still runs in a real browser."""
-    from test_viewer import BROWSER, Page
+    from browser_page import Page, browser_or_skip
 
-    if BROWSER is None:
-        pytest.skip("no Chromium on PATH (apt-get install chromium; .ci/run installs it where apt works)")
+    browser_or_skip()
     metrics = {"<!--<script>": float("nan"), "</script>": 1.25}
     out = write_view(
         [(HOSTILE_NAME, from_motion_data(_smpl_motion(8)))], tmp_path / "v.html", metrics=metrics

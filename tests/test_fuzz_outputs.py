@@ -10,6 +10,7 @@ file is written atomically with the mode the umask gives.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import lightning
 import numpy as np
@@ -112,7 +113,9 @@ def test_export_onnx_refuses_a_users_folder_before_any_work(user_folder, capsys,
 def test_sm_dance_never_replaces_a_file_beside_its_named_output(tmp_path, capsys):
     video = tmp_path / "take.mp4"
     video.write_bytes(b"the user's own video")
-    args = ["dance", "--ckpt", str(tmp_path / "none.ckpt"), "--music", "m.wav", "--video", str(video)]
+    (tmp_path / "m.wav").write_bytes(b"")  # sm dance's inputs must exist: they are checked as it parses
+    args = ["dance", "--ckpt", str(tmp_path / "none.ckpt"), "--music", str(tmp_path / "m.wav")]
+    args += ["--video", str(video)]
     err = _refused(capsys, [*args, "--out", str(tmp_path / "take.npz")], video)
     assert "written beside" in err
     assert video.read_bytes() == b"the user's own video"
@@ -121,7 +124,7 @@ def test_sm_dance_never_replaces_a_file_beside_its_named_output(tmp_path, capsys
 @pytest.mark.parametrize(
     "command",
     [
-        ["dance", "--ckpt", "none.ckpt", "--music", "m.wav", "--video", "v.mp4"],
+        ["dance", "--ckpt", "none.ckpt", "--music", "INPUT/m.wav", "--video", "INPUT/v.mp4"],
         ["stream", "--ckpt", "CKPT", "--music", "song.wav"],
         ["stream", "--task", "recognition", "--ckpt", "CKPT", "--skeleton", "clip.npy"],
         ["generate", "--checkpoint", "none.ckpt", "--text", "a person walks"],
@@ -133,6 +136,10 @@ def test_every_folder_command_refuses_a_users_folder_before_any_work(
     user_folder, stream_ckpt, capsys, command
 ):
     command = [str(stream_ckpt) if arg == "CKPT" else arg for arg in command]  # checked to exist first
+    for i, arg in enumerate(command):  # input files that exist (sm dance checks them as it parses)
+        if arg.startswith("INPUT/"):
+            command[i] = str(user_folder.parent / arg.removeprefix("INPUT/"))
+            Path(command[i]).write_bytes(b"")
     _refused(capsys, [*command, "--out", str(user_folder)], user_folder)
     _untouched(user_folder)
     assert not (user_folder / MANIFEST).exists()

@@ -78,7 +78,7 @@ def test_sm_make_ego_refuses_hostile_scenes_on_one_line(tmp_path, capsys, case):
         "8",
         "--workers",
         "1",
-        "--no-progress",
+        "--quiet",
     ]
     start = time.monotonic()
     assert sm(args) == 2
