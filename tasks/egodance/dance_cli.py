@@ -175,11 +175,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("the following arguments are required: --out")
     if not args.no_render and (args.render_size[0] % 16 or args.render_size[1] % 16):
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
-    if not args.list_samples:
-        claim_dance_output(args.out, args.name, not args.no_render, args.overwrite)
-
     if args.head == "oracle" and not args.sample:
         raise InputError("--head oracle needs the ground-truth camera path of a --sample")
+    if not args.list_samples:  # the arguments first, then the output, then any work
+        claim_dance_output(args.out, args.name, not args.no_render, args.overwrite)
+
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
     if args.list_samples:
