@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -112,7 +114,8 @@ def test_build_with_smpl_model_places_and_skips(tmp_path, tiny_model):
     assert make_ego_main([*args, "--smpl-model", str(path)]) == 0
     (folder,) = layout.complete_samples(out)
     sample = layout.read_sample(folder, load_frames=False)
-    assert sample.meta["body"] == {"model": "smpl", "file": str(path.resolve())}
+    relative = Path(os.path.relpath(path.resolve(), folder.resolve())).as_posix()  # as layout.relative_meta
+    assert sample.meta["body"] == {"model": "smpl", "file": str(path.resolve()), "file_relative": relative}
     assert sample.meta["penetration_score"] == pytest.approx(0.0)
     # the saved, placed motion posed with the model: its lowest vertex lies on the floor (y = 0)
     placed = pose_body(
