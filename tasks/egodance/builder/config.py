@@ -1,14 +1,17 @@
-"""The options of a dataset build (``sm make-ego``): :class:`BuildConfig`, torch-free so that the command's
-``--help`` shows their defaults without importing the builder."""
+"""The options of a dataset build (``sm make-ego``): :class:`BuildConfig` and the defaults it takes from the
+builder's checks (:data:`MAX_SCENE_FACES` of :mod:`.scene_check`, :data:`MIN_VIEW_HITS` of
+:mod:`.placement_checks`), plain Python so that the command's ``--help`` shows them without importing the
+builder, torch or numpy."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from skeleton_mamba.tasks.egodance.builder.scene_check import MAX_SCENE_FACES
 from skeleton_mamba.tasks.training.threads import available_cores
 
-__all__ = ["MIN_VIEW_HITS", "BuildConfig", "default_workers"]
+__all__ = ["MAX_SCENE_FACES", "MIN_VIEW_HITS", "BuildConfig", "default_workers"]
+
+MAX_SCENE_FACES = 5_000_000  # triangles of one scene: ray cast at every frame (the sample room has 84)
 
 # Share of the first frame's rays that must hit geometry (:mod:`.placement_checks`): a closed room seen from
 # inside gives 1.0; an open scene (simple_room.glb: a floor, one wall, a table) seen from its floor 0.2 to

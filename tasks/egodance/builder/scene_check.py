@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.bounded_read import parse_json, read_json
+from skeleton_mamba.tasks.egodance.builder.config import MAX_SCENE_FACES  # plain Python, for --help
 from skeleton_mamba.tasks.motion.errors import DataFileError
 
 __all__ = ["MAX_SCENE_FACES", "SceneFileError", "check_face_count", "check_scene_file", "check_scene_mesh"]
 
-MAX_SCENE_FACES = 5_000_000  # triangles of one scene: ray cast at every frame (the sample room has 84)
 _MAX_HEADER_BYTES = 1 << 16  # a PLY header
 _MAX_GLTF_JSON_BYTES = 64 << 20  # the JSON of a glTF scene
 _BLOCK = 1 << 20
