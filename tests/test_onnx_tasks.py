@@ -123,12 +123,14 @@ def test_emm_denoiser_graph_matches_eager_with_padding(tmp_path):
 
 
 @pytest.mark.slow
-def test_text_denoiser_graph_matches_eager_with_padding(tmp_path):
+@pytest.mark.parametrize("temporal_prior", [False, True])
+def test_text_denoiser_graph_matches_eager_with_padding(tmp_path, temporal_prior):
     torch.manual_seed(0)
     model = TextToMotionDenoiser(
-        TINY, text_dim=12, time_channels=4, time_embedding_dim=16, diffusion_steps=20
-    )
-    model.set_data_statistics(torch.randn(50, 263) * 2)
+        TINY, text_dim=12, time_channels=4, time_embedding_dim=16, diffusion_steps=20,
+        temporal_prior=temporal_prior,
+    )  # fmt: skip
+    model.set_data_statistics(torch.randn(200, 263) * 2, torch.tensor([120, 80]))
     spec = onnx_export.text_denoiser_specs(model.eval(), frames=12)["denoiser"]
     program, path = exported(spec, tmp_path / "denoiser.onnx")
 

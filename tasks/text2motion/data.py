@@ -88,8 +88,9 @@ class _TextMotionDataModule(SplitDataModule):
 
     def training_statistics(self) -> dict[str, torch.Tensor]:
         """``feature_mean`` and ``feature_std`` (263,) of the normalisation and, once the training split is
-        set up, ``features`` (N, 263): its first :data:`STATISTICS_FRAMES` frames, normalised (the
-        denoiser's preconditioning statistics)."""
+        set up, ``features`` (N, 263): its first :data:`STATISTICS_FRAMES` frames, normalised, and
+        ``feature_lengths`` (K,) the frames each clip gives them (the denoiser's preconditioning
+        statistics; its temporal prior's spectrum is measured within clips)."""
         mean, std = self.statistics()
         statistics = {"feature_mean": mean, "feature_std": std}
         train = self.datasets.get("train")
@@ -98,6 +99,8 @@ class _TextMotionDataModule(SplitDataModule):
             statistics["features"] = (
                 torch.from_numpy(frames.astype(np.float32)) - mean.float()
             ) / std.float()
+            ends = np.cumsum([clip.length for clip in train.clips]).clip(max=len(frames))
+            statistics["feature_lengths"] = torch.from_numpy(np.diff(ends, prepend=0)).long()
         return statistics
 
     def evaluation_clips(self, split: str = "test") -> list[MotionClip]:

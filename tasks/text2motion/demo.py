@@ -3,7 +3,9 @@
 :class:`TextToMotionDemo` is a Lightning callback (``humanml3d_demo.yaml`` configures it). When ``fit``
 ends it samples one motion per prompt with the trained module and writes, into ``<log dir>/demo/``:
 
-- ``synthetic_NN_<words>.npy``: joint positions (T, 22, 3), metres, y-up, 20 fps (``sm render`` reads it);
+- ``synthetic_NN_<words>.npy`` (:func:`demo_stem`: the prompt's words without its ``synthetic:`` label,
+  e.g. ``synthetic_00_a_person_waves_both_arms_up``): joint positions (T, 22, 3), metres, y-up, 20 fps
+  (``sm render`` reads it);
 - ``synthetic_NN_<words>_features.npy``: the 263-d HumanML3D features (T, 263);
 - ``synthetic_NN_<words>.mp4`` (or ``.gif``): the rendering, titled with the prompt;
 - ``demo.json``: prompts, sampler settings, paths, and ``"synthetic": true``, and ``scores``: motions
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import torch
@@ -41,9 +44,16 @@ from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
 from skeleton_mamba.tasks.training.diffusion import SamplingOptions
 
-__all__ = ["LABEL", "TextToMotionDemo"]
+__all__ = ["LABEL", "TextToMotionDemo", "demo_stem"]
 
 LABEL = "model trained on SYNTHETIC captioned dances (procedural motions, template captions)"
+
+
+def demo_stem(index: int, prompt: str) -> str:
+    """``synthetic_NN_<words>``: the file stem of the demo's ``index``-th prompt, the words of the prompt
+    without its leading ``synthetic:`` label (the stem's prefix says it once)."""
+    words = re.sub(r"^\s*synthetic\b\s*:?\s*", "", prompt, flags=re.IGNORECASE)
+    return f"synthetic_{index:02d}_{slug(words)}"
 
 
 class TextToMotionDemo(Callback):
@@ -108,7 +118,7 @@ class TextToMotionDemo(Callback):
             pl_module.train()
         records = []
         for i, prompt in enumerate(self.prompts):
-            stem = out / f"synthetic_{i:02d}_{slug(prompt)}"
+            stem = out / demo_stem(i, prompt)
             paths = save_generated(features[i], prompt, stem, self.render)
             records.append({"prompt": prompt, **{k: str(v) for k, v in paths.items()}})
         summary = {

@@ -37,6 +37,10 @@ from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, NUM_JOIN
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
+from skeleton_mamba.tasks.training.diffusion.temporal_prior import (
+    TemporalPriorSkipX0,
+    power_spectrum,
+)
 
 __all__ = [
     "JOINT_CHANNELS",
@@ -49,6 +53,7 @@ __all__ = [
 ]
 
 JOINT_CHANNELS = 13
+PRIOR_SEGMENT_FRAMES = 64  # frames of the stretches the temporal prior's spectrum is measured on (3.2 s)
 _CONTACT_JOINTS = (7, 10, 8, 11)  # order of the feature slice [259:263]
 
 
@@ -157,6 +162,7 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         time_channels: int = 16,
         time_embedding_dim: int = 128,
         diffusion_steps: int = 1000,
+        temporal_prior: bool = False,
     ) -> None:
         super().__init__()
         config = dataclasses.replace(
@@ -173,12 +179,23 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
         self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
         self.text_proj = nn.Linear(text_dim, text_dim)
-        self.skip_x0 = SkipX0(diffusion_steps, channels=(FEATURE_DIM,))
+        self.temporal_prior = temporal_prior
+        if temporal_prior:
+            self.skip_x0 = TemporalPriorSkipX0(diffusion_steps, FEATURE_DIM, segment=PRIOR_SEGMENT_FRAMES)
+        else:
+            self.skip_x0 = SkipX0(diffusion_steps, channels=(FEATURE_DIM,))
 
-    def set_data_statistics(self, features: torch.Tensor) -> None:
+    def set_data_statistics(self, features: torch.Tensor, lengths: torch.Tensor | None = None) -> None:
         """Per-feature mean and std of normalised training features (N, 263) for the preconditioning (the
-        group-wise normalisation of HumanML3D leaves them off 0 and 1)."""
-        self.skip_x0.set_statistics(*channel_statistics(features.reshape(-1, FEATURE_DIM), name="features"))
+        group-wise normalisation of HumanML3D leaves them off 0 and 1) and, with ``temporal_prior``, their
+        power spectrum over time, on the clips of ``lengths`` (K,) frames that ``features`` joins (None:
+        one sequence)."""
+        features = features.reshape(-1, FEATURE_DIM)
+        self.skip_x0.set_statistics(*channel_statistics(features, name="features"))
+        if self.temporal_prior:
+            clips = features.split(lengths.tolist()) if lengths is not None else (features,)
+            spectrum = power_spectrum(clips, PRIOR_SEGMENT_FRAMES, self.skip_x0.data_mean)
+            self.skip_x0.set_spectrum(spectrum)
 
     def forward(
         self,
@@ -200,7 +217,10 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
             ones = torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
             context_mask = torch.cat([ones, cond.mask.to(x_t.device)], dim=1)
         out = self.backbone(tokens, mask=mask, context=context, context_mask=context_mask)
-        x0 = self.skip_x0(x_t, tokens_to_features(out), t)
+        if self.temporal_prior:
+            x0 = self.skip_x0(x_t, tokens_to_features(out), t, mask)
+        else:
+            x0 = self.skip_x0(x_t, tokens_to_features(out), t)
         if mask is not None:
             x0 = x0 * mask[..., None].to(x0.dtype)
         return x0

@@ -103,6 +103,7 @@ class TextToMotionModule(BackboneModule):
         evaluation: T2MEvalConfig | None = None,
         eval_sampler: str | None = None,
         eval_sampling_steps: int | None = None,
+        temporal_prior: bool = False,
     ) -> None:
         super().__init__()
         SamplingOptions(sampler, sampling_steps, eta, guidance_weight).override(
@@ -121,7 +122,11 @@ class TextToMotionModule(BackboneModule):
         # not a registered submodule: frozen pretrained weights stay out of checkpoints
         self._text_encoder = _Unregistered(TextEncoder(text_encoder_path, max_tokens=max_tokens))
         self.denoiser = TextToMotionDenoiser(
-            config, self.text_encoder.dim, time_channels, diffusion_steps=diffusion_steps
+            config,
+            self.text_encoder.dim,
+            time_channels,
+            diffusion_steps=diffusion_steps,
+            temporal_prior=temporal_prior,
         )
         self.diffusion = GaussianDiffusion(diffusion_steps)
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
@@ -134,7 +139,7 @@ class TextToMotionModule(BackboneModule):
         self.feature_mean.copy_(statistics["feature_mean"])
         self.feature_std.copy_(statistics["feature_std"])
         if "features" in statistics:
-            self.denoiser.set_data_statistics(statistics["features"])
+            self.denoiser.set_data_statistics(statistics["features"], statistics.get("feature_lengths"))
 
     @property
     def text_encoder(self) -> TextEncoder:
