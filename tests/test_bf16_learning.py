@@ -61,10 +61,13 @@ def test_qean_with_the_mamba_encoder_overfits_a_batch(precision):
     assert last < 0.5 * first, (precision, first, last)
 
 
-@pytest.mark.parametrize("precision", TRAINING_PRECISIONS)
-def test_stream_dancer_overfits_two_dances(precision):
+@pytest.mark.parametrize(
+    ("precision", "smoothing_stages"), [(p, 0) for p in TRAINING_PRECISIONS] + [("32-true", 8)]
+)
+def test_stream_dancer_overfits_two_dances(precision, smoothing_stages):
+    """Also through the demo's output low-pass (8 moving averages of decay 0.6, trained through)."""
     torch.manual_seed(0)
-    module = StreamDanceModule(backbone=TINY, lr=3e-3, input_noise=0.0)
+    module = StreamDanceModule(backbone=TINY, lr=3e-3, input_noise=0.0, smoothing_stages=smoothing_stages)
     dances = [
         synthesize_dance(bpm, 1.0, fps=30.0, style=s, seed=1) for bpm, s in ((120, "bounce"), (100, "sway"))
     ]

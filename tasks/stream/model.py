@@ -5,19 +5,22 @@ training time, as QEAN [QEAN] trains its autoregressive decoder; its own outputs
 
     prev_t  = pose_{t-1} joint tokens (24, 12), zeros at t = 0 (the start token)
     music_t = normalised causal music features of frame t (34,), copied onto every joint
-    pose_t  = SkeletonMamba_causal([prev_t | music_t])_t               (B, T, 24, 46) -> (B, T, 24, 12)
+    pose_t  = smoothing(SkeletonMamba_causal([prev_t | music_t]))_t    (B, T, 24, 46) -> (B, T, 24, 12)
 
 A joint token is the joint's local rotation matrix (9, row-major) and the root position (3, repeated
 on every joint), the per-joint form of the 219-d [QEAN] / [FACT] vector
 (``tasks.qean.representation``). The music is a per-frame input, not a cross-attention context, so
 nothing can attend to future music: the network is causal end to end, and :meth:`step` (one frame,
-constant memory) equals :meth:`forward` (a whole sequence).
+constant memory) equals :meth:`forward` (a whole sequence). ``smoothing`` is the causal low-pass of
+:mod:`.output_smoothing` (trained through; off with 0 stages), its stages' values part of the stream's
+:class:`DancerState`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -31,9 +34,11 @@ from skeleton_mamba.tasks.motion.fact_features import features_to_joints, featur
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
+from skeleton_mamba.tasks.stream.output_smoothing import CausalSmoothing
 
 __all__ = [
     "POSE_CHANNELS",
+    "DancerState",
     "StreamDancer",
     "motion_to_tokens",
     "teacher_forcing_inputs",
@@ -76,6 +81,23 @@ def teacher_forcing_inputs(motion: torch.Tensor) -> torch.Tensor:
     return torch.cat([torch.zeros_like(motion[:, :1]), motion[:, :-1]], dim=1)
 
 
+@dataclass
+class DancerState(StreamState):
+    """A stream's state: the backbone's (:class:`~skeleton_mamba.streaming.StreamState`, updated in place)
+    and ``smoothing``, the output low-pass's stages (stages, B, 24, 12) (None before the first frame)."""
+
+    smoothing: torch.Tensor | None = None
+
+    @property
+    def nbytes(self) -> int:
+        extra = 0 if self.smoothing is None else self.smoothing.numel() * self.smoothing.element_size()
+        return super().nbytes + extra
+
+    def reset(self) -> None:
+        super().reset()
+        self.smoothing = None
+
+
 class StreamDancer(PretrainedMixin, nn.Module):
     """Causal Skeleton Mamba from previous pose and music to the next pose.
 
@@ -83,6 +105,8 @@ class StreamDancer(PretrainedMixin, nn.Module):
         backbone: the backbone size (``skeleton``, ``in_channels``, ``out_channels``, ``causal`` and
             ``context_dim`` are set here).
         music_dim: music features per frame (:data:`~skeleton_mamba.tasks.stream.features.NUM_FEATURES`).
+        smoothing_stages: moving averages of the output low-pass (:class:`.CausalSmoothing`; 0: none).
+        smoothing_decay: their decay.
     """
 
     pretrained_task = (
@@ -90,7 +114,13 @@ class StreamDancer(PretrainedMixin, nn.Module):
     )
     pretrained_citations = ("EgoMusic", "Mamba-2")
 
-    def __init__(self, backbone: SkeletonMambaConfig | None = None, music_dim: int = NUM_FEATURES) -> None:
+    def __init__(
+        self,
+        backbone: SkeletonMambaConfig | None = None,
+        music_dim: int = NUM_FEATURES,
+        smoothing_stages: int = 0,
+        smoothing_decay: float = 0.6,
+    ) -> None:
         super().__init__()
         cfg = dataclasses.replace(
             backbone or SkeletonMambaConfig(),
@@ -102,6 +132,7 @@ class StreamDancer(PretrainedMixin, nn.Module):
         )
         self.music_dim = music_dim
         self.backbone = SkeletonMamba(cfg)
+        self.smoothing = CausalSmoothing(smoothing_stages, smoothing_decay)
         # Music feature statistics of the training set (set by the Lightning module before training).
         self.register_buffer("music_mean", torch.zeros(music_dim))
         self.register_buffer("music_std", torch.ones(music_dim))
@@ -122,22 +153,26 @@ class StreamDancer(PretrainedMixin, nn.Module):
 
     def forward(self, prev: torch.Tensor, music: torch.Tensor) -> torch.Tensor:
         """Previous poses (B, T, 24, 12) and music (B, T, music_dim) -> poses (B, T, 24, 12)."""
-        return self.backbone(self._inputs(prev, music))
+        return self.smoothing.sequence(self.backbone(self._inputs(prev, music)))
 
-    def init_state(self, batch: int = 1) -> StreamState:
+    def init_state(self, batch: int = 1) -> DancerState:
         """Zero recurrent state for ``batch`` streams."""
-        return self.backbone.init_state(batch)
+        return DancerState(**vars(self.backbone.init_state(batch)))
 
     def step(
         self,
         prev: torch.Tensor,
         music: torch.Tensor,
-        state: StreamState,
+        state: DancerState,
         backbone_step: Callable | None = None,
-    ) -> tuple[torch.Tensor, StreamState]:
+    ) -> tuple[torch.Tensor, DancerState]:
         """One frame: previous pose (B, 24, 12) and music (B, music_dim) -> pose (B, 24, 12).
 
         ``backbone_step``: the backbone's step function (default ``self.backbone.step``; e.g. its
         :meth:`~skeleton_mamba.SkeletonMamba.compile_step`).
         """
-        return (backbone_step or self.backbone.step)(self._inputs(prev, music), state)
+        out, state = (backbone_step or self.backbone.step)(self._inputs(prev, music), state)
+        if not self.smoothing.enabled:
+            return out, state
+        pose, state.smoothing = self.smoothing.step(out, state.smoothing)
+        return pose, state

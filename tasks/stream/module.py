@@ -26,6 +26,9 @@ class StreamDanceModule(BackboneModule):
         backbone: backbone size (``backbones/skeleton_mamba.yaml``); made causal by the model.
         music_dim: music features per frame (34, :mod:`.features`).
         input_noise: std of the noise added to the teacher-forced previous poses.
+        smoothing_stages: moving averages of the network's causal output low-pass, trained through
+            (:mod:`.output_smoothing`; 0: none).
+        smoothing_decay: their decay.
         lr: AdamW learning rate.
         weight_decay: AdamW weight decay.
     """
@@ -35,12 +38,14 @@ class StreamDanceModule(BackboneModule):
         backbone: SkeletonMambaConfig | None = None,
         music_dim: int = NUM_FEATURES,
         input_noise: float = 0.02,
+        smoothing_stages: int = 0,
+        smoothing_decay: float = 0.6,
         lr: float = 3e-4,
         weight_decay: float = 0.01,
     ) -> None:
         super().__init__()
         config = self.save_backbone_hyperparameters(backbone)
-        self.model = StreamDancer(config, music_dim)
+        self.model = StreamDancer(config, music_dim, smoothing_stages, smoothing_decay)
 
     def set_data_statistics(self, statistics) -> None:
         """The music normalisation from every training music frame (``music`` (N, 34),

@@ -156,6 +156,9 @@ class DancerStepGraph(nn.Module):
     :class:`StepGraph` as its backbone step.
 
     forward(prev (B, 24, 12), music (B, M), conv_0, ssm_0, ...) -> (pose (B, 24, 12), next_conv_0, ...).
+    A dancer with an output low-pass (``dancer.smoothing``) takes two more inputs after ``music``:
+    ``started`` (one number: 0 at a stream's first frame, 1 after) and ``smoothing`` (stages, B, 24, 12),
+    the low-pass's stages (any value at the first frame), and returns ``next_smoothing`` after ``pose``.
     """
 
     def __init__(self, dancer: nn.Module):
@@ -166,10 +169,17 @@ class DancerStepGraph(nn.Module):
     def forward(
         self, prev: torch.Tensor, music: torch.Tensor, *states: torch.Tensor
     ) -> tuple[torch.Tensor, ...]:
-        outputs, _ = self.dancer.step(
-            prev, music, None, lambda x, _state: (self.backbone_step(x, *states), None)
-        )
-        return outputs
+        smoothing = self.dancer.smoothing
+        if not smoothing.enabled:
+            outputs, _ = self.dancer.step(
+                prev, music, None, lambda x, _state: (self.backbone_step(x, *states), None)
+            )
+            return outputs
+        started, stages, states = states[0], states[1], states[2:]
+        out, *nxt = self.backbone_step(self.dancer._inputs(prev, music), *states)
+        stages = started * stages + (1 - started) * out.unsqueeze(0)  # at rest on the first output
+        pose, stages = smoothing.step(out, stages)
+        return (pose, stages, *nxt)
 
 
 @dataclass
@@ -282,9 +292,15 @@ def dancer_specs(dancer: nn.Module, batch: int = 2, frames: int = 20) -> dict[st
     sequence = ExportSpec(dancer, (prev, music), ["prev", "music"], ["pose"], {"prev": axes, "music": axes})
     states = [torch.randn_like(t) for t in zero_states(dancer.backbone, batch)]
     names = _state_names(len(states))
+    inputs, outputs, dynamic = ["prev", "music"], ["pose"], {"prev": {0: "batch"}, "music": {0: "batch"}}
+    examples: list[torch.Tensor] = [prev[:, 0], music[:, 0]]
+    if dancer.smoothing.enabled:
+        examples += [torch.ones(()), torch.randn(dancer.smoothing.stages, *prev[:, 0].shape)]
+        inputs, outputs = [*inputs, "started", "smoothing"], [*outputs, "next_smoothing"]
+        dynamic["smoothing"] = {1: "batch"}
     step = ExportSpec(
-        DancerStepGraph(dancer), (prev[:, 0], music[:, 0], *states), ["prev", "music", *names],
-        ["pose", *(f"next_{n}" for n in names)], {n: {0: "batch"} for n in ["prev", "music", *names]},
+        DancerStepGraph(dancer), (*examples, *states), [*inputs, *names],
+        [*outputs, *(f"next_{n}" for n in names)], {**dynamic, **{n: {0: "batch"} for n in names}},
         varargs_from=2,
     )  # fmt: skip
     return {"sequence": sequence, "step": step}

@@ -1,0 +1,99 @@
+"""A causal low-pass at the live dancer's output: a cascade of exponential moving averages, trained through.
+
+The live dancer regresses every pose frame on its own; what it has not learned is an error of its own at
+each frame, driven by the frame-level music features (an onset spike moves the pose for one frame), so the
+raw output trembles at 5-15 Hz although every training pose sequence is smooth. A causal filter at the
+output, inside the network and trained through, removes what lies above the dance's band whatever the
+network does, and the network learns to lead it (it sees the music up to the frame and its own state).
+
+The filter is ``stages`` exponential moving averages in a row, each ``s_t = d s_{t-1} + (1 - d) x_t`` with
+decay ``d`` (a gamma kernel: non-negative, no overshoot, unit gain at 0 Hz). Its power gain at frequency
+``f`` (cycles per frame) is ``[(1 - d)^2 / (1 - 2 d cos(2 pi f) + d^2)]^stages``, its delay at low
+frequencies ``stages d / (1 - d)`` frames. Every stage starts at the first frame's value (the filter at
+rest on it), so a stream has no fade-in from zero::
+
+    y = smoothing.sequence(x)                    # x (B, T, ...) -> y (B, T, ...), causal
+    y_t, state = smoothing.step(x_t, state)      # the same, one frame at a time (state None at t = 0)
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = ["CausalSmoothing"]
+
+_TAIL = 1e-9  # the kernel is cut where the mass it leaves out falls below this
+
+
+class CausalSmoothing(nn.Module):
+    """``stages`` exponential moving averages of decay ``decay`` over time (0 stages: the identity).
+
+    Args:
+        stages: moving averages in a row (0 to 16).
+        decay: each one's ``d`` in [0, 1) (0: the identity).
+    """
+
+    def __init__(self, stages: int = 0, decay: float = 0.6) -> None:
+        super().__init__()
+        if not 0 <= stages <= 16:
+            raise ValueError(f"stages must be 0 to 16, got {stages}")
+        if not 0.0 <= decay < 1.0:
+            raise ValueError(f"decay must be in [0, 1), got {decay}")
+        self.stages, self.decay = stages, decay
+        self.register_buffer("kernel", self._kernel(), persistent=False)
+
+    @property
+    def enabled(self) -> bool:
+        return self.stages > 0 and self.decay > 0
+
+    def _kernel(self) -> torch.Tensor:
+        """The impulse response h[n] = (1 - d)^K C(n + K - 1, K - 1) d^n, n = 0 .. L - 1, reversed for
+        ``conv1d``; the mass beyond L (< 1e-9) is put on the last tap so the gain at 0 Hz is exactly 1."""
+        if not self.enabled:
+            return torch.ones(1, dtype=torch.float64)
+        k, d = self.stages, self.decay
+        taps, total, n = [], 0.0, 0
+        while total < 1.0 - _TAIL:
+            h = (1.0 - d) ** k * math.comb(n + k - 1, k - 1) * d**n
+            taps.append(h)
+            total += h
+            n += 1
+        taps[-1] += 1.0 - total
+        return torch.tensor(taps[::-1], dtype=torch.float64)
+
+    def power_gain(self, frequency: torch.Tensor) -> torch.Tensor:
+        """The filter's power gain at ``frequency`` (cycles per frame, any shape)."""
+        d = self.decay
+        one = (1 - d) ** 2 / (1 - 2 * d * torch.cos(2 * math.pi * frequency) + d * d)
+        return one**self.stages if self.enabled else torch.ones_like(frequency)
+
+    def sequence(self, x: torch.Tensor) -> torch.Tensor:
+        """x (B, T, ...) -> the filtered (B, T, ...), frame 0 held before the start."""
+        if not self.enabled:
+            return x
+        b, t = x.shape[:2]
+        flat = x.reshape(b, t, -1).transpose(1, 2).reshape(-1, 1, t)  # (B * C, 1, T)
+        length = self.kernel.shape[0]
+        padded = torch.cat([flat[..., :1].expand(-1, -1, length - 1), flat], dim=-1)
+        y = F.conv1d(padded, self.kernel.to(x.dtype).view(1, 1, -1))  # (B * C, 1, T)
+        return y.reshape(b, -1, t).transpose(1, 2).reshape(x.shape)
+
+    def step(self, x: torch.Tensor, state: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """One frame x (B, ...) and the stages' values (stages, B, ...) (None: the first frame) -> the
+        filtered frame (B, ...) and the next state."""
+        if not self.enabled:
+            return x, state
+        if state is None:
+            state = x.unsqueeze(0).expand(self.stages, *x.shape)
+        values, y = [], x
+        for previous in state:
+            y = self.decay * previous + (1.0 - self.decay) * y
+            values.append(y)
+        return y, torch.stack(values)
+
+    def extra_repr(self) -> str:
+        return f"stages={self.stages}, decay={self.decay}"
