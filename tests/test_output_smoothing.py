@@ -81,7 +81,10 @@ def test_dancer_step_equals_forward_with_the_low_pass():
             frames.append(pose)
     torch.testing.assert_close(full, CausalSmoothing(8, 0.6).sequence(raw))
     torch.testing.assert_close(torch.stack(frames, 1), full, atol=1e-5, rtol=1e-5)
-    assert state.frames == 40 and state.smoothing.shape == (8, 2, 24, 12)
-    assert state.nbytes == plain.init_state(2).nbytes + state.smoothing.numel() * 4
+    assert state.frames == 40 and state.smoothing.shape == (8, 2, 24, 12) and state.started
+    assert state.nbytes == smooth.init_state(2).nbytes == plain.init_state(2).nbytes + 8 * 2 * 24 * 12 * 4
     state.reset()
-    assert state.smoothing is None and state.frames == 0
+    assert not state.started and state.frames == 0 and not state.smoothing.any()
+    with torch.no_grad():  # after a reset the stream starts again as new
+        again, _ = smooth.step(prev[:, 0], music[:, 0], state)
+    torch.testing.assert_close(again, full[:, 0], atol=1e-5, rtol=1e-5)

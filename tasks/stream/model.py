@@ -83,10 +83,12 @@ def teacher_forcing_inputs(motion: torch.Tensor) -> torch.Tensor:
 
 @dataclass
 class DancerState(StreamState):
-    """A stream's state: the backbone's (:class:`~skeleton_mamba.streaming.StreamState`, updated in place)
-    and ``smoothing``, the output low-pass's stages (stages, B, 24, 12) (None before the first frame)."""
+    """A stream's state: the backbone's (:class:`~skeleton_mamba.streaming.StreamState`, updated in place),
+    ``smoothing``, the output low-pass's stages (stages, B, 24, 12) (None without one), and ``started``
+    (False until the first frame, which sets every stage to its value). Its size never changes."""
 
     smoothing: torch.Tensor | None = None
+    started: bool = False
 
     @property
     def nbytes(self) -> int:
@@ -95,7 +97,9 @@ class DancerState(StreamState):
 
     def reset(self) -> None:
         super().reset()
-        self.smoothing = None
+        self.started = False
+        if self.smoothing is not None:
+            self.smoothing.zero_()
 
 
 class StreamDancer(PretrainedMixin, nn.Module):
@@ -157,7 +161,12 @@ class StreamDancer(PretrainedMixin, nn.Module):
 
     def init_state(self, batch: int = 1) -> DancerState:
         """Zero recurrent state for ``batch`` streams."""
-        return DancerState(**vars(self.backbone.init_state(batch)))
+        state = DancerState(**vars(self.backbone.init_state(batch)))
+        if self.smoothing.enabled:
+            weight = next(self.parameters())
+            shape = (self.smoothing.stages, batch, self.backbone.skeleton.num_joints, POSE_CHANNELS)
+            state.smoothing = torch.zeros(shape, dtype=weight.dtype, device=weight.device)
+        return state
 
     def step(
         self,
@@ -174,5 +183,6 @@ class StreamDancer(PretrainedMixin, nn.Module):
         out, state = (backbone_step or self.backbone.step)(self._inputs(prev, music), state)
         if not self.smoothing.enabled:
             return out, state
-        pose, state.smoothing = self.smoothing.step(out, state.smoothing)
+        pose, state.smoothing = self.smoothing.step(out, state.smoothing if state.started else None)
+        state.started = True
         return pose, state
