@@ -40,6 +40,12 @@ def test_step_equals_sequence_and_a_constant_passes_unchanged():
         frames.append(y)
     torch.testing.assert_close(torch.stack(frames, 1), smoothing.sequence(x), atol=1e-10, rtol=0)
     assert state.shape == (6, 2, 4, 3)
+    # a first frame says so with started False or a 0 tensor: any stored stages are ignored
+    for started in (False, torch.tensor(0.0, dtype=torch.float64)):
+        first, _ = smoothing.step(x[:, 0], torch.full_like(state, 9.0), started)
+        torch.testing.assert_close(first, x[:, 0])
+    later, _ = smoothing.step(x[:, 0], state, torch.tensor(1.0, dtype=torch.float64))
+    torch.testing.assert_close(later, smoothing.step(x[:, 0], state)[0])
     constant = torch.full((1, 30, 2), 3.5, dtype=torch.float64)
     torch.testing.assert_close(smoothing.sequence(constant), constant)
 

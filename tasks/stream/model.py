@@ -183,6 +183,6 @@ class StreamDancer(PretrainedMixin, nn.Module):
         out, state = (backbone_step or self.backbone.step)(self._inputs(prev, music), state)
         if not self.smoothing.enabled:
             return out, state
-        pose, state.smoothing = self.smoothing.step(out, state.smoothing if state.started else None)
+        pose, state.smoothing = self.smoothing.step(out, state.smoothing, state.started)
         state.started = True
         return pose, state

@@ -13,7 +13,7 @@ frequencies ``stages d / (1 - d)`` frames. Every stage starts at the first frame
 rest on it), so a stream has no fade-in from zero::
 
     y = smoothing.sequence(x)                    # x (B, T, ...) -> y (B, T, ...), causal
-    y_t, state = smoothing.step(x_t, state)      # the same, one frame at a time (state None at t = 0)
+    y_t, state = smoothing.step(x_t, state, started)   # the same, one frame at a time
 """
 
 from __future__ import annotations
@@ -82,13 +82,19 @@ class CausalSmoothing(nn.Module):
         y = F.conv1d(padded, self.kernel.to(x.dtype).view(1, 1, -1))  # (B * C, 1, T)
         return y.reshape(b, -1, t).transpose(1, 2).reshape(x.shape)
 
-    def step(self, x: torch.Tensor, state: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """One frame x (B, ...) and the stages' values (stages, B, ...) (None: the first frame) -> the
-        filtered frame (B, ...) and the next state."""
+    def step(
+        self, x: torch.Tensor, state: torch.Tensor | None, started: bool | torch.Tensor = True
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """One frame x (B, ...) and the stages' values (stages, B, ...) -> the filtered frame (B, ...) and the
+        next state. ``started`` False (or 0; or ``state`` None) at a stream's first frame: the stages are
+        then ignored and start at rest on x. A tensor ``started`` (0 or 1) keeps the step one graph."""
         if not self.enabled:
             return x, state
-        if state is None:
-            state = x.unsqueeze(0).expand(self.stages, *x.shape)
+        rest = x.unsqueeze(0).expand(self.stages, *x.shape)
+        if state is None or started is False:
+            state = rest
+        elif isinstance(started, torch.Tensor):
+            state = started * state + (1 - started) * rest
         values, y = [], x
         for previous in state:
             y = self.decay * previous + (1.0 - self.decay) * y

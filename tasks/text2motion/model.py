@@ -217,10 +217,7 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
             ones = torch.ones(b, 1, dtype=torch.bool, device=x_t.device)
             context_mask = torch.cat([ones, cond.mask.to(x_t.device)], dim=1)
         out = self.backbone(tokens, mask=mask, context=context, context_mask=context_mask)
-        if self.temporal_prior:
-            x0 = self.skip_x0(x_t, tokens_to_features(out), t, mask)
-        else:
-            x0 = self.skip_x0(x_t, tokens_to_features(out), t)
+        x0 = self.skip_x0(x_t, tokens_to_features(out), t, mask)
         if mask is not None:
             x0 = x0 * mask[..., None].to(x0.dtype)
         return x0

@@ -177,8 +177,7 @@ class DancerStepGraph(nn.Module):
             return outputs
         started, stages, states = states[0], states[1], states[2:]
         out, *nxt = self.backbone_step(self.dancer._inputs(prev, music), *states)
-        stages = started * stages + (1 - started) * out.unsqueeze(0)  # at rest on the first output
-        pose, stages = smoothing.step(out, stages)
+        pose, stages = smoothing.step(out, stages, started)
         return (pose, stages, *nxt)
 
 

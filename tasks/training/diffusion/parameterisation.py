@@ -78,7 +78,11 @@ class SkipX0(nn.Module):
         a, _, mu, _, d = self._scalings(x_t, t)
         return (x_t - a * mu) / d.sqrt()
 
-    def forward(self, x_t: torch.Tensor, out: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """x_t and F (B, ...), t (B,) long -> x0_hat (B, ...)."""
+    def forward(
+        self, x_t: torch.Tensor, out: torch.Tensor, t: torch.Tensor, mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """x_t and F (B, ...), t (B,) long -> x0_hat (B, ...). ``mask`` (B, T) of valid frames is taken for
+        the signature of :class:`~.temporal_prior.TemporalPriorSkipX0` and not needed: every frame is its
+        own."""
         a, s, mu, sigma, d = self._scalings(x_t, t)
         return mu + a * sigma.square() / d * (x_t - a * mu) + sigma * s / d.sqrt() * out

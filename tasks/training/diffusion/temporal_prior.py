@@ -137,12 +137,11 @@ class TemporalPriorSkipX0(SkipX0):
     ) -> torch.Tensor:
         """x_t and F (B, T, C), t (B,) long, mask (B, T) bool valid frames (right padding; None: all) ->
         x0_hat (B, T, C). Padded frames get SkipX0's per-frame output."""
-        x0 = super().forward(x_t, out, t)
         a, s, mu, _, _ = self._scalings(x_t, t)
         frames = x_t.shape[1]
-        if mask is None:
-            mask = torch.ones(x_t.shape[:2], dtype=torch.bool, device=x_t.device)
-        lengths = mask.sum(1).clamp(min=1)  # (B,)
+        lengths = (
+            torch.full(x_t.shape[:1], frames, device=x_t.device) if mask is None else mask.sum(1).clamp(min=1)
+        )  # (B,)
         basis = dct_bases(lengths, frames).to(x_t.dtype)  # (B, T, T)
         power = spectrum_at(self.spectrum.to(x_t.dtype), lengths, frames)  # (B, T, C): Q_k
         variance = a.square() * power + s.square()
@@ -150,4 +149,6 @@ class TemporalPriorSkipX0(SkipX0):
             basis @ out
         )
         prior = mu + basis.transpose(1, 2) @ coefficients
-        return torch.where(mask[..., None], prior, x0)
+        if mask is None:
+            return prior
+        return torch.where(mask[..., None], prior, super().forward(x_t, out, t))
