@@ -62,7 +62,7 @@ def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
     """``mixer.mix(zxbcdt)`` (a :class:`~skeleton_mamba.mixer.Mamba2Mixer`) from a zero state, inference only.
 
     Args:
-        mixer: the mixer whose weights are used.
+        mixer (Mamba2Mixer): the mixer whose weights are used.
         zxbcdt: (b, L, F) its ``in_proj`` output.
 
     Returns:

@@ -149,7 +149,7 @@ def step(
         state: from :func:`init_state`; updated in place and returned.
         context: (B, S, Dc) the condition for this frame (see the module docstring).
         context_mask: (B, S) bool, True on valid condition tokens.
-        ops: the frame-wise scans' operations (see :func:`block_step`).
+        ops (type[FrameOps]): the frame-wise scans' operations (see :func:`block_step`).
 
     Returns:
         (B, J, D or C_out) the output for this frame, and ``state``.

@@ -169,7 +169,8 @@ def chunk_scan(
         delta: (n, Q, H) step sizes Δ.
         a: (n, H, Q) log decays a = Δ·A, float64 (or x's dtype, then the decays carry the rounding
             error of their cumulative sums; see intra_chunk.py).
-        B, C: (n, Q, G, N); head h reads group h // (H // G).
+        B: (n, Q, G, N) input projections; head h reads group h // (H // G).
+        C: (n, Q, G, N) output projections, grouped as B.
         D: (H, P) skip weights or ``None``.
         h0: (b, H, N, P) the state entering each sequence (N×P, the transpose of ``ssd``'s states).
 

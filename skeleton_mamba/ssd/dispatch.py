@@ -89,9 +89,12 @@ def ssd(
         x: (b, L, H, P).
         dt: (b, L, H) raw step sizes.
         A: (H,) negative continuous decay per head (A = -exp(A_log)).
-        B, C: (b, L, G, N) with H % G == 0; head h reads group h // (H // G).
+        B: (b, L, G, N) input projections, H % G == 0; head h reads group h // (H // G).
+        C: (b, L, G, N) output projections, grouped as B.
         D: (H,) or (H, P) skip weights, or ``None``.
-        dt_bias: (H,) or ``None``; dt_softplus, dt_limit: see above.
+        dt_bias: (H,) or ``None``.
+        dt_softplus: apply the softplus to dt + dt_bias (see above).
+        dt_limit: the (min, max) clamp of Δ (see above).
         initial_state: (b, H, P, N) or ``None`` (zeros).
         return_final_state: also return the final state (b, H, P, N) in fp32.
         chunk_size: chunk length of the chunked form (and of the kernel).

@@ -198,7 +198,8 @@ def intra_chunk(
         delta: (n, Q, H) step sizes Δ.
         a: (n, H, Q) log decays a = Δ·A, in float64 (or in x's dtype, then the mask carries the
             rounding error of their cumulative sum, see the module docstring).
-        B, C: (n, Q, G, N); head h reads group h // (H // G).
+        B: (n, Q, G, N) input projections; head h reads group h // (H // G).
+        C: (n, Q, G, N) output projections, grouped as B.
         D: (H, P) skip weights or ``None``.
         y_off: (n, Q, H, P) extra term (the contribution of the earlier blocks) or ``None``.
 

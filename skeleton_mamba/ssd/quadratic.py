@@ -40,7 +40,8 @@ def below_diagonal(
     Args:
         xd: (b, K·q, H, P) Δ ⊙ x.
         cs: (b, K·q, H) float64 cumulative sums of a = Δ·A over the whole sequence.
-        B, C: (b, K·q, G, N).
+        B: (b, K·q, G, N) input projections.
+        C: (b, K·q, G, N) output projections.
         q: block length.
 
     Returns:

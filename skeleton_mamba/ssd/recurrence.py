@@ -35,9 +35,12 @@ def ssd_recurrence(
         x: (b, L, H, P) inputs.
         dt: (b, L, H) raw step sizes (see :func:`discretize_dt`).
         A: (H,) negative continuous decay per head.
-        B, C: (b, L, G, N); head h reads group h // (H // G).
+        B: (b, L, G, N) input projections; head h reads group h // (H // G).
+        C: (b, L, G, N) output projections, grouped as B.
         D: (H,) or (H, P) skip, or ``None``.
-        dt_bias, dt_softplus, dt_limit: the discretisation of Δ.
+        dt_bias: the discretisation of Δ: bias added to dt.
+        dt_softplus: the discretisation of Δ: softplus of dt + dt_bias.
+        dt_limit: the discretisation of Δ: its (min, max) clamp.
         initial_state: (b, H, P, N) state before the first step, or ``None`` (zeros).
         return_final_state: also return the state after the last step.
 

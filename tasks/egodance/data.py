@@ -332,10 +332,12 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         seed: generator seed.
         swing_side: ``random`` or ``music`` (the music's bars decide which way the dancers swing;
             :func:`~skeleton_mamba.tasks.motion.synthetic.synthesize_dance`).
-        val_fraction, test_fraction: ``ceil(fraction * count)`` dances are held out, stratified by
+        val_fraction: ``ceil(val_fraction * count)`` dances are held out for validation, stratified by
             style (:func:`~skeleton_mamba.tasks.motion.synthetic.splits.stratified_holdout`).
+        test_fraction: ``ceil(test_fraction * count)`` dances are held out for testing, likewise.
         cache_frames: keep decoded frames in memory (default here: the set is small).
-        Other arguments as :class:`EgoDanceDataModule`.
+
+    Other arguments as :class:`EgoDanceDataModule`.
     """
 
     def __init__(

@@ -33,7 +33,8 @@ def write_dance(
     Args:
         tokens: the sampled dance (:mod:`.representation`).
         fps: frame rate of the dance.
-        The others as :func:`~skeleton_mamba.tasks.motion.export.write_motion`.
+
+    The others as :func:`~skeleton_mamba.tasks.motion.export.write_motion`.
     """
     return write_motion(
         tokens_to_motion(tokens, fps), out_dir, name, music, music_start_s, render, style, title, progress

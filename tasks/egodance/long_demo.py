@@ -45,7 +45,8 @@ def long_sample(data, source: str, duration_s: float) -> Path:
     already built).
 
     Args:
-        data: the :class:`~.data.SyntheticEgoDanceDataModule` the model was trained on.
+        data (SyntheticEgoDanceDataModule): the data module the model was trained on
+            (:class:`~.data.SyntheticEgoDanceDataModule`).
         source: a held-out generated dance (``synthetic_<style>_<bpm>bpm_s<seed>``).
     """
     hp = data.hparams
@@ -117,7 +118,7 @@ def score_long_dance(
     """Dance the sample ``folder`` long-form with the module's EMA model and score it (module docstring).
 
     Args:
-        module: a trained :class:`~.module.EgoDanceModule` (eval mode).
+        module (EgoDanceModule): a trained :class:`~.module.EgoDanceModule` (eval mode).
         mean_pose: (24, 3) the training poses' mean joint positions (the baseline held still).
         overlap: frames shared by consecutive windows.
 

@@ -137,7 +137,8 @@ def load_skeleton_motion(
         path: the motion file.
         skeleton: skeleton of a ``.npy`` joint file (else inferred from its joint count).
         motion_fps: the input's frame rate (replaces the file's).
-        units, scale: the input's length unit or metres per unit (:func:`~.units.choose_scale`).
+        units: the input's length unit (:func:`~.units.choose_scale`).
+        scale: the input's metres per unit, instead of ``units`` (:func:`~.units.choose_scale`).
     """
     path = _existing(path)
     suffix = path.suffix.lower()

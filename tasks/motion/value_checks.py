@@ -92,7 +92,8 @@ def check_finite(
     Args:
         array: the parsed values.
         source: the file (or ``file: key``) the values come from.
-        what, axes: see :func:`non_finite_message`.
+        what: see :func:`non_finite_message`.
+        axes: see :func:`non_finite_message`.
         error: the reader's own :class:`DataFileError` subclass.
     """
     message = non_finite_message(array, what, axes)

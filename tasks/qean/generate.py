@@ -138,8 +138,12 @@ def generate_fast(
     """The same frames as :func:`generate_plain` with the reuse of the module docstring.
 
     Args:
-        model, seed, music, num_frames, progress: as :func:`generate_plain`.
+        model: as :func:`generate_plain`.
+        seed: as :func:`generate_plain`.
+        music: as :func:`generate_plain`.
+        num_frames: as :func:`generate_plain`.
         audio_chunk: music windows encoded per batched audio-encoder call.
+        progress: as :func:`generate_plain`.
     """
     _check(model, seed, music)
     if audio_chunk < 1:

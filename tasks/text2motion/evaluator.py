@@ -150,8 +150,14 @@ class T2MEvaluator(nn.Module):
         feature_dim: motion feature size (263 HumanML3D, 251 KIT-ML); the last 4 (foot contacts) are unused.
         comparable: ``True`` only when the official checkpoint was loaded; results of an evaluator
             trained here must be labelled as not comparable with published numbers.
-        word_size, text_hidden, movement_hidden, movement_latent, motion_hidden, embedding_dim: the
-            official sizes (300, 512, 512, 512, 1024, 512) by default.
+        word_size: word vector size (official: 300).
+        text_hidden: text encoder width (official: 512).
+        movement_hidden: movement encoder width (official: 512).
+        movement_latent: movement latent size (official: 512).
+        motion_hidden: motion encoder width (official: 1024).
+        embedding_dim: the shared text / motion embedding size (official: 512).
+
+    The defaults are the official sizes.
     """
 
     def __init__(

@@ -247,9 +247,11 @@ class TextToMotionModule(BackboneModule):
             captions: B captions.
             lengths: B lengths in frames (20 fps).
             generator: CPU generator for reproducible noise.
-            guidance_weight, sampling_steps, sampler, eta: overrides of the module's :attr:`sampling`
-                (``None`` keeps its setting; a step count alone selects DDIM:
+            guidance_weight: override of the module's :attr:`sampling` (``None`` keeps its setting; as
                 :meth:`~skeleton_mamba.tasks.training.diffusion.SamplingOptions.override`).
+            sampling_steps: override likewise (a step count alone selects DDIM).
+            sampler: override likewise.
+            eta: override likewise.
             progress: show a progress bar.
 
         Returns:

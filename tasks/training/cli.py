@@ -135,6 +135,28 @@ TASK_VARIANTS: dict[str, dict[str, Command]] = {
     },
 }
 LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
+# What ``pip install skeleton-mamba`` leaves out (pyproject.toml's extras): the import names ``sm`` checks
+# (without importing them) before any command, and those of the commands that need another extra.
+TASKS_EXTRA_MODULES = (
+    "lightning",
+    "jsonargparse",
+    "torchmetrics",
+    "transformers",
+    "librosa",
+    "soundfile",
+    "trimesh",
+    "kornia",
+    "numpy",
+    "scipy",
+    "matplotlib",
+    "imageio",
+    "imageio_ffmpeg",
+    "cv2",
+    "tensorboard",
+    "tqdm",
+    "pygltflib",
+)
+COMMAND_EXTRAS = {"export-onnx": ("export", ("onnx", "onnxscript", "onnxruntime"))}
 EXIT_BAD_INPUT = 2  # an expected failure: bad or missing input, unwritable output (one line, no traceback)
 EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT), as shells report it
 
@@ -145,6 +167,15 @@ def _module_available(target: str) -> bool:
         return importlib.util.find_spec(module) is not None
     except ModuleNotFoundError:
         return False
+
+
+def missing_extra(extra: str, modules: Sequence[str]) -> str | None:
+    """The line telling the user to install ``extra`` when one of ``modules`` is not installed, else None."""
+    missing = [name for name in modules if not _module_available(name)]
+    if not missing:
+        return None
+    names = ", ".join(missing)
+    return f'needs the [{extra}] extra (not installed: {names}): pip install "skeleton-mamba[{extra}]"'
 
 
 def available_commands() -> dict[str, Command]:
@@ -176,17 +207,26 @@ def _load(target: str) -> Callable:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``sm`` console script; returns the exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
+    if args[:1] in (["-V"], ["--version"]):
+        print(f"skeleton-mamba {__version__}")
+        return 0
+    hint = missing_extra("tasks", TASKS_EXTRA_MODULES)  # the core install: the backbone without the tasks
+    if hint is not None:
+        print(f"sm: {hint}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if not args or args[0] in ("-h", "--help"):
         print(_usage())
-        return 0
-    if args[0] in ("-V", "--version"):
-        print(f"skeleton-mamba {__version__}")
         return 0
     command_name, rest = args[0], args[1:]
     commands = available_commands()
     if command_name not in commands:
         print(f"sm: unknown command {command_name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
+    extra, modules = COMMAND_EXTRAS.get(command_name, ("", ()))
+    hint = missing_extra(extra, modules)
+    if hint is not None:
+        print(error_line(command_name, hint), file=sys.stderr)
+        return EXIT_BAD_INPUT
     apply_thread_defaults()  # one intra-op thread on a small machine unless OMP_NUM_THREADS is set
     silence_library_noise()
     command = _variant(command_name, rest, commands[command_name])

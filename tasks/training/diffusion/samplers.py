@@ -154,7 +154,8 @@ def ddpm_sample(
             e.g. window consistency).
         x_T: the starting noise (default: drawn with ``generator``).
         generator: a CPU generator for reproducible noise.
-        device, dtype: where and in which dtype to sample.
+        device: where to sample.
+        dtype: the dtype to sample in.
         progress: show a tqdm bar.
 
     Returns:

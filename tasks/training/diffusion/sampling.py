@@ -98,7 +98,9 @@ def sample(
             classifier-free guidance in one call.
         shape: the sample shape (B, ...).
         cond: the condition (``None``: unconditional).
-        sampler, sampling_steps, eta: as :class:`SamplingOptions` (``sample(..., **asdict(options))``).
+        sampler: as :class:`SamplingOptions` (``sample(..., **asdict(options))``).
+        sampling_steps: as :class:`SamplingOptions`.
+        eta: as :class:`SamplingOptions`.
         **kwargs: the sampler's other options, alike for both (:func:`~.samplers.ddpm_sample`):
             ``guidance_weight``; ``guidance`` terms (e.g. EgoMusic's head guidance); ``clip_x0``;
             ``post_step`` (e.g. window consistency); ``x_T``; ``generator``; ``device``, ``dtype``;
