@@ -16,7 +16,7 @@ twice; a link applies when both the data module has the attribute and the model 
 
 Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGuard` and
 :class:`~skeleton_mamba.tasks.training.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
-:mod:`skeleton_mamba.tasks.training.checkpoints` before Lightning reads it (README "Safety and errors").
+:mod:`skeleton_mamba.tasks.training.checkpoints` before Lightning reads it (docs/how-to/safety.md).
 """
 
 from __future__ import annotations
