@@ -2,8 +2,9 @@
 
 ``tasks/`` is installed as ``skeleton_mamba.tasks`` (``setup.py``'s ``package_dir``), a mapping that the
 static source reader of mkdocstrings (griffe) does not follow. Before the build this hook copies the Python
-sources into ``build/api/skeleton_mamba/`` as they are installed (``skeleton_mamba/`` with ``tasks/`` inside it),
-and ``mkdocs.yml`` points the Python handler there. Nothing is imported; new modules appear without an edit.
+sources into ``build/api/skeleton_mamba/`` as they are installed (``skeleton_mamba/`` with ``tasks/`` inside
+it), and ``mkdocs.yml`` points the Python handler there. Nothing is imported; new modules appear without an
+edit.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ def _python_only(folder: str, names: list[str]) -> set[str]:
 
 
 def on_startup(**_kwargs) -> None:
-    """Rebuild ``build/api/skeleton_mamba`` from the sources (called once before the configuration is used)."""
+    """Rebuild ``build/api/skeleton_mamba`` from the sources (once, before the configuration is used)."""
     if LAYOUT.exists():
         shutil.rmtree(LAYOUT)
     for target, source in SOURCES.items():
