@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from test_packaging import build_wheel
 
 from skeleton_mamba.tasks.training import cli
 
@@ -107,23 +108,8 @@ def test_core_wheel_in_a_fresh_environment_is_the_backbone_alone(tmp_path):
         else:
             source.mkdir(exist_ok=True)
             shutil.copy2(path, source / name)
-    wheel_dir = tmp_path / "wheel"
-    built = _run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "wheel",
-            "--no-deps",
-            "--no-build-isolation",
-            "-w",
-            str(wheel_dir),
-            str(source),
-        ]
-    )
-    assert built.returncode == 0, built.stdout + built.stderr
-    assert "SetuptoolsDeprecationWarning" not in built.stdout + built.stderr
-    (wheel,) = wheel_dir.glob("skeleton_mamba-*.whl")
+    wheel, output = build_wheel(source, tmp_path / "wheel")
+    assert "SetuptoolsDeprecationWarning" not in output
 
     # A fresh environment, not seeing this one's packages: torch as CI installs it, then the wheel alone.
     env_dir = tmp_path / "env"

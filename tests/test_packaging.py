@@ -30,6 +30,15 @@ def _python(code: str, **kwargs) -> str:
     return out.stdout
 
 
+def build_wheel(source: Path, wheel_dir: Path) -> tuple[Path, str]:
+    """The wheel of the project in ``source`` (no dependencies, no build isolation) and pip's output."""
+    pip_wheel = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation"]
+    result = subprocess.run([*pip_wheel, "-w", str(wheel_dir), str(source)], capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
+    (wheel,) = wheel_dir.glob("skeleton_mamba-*.whl")
+    return wheel, result.stdout + result.stderr
+
+
 def test_import_skeleton_mamba_loads_only_torch_and_einops():
     code = (
         "import sys, json; import skeleton_mamba; "
@@ -68,24 +77,7 @@ def test_current_install_resolves_mapped_packages():
 
 
 def test_wheel_installs_tasks_and_recipes_inside_the_namespace(tmp_path):
-    wheel_dir = tmp_path / "wheel"
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "wheel",
-            "--no-deps",
-            "--no-build-isolation",
-            "-q",
-            "-w",
-            str(wheel_dir),
-            str(REPO),
-        ],
-        check=True,
-        capture_output=True,
-    )
-    (wheel,) = wheel_dir.glob("skeleton_mamba-*.whl")
+    wheel, _ = build_wheel(REPO, tmp_path / "wheel")
     names = zipfile.ZipFile(wheel).namelist()
     assert "skeleton_mamba/tasks/__init__.py" in names
     assert "skeleton_mamba/recipes/__init__.py" in names

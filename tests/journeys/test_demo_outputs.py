@@ -1,7 +1,7 @@
-"""Journey (c): what ``sm dance``, ``sm generate``, ``sm stream`` and ``sm predict`` write, as the README
-names it, is listed on the console, and every motion file among it is read back by ``sm view``,
-``sm render`` and ``sm export`` (the files a user would open next). Tiny random models; the EgoDance
-``sm predict`` journey trains a one-step demo model first and is marked slow."""
+"""Journey (c): what ``sm dance``, ``sm generate``, ``sm stream`` and ``sm predict`` write, as
+``docs/reference/cli.md`` names it, is listed on the console, and every motion file among it is read back by
+``sm view``, ``sm render`` and ``sm export`` (the files a user would open next). Tiny random models; the
+EgoDance ``sm predict`` journey trains a one-step demo model first and is marked slow."""
 
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ def test_sm_dance_files_are_listed_and_readable(tmp_path, song, tiny_egodance_mo
     args = ["dance", "--ckpt", str(ckpt), "--music", str(song), "--video", str(tmp_path / "ego.mp4")]
     assert sm_main([*args, "--out", str(tmp_path / "out"), "--steps", "1", "--render-size", "160x128"]) == 0
     listed = _listed(capsys.readouterr().out)
-    # the README: DIR/dance.{npz,bvh,mp4} (+ the .glb and the music slice)
+    # docs/reference/cli.md: DIR/dance.{npz,bvh,mp4} (+ the .glb and the music slice)
     assert sorted(p.name for p in listed) == ["dance.bvh", "dance.glb", "dance.mp4", "dance.npz", "dance.wav"]
     assert all(p.stat().st_size > 0 for p in listed)
     assert load_motion(tmp_path / "out" / "dance.npz").num_frames == 90
@@ -88,7 +88,7 @@ def test_sm_stream_files_are_listed_and_readable(tmp_path, song, capsys):
     args = ["stream", "--ckpt", str(ckpt), "--music", str(song), "--out", str(tmp_path / "live")]
     assert sm_main([*args, "--render-size", "160x128", "--threads", "1"]) == 0
     listed = _listed(capsys.readouterr().out)
-    # the README: DIR/<name>.{npz,bvh,mp4} (+ the .glb and the music slice)
+    # docs/reference/cli.md: DIR/<name>.{npz,bvh,mp4} (+ the .glb and the music slice)
     assert sorted(p.name for p in listed) == ["song.bvh", "song.glb", "song.mp4", "song.npz", "song.wav"]
     assert (tmp_path / "live" / "song_stream.json").is_file()
     _readable_by_every_command(listed, tmp_path)
