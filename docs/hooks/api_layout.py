@@ -23,7 +23,12 @@ def _python_only(folder: str, names: list[str]) -> set[str]:
 
 
 def on_startup(**_kwargs) -> None:
-    """Rebuild ``build/api/skeleton_mamba`` from the sources (once, before the configuration is used)."""
+    """Write ``build/api/skeleton_mamba`` before the handler reads its ``paths`` (they must exist then)."""
+    on_pre_build()
+
+
+def on_pre_build(**_kwargs) -> None:
+    """Rebuild ``build/api/skeleton_mamba`` from the sources before every build (``mkdocs serve`` too)."""
     if LAYOUT.exists():
         shutil.rmtree(LAYOUT)
     for target, source in SOURCES.items():
