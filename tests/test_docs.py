@@ -4,6 +4,7 @@ the code prints. (``mkdocs build --strict`` in ``.ci/run`` checks the links and 
 
 from __future__ import annotations
 
+import importlib.util
 import re
 from pathlib import Path
 
@@ -72,3 +73,11 @@ def test_qean_tutorial_quotes_the_table_sm_test_prints():
         if len(cells) == 3 and cells[0] in QEAN_TABLE1:
             rows[cells[0]] = (float(cells[1]), float(cells[2]) if cells[2] else None)
     assert rows == QEAN_TABLE1
+
+
+def test_site_hook_unescapes_pipes_only_inside_table_code():
+    spec = importlib.util.spec_from_file_location("table_pipes", DOCS / "hooks" / "table_pipes.py")
+    hook = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hook)
+    page = "| `--p a\\|b` | a \\| b `c\\|d` |\ntext `e\\|f`\n```\n| g\n```\n"
+    assert hook.unescape_table_code(page) == "| `--p a|b` | a \\| b `c|d` |\ntext `e\\|f`\n```\n| g\n```\n"
