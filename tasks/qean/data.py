@@ -26,6 +26,12 @@ Samples (all at 60 fps, motion frame t aligned with music frame t):
   zero-padded to the ``generate_frames + music_frames - 1`` frames that generation reads;
 * predict: ``predict_seed`` (an AIST++ ``.pkl`` or our ``.npz``) and ``predict_music`` (any audio file).
 
+``synthetic: true`` marks the files as generated stand-ins (the test table says its figures are not
+comparable with [QEAN] Table 1) and, when ``<root>/motions`` does not exist, writes the SYNTHETIC demo set
+of the live-dance demo there on first use (:func:`~skeleton_mamba.tasks.stream.data.write_synthetic_aistpp`:
+procedural beat-synchronised dances and synthesised drum tracks, ``splits/crossmodal_train.txt`` and
+``crossmodal_val.txt``, the held-out split).
+
 The 219-d motion vector is :mod:`.representation`'s; music features are the toolkit's cached 35-d ones.
 """
 
@@ -46,6 +52,7 @@ from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.qean.generate import pad_music
+from skeleton_mamba.tasks.stream.data import write_synthetic_aistpp
 
 __all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
 
@@ -134,7 +141,11 @@ class AISTPPDanceDataModule(LightningDataModule):
         music_cache_dir: cache folder for music features (default: the toolkit's).
         test_max_sequences: generate for only the first N test sequences (``None``: all; for quick checks).
         synthetic: the files are generated stand-ins in the AIST++ layout, not AIST++: the test table says
-            that its figures are not comparable with [QEAN] Table 1.
+            that its figures are not comparable with [QEAN] Table 1; a SYNTHETIC demo set is written under
+            ``root`` when it holds no ``motions/`` (module docstring).
+        synthetic_count: dances in that demo set (the last ``synthetic_held_out`` are the ``val`` split).
+        synthetic_held_out: held-out (``val``) dances of the demo set.
+        synthetic_duration_s: length of each demo dance in seconds.
         predict_seed: seed motion file for ``sm predict`` (AIST++ ``.pkl`` or ``.npz``).
         predict_music: music file for ``sm predict``.
     """
@@ -158,6 +169,9 @@ class AISTPPDanceDataModule(LightningDataModule):
         music_cache_dir: str | None = None,
         test_max_sequences: int | None = None,
         synthetic: bool = False,
+        synthetic_count: int = 8,
+        synthetic_held_out: int = 2,
+        synthetic_duration_s: float = 12.0,
         predict_seed: str | None = None,
         predict_music: str | None = None,
     ) -> None:
@@ -181,8 +195,14 @@ class AISTPPDanceDataModule(LightningDataModule):
         self.predict_frames, self.generate_frames = predict_frames, generate_frames
         self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.datasets: dict[str, Dataset] = {}
-        if predict_seed is None:  # fail before the model is built; `sm predict` needs no AIST++ copy
-            self.check_layout()
+        if predict_seed is None and not synthetic:  # fail before the model is built; `sm predict` needs
+            self.check_layout()  # no AIST++ copy, a synthetic set is written by prepare_data
+
+    def prepare_data(self) -> None:
+        """Write the SYNTHETIC demo set under ``root`` if ``synthetic`` asks for it and it has no motions."""
+        h = self.hparams
+        if h.synthetic and not (self.root / "motions").is_dir():
+            write_synthetic_aistpp(self.root, h.synthetic_count, h.synthetic_duration_s, h.synthetic_held_out)
 
     # ----- files -----
     def check_layout(self) -> None:
@@ -287,6 +307,8 @@ class AISTPPDanceDataModule(LightningDataModule):
 
     def setup(self, stage: str) -> None:
         h = self.hparams
+        if stage in ("fit", "test"):
+            self.prepare_data()  # also when a callback sets up a stage the trainer did not prepare
         if stage == "fit" and "train" not in self.datasets:
             self.check_layout()
             sequences = self._load(self.split_names(h.train_split), "train")

@@ -41,7 +41,7 @@ from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
 from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
 
-__all__ = ["QEANModule", "QEAN_TABLE1"]
+__all__ = ["QEANModule", "QEAN_TABLE1", "features_to_motion"]
 
 # [QEAN] Table 1 (QEAN row and the AIST++ ground-truth row), printed beside our test figures.
 QEAN_TABLE1 = {
@@ -53,6 +53,19 @@ QEAN_TABLE1 = {
 }
 PAPER_SEQUENCES = 40  # generated sequences of [QEAN]'s protocol (crossmodal val + test)
 PAPER_FRAMES = 1200  # frames generated after each seed motion (20 s at 60 fps)
+
+
+def features_to_motion(features: torch.Tensor) -> MotionData:
+    """A (T, 219) motion vector sequence -> our motion format (SMPL poses, root, joints; 60 fps)."""
+    poses, root = features_to_smpl(features.double())
+    return MotionData(
+        fps=FPS,
+        skeleton="smpl24",
+        poses=poses.cpu().numpy().astype(np.float32),
+        trans=root.cpu().numpy().astype(np.float32),
+        scaling=1.0,
+        joints=features_to_joints(features.double()).cpu().numpy().astype(np.float32),
+    )
 
 
 class QEANModule(BackboneModule):
@@ -161,7 +174,11 @@ class QEANModule(BackboneModule):
         rank_zero_info(f"QEAN test: real set of {self._reference_count} AIST++ clips")
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
-        full = self.generate(batch["seed"], batch["music"])
+        self.score_generated(batch, self.generate(batch["seed"], batch["music"]))
+
+    def score_generated(self, batch: dict, full: torch.Tensor) -> torch.Tensor:
+        """Add the generations ``full`` (B, 120 + G, 219) of a test batch to the test metrics; returns their
+        joints (B, 120 + G, 24, 3)."""
         joints = features_to_joints(full.double())  # (B, 120 + G, 24, 3)
         protocol = self.test_evaluation.protocol
         cache = None if self.contract is None else self.contract.music_cache_dir  # the data's feature cache
@@ -172,8 +189,11 @@ class QEANModule(BackboneModule):
                 beats = protocol.music_beats(batch["music_path"][i], cache_dir=cache)
             self.test_evaluation.add(joints[i].cpu(), FPS, beats)
         self._generated_count += full.shape[0]
+        return joints
 
-    def on_test_epoch_end(self) -> None:
+    def test_scores(self) -> dict[str, float]:
+        """The test figures of everything scored since the last call (FID_k ... BeatAlign, PFC when the
+        protocol has it); the generated set is cleared, the real set kept."""
         result = self.test_evaluation.compute()
         values = {
             "FID_k": result["FID_k"],
@@ -184,9 +204,13 @@ class QEANModule(BackboneModule):
         }
         if "PFC" in result:
             values["PFC"] = result["PFC"]
-        for name, value in values.items():
-            self.log(f"test/{name}", float(value))
         self.test_evaluation.reset(keep_real=True)
+        return {name: float(value) for name, value in values.items()}
+
+    def on_test_epoch_end(self) -> None:
+        values = self.test_scores()
+        for name, value in values.items():
+            self.log(f"test/{name}", value)
         rank_zero_info(self.results_table(values))
 
     def results_table(self, values: dict[str, float]) -> str:
@@ -221,15 +245,7 @@ class QEANModule(BackboneModule):
         full = self.generate(batch["seed"], batch["music"], progress=False)  # Lightning's bar counts batches
         written = []
         for i, name in enumerate(batch["name"]):
-            poses, root = features_to_smpl(full[i].double())
-            motion = MotionData(
-                fps=FPS,
-                skeleton="smpl24",
-                poses=poses.cpu().numpy().astype(np.float32),
-                trans=root.cpu().numpy().astype(np.float32),
-                scaling=1.0,
-                joints=features_to_joints(full[i].double()).cpu().numpy().astype(np.float32),
-            )
+            motion = features_to_motion(full[i])
             music, render = batch["music_path"][i], self.hparams.render
             files = write_motion(motion, self.hparams.output_dir, name, music=music, render=render)
             paths = [p for p in vars(files).values() if p is not None]
