@@ -1,0 +1,163 @@
+"""The QEAN demo: ``sm fit --recipe qean_demo.yaml`` writes the SYNTHETIC AIST++-layout set on first use,
+trains QEAN on it and, when fit ends, :class:`~skeleton_mamba.tasks.qean.demo.QEANDemo` generates from the
+held-out seeds and music, prints the protocol table (NOT COMPARABLE with [QEAN] Table 1) and the dynamics
+checks, and writes the dance, its ground truth, ``demo.json`` and ``view.html``. The demo's QEAN learns."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+import yaml
+
+from skeleton_mamba.tasks.motion.fact_features import features_to_joints
+from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
+from skeleton_mamba.tasks.qean.model import QEANConfig
+from skeleton_mamba.tasks.qean.module import QEANModule
+from skeleton_mamba.tasks.training.cli import main as sm_main
+from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipes
+
+LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 30}
+TINY = [
+    "--trainer.max_steps=3", "--trainer.enable_progress_bar=false", "--data.init_args.synthetic_count=3",
+    "--data.init_args.synthetic_held_out=1", "--data.init_args.synthetic_duration_s=1.5",
+    "--data.init_args.batch_size=2", "--data.init_args.window_stride=4",
+    "--model.init_args.network.hidden=16", "--model.init_args.network.heads=2",
+    "--model.init_args.network.mlp_dim=32", "--model.init_args.network.cross_layers=1",
+    *(f"--data.init_args.{k}={v}" for k, v in LENGTHS.items()),
+]  # fmt: skip
+
+
+def _recipe() -> dict:
+    return yaml.safe_load(Path(packaged_recipes()["qean_demo.yaml"]).read_text(encoding="utf-8"))
+
+
+@pytest.mark.slow  # about 30 s of CPU (a 3-dance set, 3 steps, 30 generated frames, rendering off)
+def test_qean_demo_runs_end_to_end_and_writes_its_files(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    callbacks = [
+        {"class_path": "lightning.pytorch.callbacks.ModelCheckpoint", "init_args": {"filename": "last"}},
+        {"class_path": "skeleton_mamba.tasks.qean.demo.QEANDemo", "init_args": {"render": False}},
+    ]
+    root = tmp_path / "data"
+    args = ["fit", "--recipe", "qean_demo.yaml", *TINY, f"--data.init_args.root={root}"]
+    assert sm_main([*args, "--trainer.callbacks", json.dumps(callbacks)]) == 0
+    # the SYNTHETIC set, written on first use: 2 training dances, 1 held out
+    assert "SYNTHETIC" in (root / "SYNTHETIC.txt").read_text()
+    assert len((root / "splits" / "crossmodal_train.txt").read_text().split()) == 2
+    (held_out,) = (root / "splits" / "crossmodal_val.txt").read_text().split()
+    folder = Path("runs/qean_demo/version_0/demo")
+    demo = json.loads((folder / "demo.json").read_text())
+    assert demo["synthetic"] is True and "SYNTHETIC" in demo["label"] and demo["global_step"] == 3
+    assert demo["frames"] == {"seed": 12, "music": 24, "predict": 4, "generate": 30}
+    protocol = demo["protocol"]
+    assert protocol["comparable_with_paper"] is False and protocol["sequences"] == 1
+    assert {"FID_k", "FID_g", "Dist_k", "Dist_g", "BeatAlign"} <= set(protocol)
+    assert 0 <= protocol["BeatAlign"] <= 1 and protocol["Dist_k"] >= 0
+    columns = {c: m for c, m in demo["scores"].items() if isinstance(m, dict)}
+    assert columns["ground_truth"] == pytest.approx(
+        {"amplitude_ratio": 1, "jitter_ratio": 1, "high_frequency_ratio": 1}
+    )
+    assert columns["mean_pose"] == pytest.approx({k: 0 for k in columns["ground_truth"]})
+    assert all(math.isfinite(v) and v >= 0 for v in columns["dance"].values())
+    assert set(demo["checks"]) == {
+        "amplitude ratio >= 0.7",
+        "jitter ratio <= 1.5",
+        "energy above 6 Hz within 2x of the ground truth's",
+    }
+    (sample,) = demo["samples"]
+    assert sample["sequence"] == held_out
+    dance, reference = (load_motion(sample[k]["npz"]) for k in ("dance", "reference"))
+    assert dance.num_frames == reference.num_frames == 12 + 30
+    # the dance starts from the held-out sequence's own seed: its first 12 frames are the truth's
+    np.testing.assert_allclose(dance.joints[:12], reference.joints[:12], atol=1e-5)
+    assert not np.allclose(dance.joints[12:], reference.joints[12:], atol=1e-3)
+    assert {"npz", "bvh", "glb", "wav"} <= set(sample["dance"]) and "mp4" not in sample["dance"]
+    assert all(Path(p).stat().st_size > 0 for p in sample["dance"].values())
+    # the reference is the truth: the held-out sequence's joints from the data module's own reader
+    data = AISTPPDanceDataModule(root=str(root), synthetic=True, **LENGTHS)
+    truth = features_to_joints(data.sequence(held_out)[0][:42].double()).numpy()
+    np.testing.assert_allclose(reference.joints, truth, atol=1e-4)
+    out = capsys.readouterr().out
+    assert "NOT COMPARABLE with [QEAN] Table 1: synthetic data in the AIST++ layout" in out
+    assert f"BeatAlign {protocol['BeatAlign']:>10.3f}" in out
+    for check, ok in demo["checks"].items():
+        assert f"{'reached' if ok else 'NOT reached'}: {check}" in out
+    page = (folder / "view.html").read_text()
+    assert f"viewer: {folder / 'view.html'}" in out and "dance" in page and "reference" in page
+
+
+def test_demo_recipe_is_a_small_qean_on_the_synthetic_set():
+    recipe = _recipe()
+    data, network = recipe["data"]["init_args"], recipe["model"]["init_args"]["network"]
+    assert data["synthetic"] is True and data["root"] == "runs/qean_demo/data" and data["test_split"] == "val"
+    assert network["hidden"] < QEANConfig.hidden and "max_time" not in recipe["trainer"]
+    callbacks = [c["class_path"] for c in recipe["trainer"]["callbacks"]]
+    assert "skeleton_mamba.tasks.qean.demo.QEANDemo" in callbacks
+
+
+def test_the_demo_qean_overfits_two_windows(tmp_path):
+    """The recipe's network and window lengths on two windows of the synthetic set: the loss falls 20-fold."""
+    recipe = _recipe()
+    data_args = recipe["data"]["init_args"]
+    lengths = {k: data_args[k] for k in ("seed_frames", "music_frames", "predict_frames")}
+    data = AISTPPDanceDataModule(
+        root=str(tmp_path / "data"),
+        synthetic=True,
+        synthetic_count=2,
+        synthetic_held_out=1,
+        synthetic_duration_s=3.5,
+        window_stride=50,
+        num_workers=0,
+        **lengths,
+    )
+    data.setup("fit")
+    windows = [data.datasets["train"][i] for i in range(2)]
+    batch = {k: torch.stack([w[k] for w in windows]) for k in ("motion", "music", "target")}
+    torch.manual_seed(0)
+    network = QEANConfig(**{**recipe["model"]["init_args"]["network"], **lengths, "dropout": 0.0})
+    module = QEANModule(network=network, lr=1e-3)
+    optimizer = torch.optim.Adam(module.parameters(), lr=1e-3)
+    losses = []
+    for _ in range(150):
+        optimizer.zero_grad()
+        loss = F.mse_loss(module(batch["motion"], batch["music"]), batch["target"])
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    assert losses[-1] < losses[0] / 20
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.05])
+def test_input_noise_perturbs_only_the_seed_motion_of_training_windows(sigma):
+    torch.manual_seed(0)
+    sizes = dict(hidden=16, heads=2, motion_layers=1, audio_layers=1, cross_layers=1, mlp_dim=32, dropout=0.0)
+    network = QEANConfig(**sizes, seed_frames=40, music_frames=24, predict_frames=4)
+    module = QEANModule(network=network, input_noise=sigma)
+    assert QEANModule(network=network).hparams.input_noise == 0  # [QEAN]'s training is the default
+    batch = {
+        "motion": torch.randn(8, 40, 219),
+        "music": torch.randn(8, 24, 35),
+        "target": torch.randn(8, 4, 219),
+    }
+    seen = []
+    module.model.motion_encoder.register_forward_hook(lambda _m, args, _out: seen.append(args[0].detach()))
+    loss = module.training_step(batch, 0)
+    noise = seen[0] - batch["motion"]
+    if sigma == 0:
+        assert torch.equal(noise, torch.zeros_like(noise))
+    else:  # 8 x 40 x 219 = 70080 draws: the sample std within 1 %, the mean within 4 sigma / sqrt(n)
+        assert noise.std().item() == pytest.approx(sigma, rel=0.01)
+        assert abs(noise.mean().item()) < 4 * sigma / noise.numel() ** 0.5
+    # the loss is the L2 between the prediction from the perturbed seed and the clean target
+    with torch.no_grad():
+        want = F.mse_loss(module.model(seen[0], batch["music"]), batch["target"])
+    assert loss.item() == pytest.approx(want.item(), rel=1e-6)
+    with pytest.raises(ValueError, match="input_noise"):
+        QEANModule(network=network, input_noise=-0.1)
