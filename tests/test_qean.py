@@ -219,7 +219,9 @@ def test_model_output_shape_and_mamba_variant():
     assert any("backbone" in name for name, _ in mamba.named_parameters())
 
 
-@pytest.mark.parametrize("variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder"])
+@pytest.mark.parametrize(
+    "variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder", "residual"]
+)
 def test_generation_length_and_fast_equals_plain(variant):
     torch.manual_seed(0)
     backbone = SkeletonMambaConfig(
@@ -230,6 +232,7 @@ def test_generation_length_and_fast_equals_plain(variant):
         "two_layers": {"motion_layers": 2, "audio_layers": 2},  # reused first block + a recomputed one
         "learned_positions": {"learned_positions": True},  # per-window embeddings: no per-token reuse
         "mamba_encoder": {"backbone": backbone},  # SkeletonMamba motion encoder runs per window
+        "residual": {"residual": True},  # offsets from the last input frame
     }[variant]
     model = _tiny(**kwargs).double()
     seed = torch.randn(2, 20, 219, dtype=torch.float64)
@@ -249,6 +252,25 @@ def test_generation_length_and_fast_equals_plain(variant):
     torch.testing.assert_close(plain[:, 24], model(plain[:, 12:24], padded)[:, 0])
     with pytest.raises(ValueError, match="seed must be"):
         generate_fast(model, seed[:, :5], music, num_frames=3)
+
+
+def test_residual_frames_are_the_absolute_heads_output_plus_the_last_input_frame():
+    torch.manual_seed(0)
+    residual = _tiny(residual=True).double()
+    absolute = _tiny().double()
+    absolute.load_state_dict(residual.state_dict())  # the same weights, [QEAN]'s absolute head
+    assert not QEANConfig().residual  # the paper's behaviour is the default
+    seed = torch.randn(2, 12, 219, dtype=torch.float64)
+    music = torch.randn(2, 40, 35, dtype=torch.float64)
+    want = absolute(seed, music[:, :24]) + seed[:, -1:]
+    torch.testing.assert_close(residual(seed, music[:, :24]), want, rtol=0, atol=1e-12)
+    # generation: each kept frame is the absolute head's first frame plus the frame before it
+    frames = generate_fast(residual, seed, music, num_frames=3, audio_chunk=2)
+    previous, window = seed[:, -1:], seed
+    for i in range(3):
+        step = absolute(window, music[:, i : i + 24])[:, :1] + previous
+        torch.testing.assert_close(frames[:, i : i + 1], step, rtol=0, atol=1e-12)
+        previous, window = step, torch.cat([window[:, 1:], step], dim=1)
 
 
 def test_series_rotation_is_the_hamilton_product_with_the_unit():

@@ -159,6 +159,7 @@ def generate_fast(
         motion_tokens = _MotionTokens(model, motion, num_frames)
     out = []
     encoded = None
+    last = motion[:, -1:]  # the frame ``residual`` offsets are added to
     for i in tqdm(range(num_frames), desc="QEAN (fast)", disable=not progress):
         j = i % audio_chunk
         if j == 0:
@@ -173,8 +174,9 @@ def generate_fast(
             h_motion = model.encode_motion(motion)
         else:
             h_motion = motion_tokens.encode(i)
-        frame = model.decode(h_motion, encoded[:, j], num_outputs=1)
+        frame = model.from_offsets(model.decode(h_motion, encoded[:, j], num_outputs=1), last)
         out.append(frame)
+        last = frame
         if motion_tokens is None:
             motion = torch.cat([motion[:, 1:], frame], dim=1)
         elif i + 1 < num_frames:

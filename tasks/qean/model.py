@@ -14,6 +14,12 @@ All transformers: pre-LayerNorm blocks, 16 heads, hidden 800, MLP 3072 with GELU
 given by [QEAN]; the defaults are FACT's (audio 2, motion 2, cross-modal 12). The learnable absolute
 position embeddings are [QEAN] Table 2's ablation baseline that Spin Position Embedding replaces;
 ``learned_positions`` adds them back (default off).
+
+``residual`` (ours, default off = [QEAN]'s absolute frames) makes the head predict each future frame as an
+offset from the input's last frame, ``out_i = y_{T-1} + head(x)_i``. With absolute frames a small network's
+error in the pose (the same size every step, drawn afresh when the window moves one frame) is far larger than
+the motion between two 60 fps frames, so autoregressive generation trembles; with offsets the error scales
+with the motion and the first predicted frame continues the last.
 """
 
 from __future__ import annotations
@@ -60,6 +66,7 @@ class QEANConfig:
     music_frames: int = 240
     predict_frames: int = 20
     learned_positions: bool = False
+    residual: bool = False
 
 
 class _MLP(nn.Sequential):
@@ -232,8 +239,14 @@ class QEAN(PretrainedMixin, nn.Module):
             x = block(x, num_queries=n if i == last else None)
         return self.head(self.norm(x[:, :n]))
 
+    def from_offsets(self, out: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
+        """The head's output (B, n, 219) as frames: ``last`` (B, 1, 219, the input's last frame) added when
+        ``residual``, else unchanged ([QEAN])."""
+        return out + last if self.config.residual else out
+
     def forward(
         self, motion: torch.Tensor, music: torch.Tensor, num_outputs: int | None = None
     ) -> torch.Tensor:
         """Seed motion (B, 120, 219) and music (B, 240, 35) -> next frames (B, predict_frames, 219)."""
-        return self.decode(self.encode_motion(motion), self.encode_music(music), num_outputs)
+        out = self.decode(self.encode_motion(motion), self.encode_music(music), num_outputs)
+        return self.from_offsets(out, motion[:, -1:])
