@@ -132,32 +132,3 @@ def test_the_demo_qean_overfits_two_windows(tmp_path):
         optimizer.step()
         losses.append(loss.item())
     assert losses[-1] < losses[0] / 20
-
-
-@pytest.mark.parametrize("sigma", [0.0, 0.05])
-def test_input_noise_perturbs_only_the_seed_motion_of_training_windows(sigma):
-    torch.manual_seed(0)
-    sizes = dict(hidden=16, heads=2, motion_layers=1, audio_layers=1, cross_layers=1, mlp_dim=32, dropout=0.0)
-    network = QEANConfig(**sizes, seed_frames=40, music_frames=24, predict_frames=4)
-    module = QEANModule(network=network, input_noise=sigma)
-    assert QEANModule(network=network).hparams.input_noise == 0  # [QEAN]'s training is the default
-    batch = {
-        "motion": torch.randn(8, 40, 219),
-        "music": torch.randn(8, 24, 35),
-        "target": torch.randn(8, 4, 219),
-    }
-    seen = []
-    module.model.motion_encoder.register_forward_hook(lambda _m, args, _out: seen.append(args[0].detach()))
-    loss = module.training_step(batch, 0)
-    noise = seen[0] - batch["motion"]
-    if sigma == 0:
-        assert torch.equal(noise, torch.zeros_like(noise))
-    else:  # 8 x 40 x 219 = 70080 draws: the sample std within 1 %, the mean within 4 sigma / sqrt(n)
-        assert noise.std().item() == pytest.approx(sigma, rel=0.01)
-        assert abs(noise.mean().item()) < 4 * sigma / noise.numel() ** 0.5
-    # the loss is the L2 between the prediction from the perturbed seed and the clean target
-    with torch.no_grad():
-        want = F.mse_loss(module.model(seen[0], batch["music"]), batch["target"])
-    assert loss.item() == pytest.approx(want.item(), rel=1e-6)
-    with pytest.raises(ValueError, match="input_noise"):
-        QEANModule(network=network, input_noise=-0.1)

@@ -86,10 +86,6 @@ class QEANModule(BackboneModule):
         render: also render an mp4 at predict time.
         protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, [QEAN]'s), ``"bailando"``
             or ``"edge"`` (see :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`).
-        input_noise: standard deviation of Gaussian noise added to the seed motion of every training window
-            (ours; 0, the default, trains as [QEAN]). The target stays the true future, so the network learns
-            to continue a dance from slightly wrong past frames, as it must when generation feeds it its own
-            (exposure bias).
     """
 
     def __init__(
@@ -104,14 +100,11 @@ class QEANModule(BackboneModule):
         output_dir: str = "qean_predictions",
         render: bool = True,
         protocol: str = "fact",
-        input_noise: float = 0.0,
     ) -> None:
         super().__init__()
         network = config_from(QEANConfig, network)
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
-        if not input_noise >= 0:
-            raise ValueError(f"input_noise must be >= 0, got {input_noise}")
         ignore = ("network",)
         backbone_cfg = self.save_backbone_hyperparameters(backbone, ignore=ignore, optional=True)
         self.hparams["network"] = plain_backbone_config(network)
@@ -144,10 +137,7 @@ class QEANModule(BackboneModule):
                 )
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
-        motion = batch["motion"]
-        if self.hparams.input_noise > 0:
-            motion = motion + self.hparams.input_noise * torch.randn_like(motion)
-        pred = self.model(motion, batch["music"])
+        pred = self.model(batch["motion"], batch["music"])
         loss = F.mse_loss(pred, batch["target"])
         self.log("train/loss", loss, prog_bar=True, batch_size=pred.shape[0])
         return loss
