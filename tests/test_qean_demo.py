@@ -132,3 +132,41 @@ def test_the_demo_qean_overfits_two_windows(tmp_path):
         optimizer.step()
         losses.append(loss.item())
     assert losses[-1] < losses[0] / 20
+
+
+def test_rollout_windows_carry_the_earlier_frames_and_the_seed_ends_in_the_models_own():
+    """rollout_frames R: the window starts R frames earlier (motion R + S, music R + M, the same target);
+    rollout_probability 1: the seed's last R frames are the network's prediction from the seed R frames
+    earlier, written out here with the network itself; 0 (and eval mode): the true last S frames."""
+    from skeleton_mamba.tasks.qean.data import DanceWindowDataset
+
+    torch.manual_seed(0)
+    motion, music = torch.randn(50, 219), torch.randn(50, 35)
+    plain = DanceWindowDataset({"a": (motion, music)}, 12, 16, 4, stride=5)
+    rolled = DanceWindowDataset({"a": (motion, music)}, 12, 16, 4, stride=5, rollout_frames=3)
+    item = rolled[1]  # the window starting at 5: seed [8, 20), target [20, 24)
+    torch.testing.assert_close(item["motion"], motion[5:20])
+    torch.testing.assert_close(item["music"], music[5:24])
+    torch.testing.assert_close(item["target"], motion[20:24])
+    assert len(rolled) == len(range(0, 50 - 15 - 4 + 1, 5))  # windows of 15 + 4 frames in 50
+    assert len(plain) == len(range(0, 50 - 12 - 4 + 1, 5))
+
+    sizes = dict(hidden=16, heads=2, motion_layers=1, audio_layers=1, cross_layers=1, mlp_dim=32, dropout=0.0)
+    network = QEANConfig(**sizes, seed_frames=12, music_frames=16, predict_frames=4)
+    batch_motion = torch.stack([rolled[i]["motion"] for i in range(3)])
+    batch_music = torch.stack([rolled[i]["music"] for i in range(3)])
+    always = QEANModule(network=network, rollout_probability=1.0).train()
+    seed, future_music = always.rollout_seed(batch_motion, batch_music)
+    with torch.no_grad():
+        own = always.model(batch_motion[:, :12], batch_music[:, :16])[:, :3]
+    torch.testing.assert_close(seed, torch.cat([batch_motion[:, 3:12], own], dim=1))
+    torch.testing.assert_close(future_music, batch_music[:, 3:])
+    assert not seed.requires_grad  # no gradient through the rolled-out frames
+    never = QEANModule(network=network).train()
+    assert never.hparams.rollout_probability == 0  # [QEAN]'s teacher forcing is the default
+    torch.testing.assert_close(never.rollout_seed(batch_motion, batch_music)[0], batch_motion[:, 3:])
+    torch.testing.assert_close(always.eval().rollout_seed(batch_motion, batch_music)[0], batch_motion[:, 3:])
+    with pytest.raises(ValueError, match="rollout_probability"):
+        QEANModule(network=network, rollout_probability=1.5)
+    with pytest.raises(ValueError, match="rollout_frames"):
+        AISTPPDanceDataModule(root="x", synthetic=True, predict_frames=4, rollout_frames=5)

@@ -22,14 +22,17 @@ Samples (all at 60 fps, motion frame t aligned with music frame t):
 * training: windows starting at ``s`` every ``window_stride`` frames: ``motion`` (seed_frames, 219) =
   frames ``[s, s + seed_frames)``, ``music`` (music_frames, 35) = music frames ``[s, s + music_frames)``,
   ``target`` (predict_frames, 219) = motion frames ``[s + seed_frames, s + seed_frames + predict_frames)``;
+  with ``rollout_frames`` R > 0 the window also carries the R frames before it: ``motion`` (R + seed_frames)
+  and ``music`` (R + music_frames) start R frames earlier (for :class:`~.module.QEANModule`'s rollouts);
 * test: one item per sequence: its first ``seed_frames`` frames as ``seed`` and its music features
   zero-padded to the ``generate_frames + music_frames - 1`` frames that generation reads;
 * predict: ``predict_seed`` (an AIST++ ``.pkl`` or our ``.npz``) and ``predict_music`` (any audio file).
 
 ``synthetic: true`` marks the files as generated stand-ins (the test table says its figures are not
 comparable with [QEAN] Table 1) and, when ``<root>/motions`` does not exist, writes the SYNTHETIC demo set
-of the live-dance demo there on first use (:func:`~skeleton_mamba.tasks.stream.data.write_synthetic_aistpp`:
-procedural beat-synchronised dances and synthesised drum tracks, ``splits/crossmodal_train.txt`` and
+of the live-dance demo there on first use
+(:func:`~skeleton_mamba.tasks.motion.synthetic.aistpp_set.write_synthetic_aistpp`: procedural
+beat-synchronised dances and synthesised drum tracks, ``splits/crossmodal_train.txt`` and
 ``crossmodal_val.txt``, the held-out split).
 
 The 219-d motion vector is :mod:`.representation`'s; music features are the toolkit's cached 35-d ones.
@@ -51,8 +54,8 @@ from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundErr
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
+from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.qean.generate import pad_music
-from skeleton_mamba.tasks.stream.data import write_synthetic_aistpp
 
 __all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
 
@@ -77,9 +80,11 @@ class DanceWindowDataset(Dataset):
         music_frames: int,
         predict_frames: int,
         stride: int,
+        rollout_frames: int = 0,
     ) -> None:
         self.sequences = sequences
-        self.lengths = (seed_frames, music_frames, predict_frames)
+        self.lengths = (seed_frames + rollout_frames, music_frames + rollout_frames, predict_frames)
+        seed_frames, music_frames = self.lengths[:2]
         self.index: list[tuple[str, int]] = []
         for name, (motion, music) in sequences.items():
             last = min(len(motion) - seed_frames - predict_frames, len(music) - music_frames)
@@ -134,6 +139,8 @@ class AISTPPDanceDataModule(LightningDataModule):
         predict_frames: frames predicted per window (20).
         generate_frames: frames generated after the seed at test time (1200 = 20 s).
         window_stride: frames between training windows.
+        rollout_frames: frames before each training window that it also carries (0: none, [QEAN]'s windows),
+            for ``QEANModule.rollout_probability``; at most ``predict_frames``.
         exclude_ignored: drop the AIST++ ignore list.
         batch_size: training batch (16).
         test_batch_size: sequences generated together at test and predict time.
@@ -162,6 +169,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         predict_frames: int = 20,
         generate_frames: int = 1200,
         window_stride: int = 1,
+        rollout_frames: int = 0,
         exclude_ignored: bool = True,
         batch_size: int = 16,
         test_batch_size: int = 8,
@@ -185,6 +193,10 @@ class AISTPPDanceDataModule(LightningDataModule):
         if test_split is None:
             test_split = ["val", "test"]
         self.test_splits = [test_split] if isinstance(test_split, str) else list(test_split)
+        if not 0 <= rollout_frames <= predict_frames:
+            raise ValueError(
+                f"rollout_frames must be 0 to {predict_frames} (predict_frames), got {rollout_frames}"
+            )
         if test_max_sequences is not None and test_max_sequences < 1:
             raise ValueError(f"test_max_sequences must be >= 1 or None, got {test_max_sequences}")
         self.synthetic = synthetic
@@ -313,7 +325,7 @@ class AISTPPDanceDataModule(LightningDataModule):
             self.check_layout()
             sequences = self._load(self.split_names(h.train_split), "train")
             self.datasets["train"] = DanceWindowDataset(
-                sequences, h.seed_frames, h.music_frames, h.predict_frames, h.window_stride
+                sequences, h.seed_frames, h.music_frames, h.predict_frames, h.window_stride, h.rollout_frames
             )
         elif stage == "test" and "test" not in self.datasets:
             self.check_layout()

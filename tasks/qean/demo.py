@@ -37,9 +37,9 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
 )
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
 from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.qean.module import features_to_motion
-from skeleton_mamba.tasks.stream.demo import LABEL
 
 __all__ = ["QEANDemo"]
 
@@ -136,7 +136,12 @@ class QEANDemo(Callback):
                 "generate": generate_frames,
             },
             "samples": records,
-            "protocol": {"comparable_with_paper": False, "sequences": len(names), **protocol},
+            "protocol": {
+                "comparable_with_paper": False,
+                "sequences": len(names),
+                **protocol,
+                "constant_real_features": pl_module.constant_real_features(),
+            },
             "scores": {"held_out_sequences": len(names), "training_sequences": len(train), **scores},
             "checks": checks,
         }
