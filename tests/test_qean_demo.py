@@ -27,7 +27,7 @@ LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate
 TINY = [
     "--trainer.max_steps=3", "--trainer.enable_progress_bar=false", "--data.init_args.synthetic_count=3",
     "--data.init_args.synthetic_held_out=1", "--data.init_args.synthetic_duration_s=1.5",
-    "--data.init_args.batch_size=2", "--data.init_args.window_stride=4",
+    "--data.init_args.batch_size=2", "--data.init_args.window_stride=4", "--data.init_args.rollout_frames=2",
     "--model.init_args.network.hidden=16", "--model.init_args.network.heads=2",
     "--model.init_args.network.mlp_dim=32", "--model.init_args.network.cross_layers=1",
     *(f"--data.init_args.{k}={v}" for k, v in LENGTHS.items()),
@@ -100,6 +100,9 @@ def test_demo_recipe_is_a_small_qean_on_the_synthetic_set():
     assert network["hidden"] < QEANConfig.hidden and "max_time" not in recipe["trainer"]
     callbacks = [c["class_path"] for c in recipe["trainer"]["callbacks"]]
     assert "skeleton_mamba.tasks.qean.demo.QEANDemo" in callbacks
+    # against trembling and freezing: the output low-pass and rollouts of the seed's last 20 frames
+    assert network["smoothing_stages"] == 8 and network["smoothing_decay"] == 0.6
+    assert recipe["model"]["init_args"]["rollout_probability"] == 0.5 and data["rollout_frames"] == 20
 
 
 def test_the_demo_qean_overfits_two_windows(tmp_path):
