@@ -221,6 +221,26 @@ def test_fid_keeps_real_features_when_asked():
         FrechetMotionDistance("kinetic").compute()
 
 
+def test_constant_real_features_are_counted_and_make_fid_astronomic():
+    """A geometric feature that never varies over the real set (std 0) is divided by 1e-10 in the reference
+    normalisation: a generated set that sets it in one clip has FID_g of order 1e18, which the count flags."""
+    rng = np.random.default_rng(3)
+    real = torch.tensor(rng.uniform(0.1, 0.9, size=(8, 32)))
+    real[:, [6, 7]] = 0.0  # two features no real clip ever sets
+    fake = real.clone() + 0.01 * torch.tensor(rng.standard_normal((8, 32)))
+    fake[:, [6, 7]] = 0.0
+    m = FrechetMotionDistance("geometric")
+    assert m.constant_real_features() == 0  # nothing added yet
+    m.update_features(real, real=True)
+    assert m.constant_real_features() == 2
+    m.update_features(fake, real=False)
+    assert m.compute().item() < 10  # the constant features agree: an ordinary figure
+    extra = fake[:1].clone()
+    extra[:, 6] = 0.02
+    m.update_features(extra, real=False)
+    assert m.compute().item() > 1e12  # one generated clip sets a constant feature by 0.02
+
+
 def test_diversity_hand_computation():
     fake = torch.tensor([[0.0, 0.0], [3.0, 4.0], [6.0, 8.0]])
     assert average_pairwise_distance(fake).item() == pytest.approx((5 + 10 + 5) / 3)

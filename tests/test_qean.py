@@ -219,7 +219,9 @@ def test_model_output_shape_and_mamba_variant():
     assert any("backbone" in name for name, _ in mamba.named_parameters())
 
 
-@pytest.mark.parametrize("variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder"])
+@pytest.mark.parametrize(
+    "variant", ["one_layer", "two_layers", "learned_positions", "mamba_encoder", "smoothing"]
+)
 def test_generation_length_and_fast_equals_plain(variant):
     torch.manual_seed(0)
     backbone = SkeletonMambaConfig(
@@ -230,6 +232,7 @@ def test_generation_length_and_fast_equals_plain(variant):
         "two_layers": {"motion_layers": 2, "audio_layers": 2},  # reused first block + a recomputed one
         "learned_positions": {"learned_positions": True},  # per-window embeddings: no per-token reuse
         "mamba_encoder": {"backbone": backbone},  # SkeletonMamba motion encoder runs per window
+        "smoothing": {"smoothing_stages": 3, "smoothing_decay": 0.5},  # the output low-pass
     }[variant]
     model = _tiny(**kwargs).double()
     seed = torch.randn(2, 20, 219, dtype=torch.float64)
@@ -249,6 +252,38 @@ def test_generation_length_and_fast_equals_plain(variant):
     torch.testing.assert_close(plain[:, 24], model(plain[:, 12:24], padded)[:, 0])
     with pytest.raises(ValueError, match="seed must be"):
         generate_fast(model, seed[:, :5], music, num_frames=3)
+
+
+def test_output_low_pass_carries_on_from_the_window_in_training_and_generation():
+    """smoothing_stages: y_t = (1 - d)^K x_t - sum_j C(K, j) (-d)^j y_{t-j} on the head's outputs x, the y
+    before the window's end being its frames; written out here for K = 2:
+    y_t = (1 - d)^2 x_t + 2 d y_{t-1} - d^2 y_{t-2}."""
+    torch.manual_seed(0)
+    d = 0.6
+    smooth = _tiny(smoothing_stages=2, smoothing_decay=d).double()
+    plain = _tiny().double()
+    plain.load_state_dict(smooth.state_dict())  # the same weights, [QEAN]'s frames
+    assert QEANConfig().smoothing_stages == 0  # the paper's behaviour is the default
+    seed = torch.randn(2, 12, 219, dtype=torch.float64)
+    music = torch.randn(2, 40, 35, dtype=torch.float64)
+
+    def by_hand(x, past):
+        y = [past[:, -2], past[:, -1]]
+        for t in range(x.shape[1]):
+            y.append((1 - d) ** 2 * x[:, t] + 2 * d * y[-1] - d * d * y[-2])
+        return torch.stack(y[2:], dim=1)
+
+    want = by_hand(plain(seed, music[:, :24]), seed)
+    torch.testing.assert_close(smooth(seed, music[:, :24]), want, rtol=0, atol=1e-12)
+    # generation: each kept frame is the low-pass carried on from the two frames before it
+    frames = generate_fast(smooth, seed, music, num_frames=3, audio_chunk=2)
+    window = seed
+    for i in range(3):
+        step = by_hand(plain(window, music[:, i : i + 24])[:, :1], window)
+        torch.testing.assert_close(frames[:, i : i + 1], step, rtol=0, atol=1e-12)
+        window = torch.cat([window[:, 1:], step], dim=1)
+    with pytest.raises(ValueError, match="smoothing_stages"):
+        _tiny(smoothing_stages=13)
 
 
 def test_series_rotation_is_the_hamilton_product_with_the_unit():

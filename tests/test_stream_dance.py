@@ -217,7 +217,8 @@ def test_sm_stream_checks_checkpoints_like_every_command(tmp_path, capsys, tiny_
 
 
 def test_training_features_are_what_the_live_stream_computes(tmp_path):
-    from skeleton_mamba.tasks.stream.data import StreamDanceDataModule, write_synthetic_aistpp
+    from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
+    from skeleton_mamba.tasks.stream.data import StreamDanceDataModule
 
     names = write_synthetic_aistpp(tmp_path, count=2, duration_s=2.0, val_count=1)
     data = StreamDanceDataModule(root=str(tmp_path), train_split="train", val_split="val", window_frames=30)

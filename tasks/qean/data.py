@@ -22,9 +22,18 @@ Samples (all at 60 fps, motion frame t aligned with music frame t):
 * training: windows starting at ``s`` every ``window_stride`` frames: ``motion`` (seed_frames, 219) =
   frames ``[s, s + seed_frames)``, ``music`` (music_frames, 35) = music frames ``[s, s + music_frames)``,
   ``target`` (predict_frames, 219) = motion frames ``[s + seed_frames, s + seed_frames + predict_frames)``;
+  with ``rollout_frames`` R > 0 the window also carries the R frames before it: ``motion`` (R + seed_frames)
+  and ``music`` (R + music_frames) start R frames earlier (for :class:`~.module.QEANModule`'s rollouts);
 * test: one item per sequence: its first ``seed_frames`` frames as ``seed`` and its music features
   zero-padded to the ``generate_frames + music_frames - 1`` frames that generation reads;
 * predict: ``predict_seed`` (an AIST++ ``.pkl`` or our ``.npz``) and ``predict_music`` (any audio file).
+
+``synthetic: true`` marks the files as generated stand-ins (the test table says its figures are not
+comparable with [QEAN] Table 1) and, when ``<root>/motions`` does not exist, writes the SYNTHETIC demo set
+of the live-dance demo there on first use
+(:func:`~skeleton_mamba.tasks.motion.synthetic.aistpp_set.write_synthetic_aistpp`: procedural
+beat-synchronised dances and synthesised drum tracks, ``splits/crossmodal_train.txt`` and
+``crossmodal_val.txt``, the held-out split).
 
 The 219-d motion vector is :mod:`.representation`'s; music features are the toolkit's cached 35-d ones.
 """
@@ -45,6 +54,7 @@ from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundErr
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
+from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.qean.generate import pad_music
 
 __all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
@@ -70,9 +80,11 @@ class DanceWindowDataset(Dataset):
         music_frames: int,
         predict_frames: int,
         stride: int,
+        rollout_frames: int = 0,
     ) -> None:
         self.sequences = sequences
-        self.lengths = (seed_frames, music_frames, predict_frames)
+        self.lengths = (seed_frames + rollout_frames, music_frames + rollout_frames, predict_frames)
+        seed_frames, music_frames = self.lengths[:2]
         self.index: list[tuple[str, int]] = []
         for name, (motion, music) in sequences.items():
             last = min(len(motion) - seed_frames - predict_frames, len(music) - music_frames)
@@ -127,6 +139,8 @@ class AISTPPDanceDataModule(LightningDataModule):
         predict_frames: frames predicted per window (20).
         generate_frames: frames generated after the seed at test time (1200 = 20 s).
         window_stride: frames between training windows.
+        rollout_frames: frames before each training window that it also carries (0: none, [QEAN]'s windows),
+            for ``QEANModule.rollout_probability``; at most ``predict_frames``.
         exclude_ignored: drop the AIST++ ignore list.
         batch_size: training batch (16).
         test_batch_size: sequences generated together at test and predict time.
@@ -134,7 +148,11 @@ class AISTPPDanceDataModule(LightningDataModule):
         music_cache_dir: cache folder for music features (default: the toolkit's).
         test_max_sequences: generate for only the first N test sequences (``None``: all; for quick checks).
         synthetic: the files are generated stand-ins in the AIST++ layout, not AIST++: the test table says
-            that its figures are not comparable with [QEAN] Table 1.
+            that its figures are not comparable with [QEAN] Table 1; a SYNTHETIC demo set is written under
+            ``root`` when it holds no ``motions/`` (module docstring).
+        synthetic_count: dances in that demo set (the last ``synthetic_held_out`` are the ``val`` split).
+        synthetic_held_out: held-out (``val``) dances of the demo set.
+        synthetic_duration_s: length of each demo dance in seconds.
         predict_seed: seed motion file for ``sm predict`` (AIST++ ``.pkl`` or ``.npz``).
         predict_music: music file for ``sm predict``.
     """
@@ -151,6 +169,7 @@ class AISTPPDanceDataModule(LightningDataModule):
         predict_frames: int = 20,
         generate_frames: int = 1200,
         window_stride: int = 1,
+        rollout_frames: int = 0,
         exclude_ignored: bool = True,
         batch_size: int = 16,
         test_batch_size: int = 8,
@@ -158,6 +177,9 @@ class AISTPPDanceDataModule(LightningDataModule):
         music_cache_dir: str | None = None,
         test_max_sequences: int | None = None,
         synthetic: bool = False,
+        synthetic_count: int = 8,
+        synthetic_held_out: int = 2,
+        synthetic_duration_s: float = 12.0,
         predict_seed: str | None = None,
         predict_music: str | None = None,
     ) -> None:
@@ -171,6 +193,10 @@ class AISTPPDanceDataModule(LightningDataModule):
         if test_split is None:
             test_split = ["val", "test"]
         self.test_splits = [test_split] if isinstance(test_split, str) else list(test_split)
+        if not 0 <= rollout_frames <= predict_frames:
+            raise ValueError(
+                f"rollout_frames must be 0 to {predict_frames} (predict_frames), got {rollout_frames}"
+            )
         if test_max_sequences is not None and test_max_sequences < 1:
             raise ValueError(f"test_max_sequences must be >= 1 or None, got {test_max_sequences}")
         self.synthetic = synthetic
@@ -181,8 +207,14 @@ class AISTPPDanceDataModule(LightningDataModule):
         self.predict_frames, self.generate_frames = predict_frames, generate_frames
         self._sequences: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.datasets: dict[str, Dataset] = {}
-        if predict_seed is None:  # fail before the model is built; `sm predict` needs no AIST++ copy
-            self.check_layout()
+        if predict_seed is None and not synthetic:  # fail before the model is built; `sm predict` needs
+            self.check_layout()  # no AIST++ copy, a synthetic set is written by prepare_data
+
+    def prepare_data(self) -> None:
+        """Write the SYNTHETIC demo set under ``root`` if ``synthetic`` asks for it and it has no motions."""
+        h = self.hparams
+        if h.synthetic and not (self.root / "motions").is_dir():
+            write_synthetic_aistpp(self.root, h.synthetic_count, h.synthetic_duration_s, h.synthetic_held_out)
 
     # ----- files -----
     def check_layout(self) -> None:
@@ -287,11 +319,13 @@ class AISTPPDanceDataModule(LightningDataModule):
 
     def setup(self, stage: str) -> None:
         h = self.hparams
+        if stage in ("fit", "test"):
+            self.prepare_data()  # also when a callback sets up a stage the trainer did not prepare
         if stage == "fit" and "train" not in self.datasets:
             self.check_layout()
             sequences = self._load(self.split_names(h.train_split), "train")
             self.datasets["train"] = DanceWindowDataset(
-                sequences, h.seed_frames, h.music_frames, h.predict_frames, h.window_stride
+                sequences, h.seed_frames, h.music_frames, h.predict_frames, h.window_stride, h.rollout_frames
             )
         elif stage == "test" and "test" not in self.datasets:
             self.check_layout()

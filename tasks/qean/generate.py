@@ -163,6 +163,7 @@ def generate_fast(
         motion_tokens = _MotionTokens(model, motion, num_frames)
     out = []
     encoded = None
+    recent = motion  # the last frames, from which the output low-pass carries on
     for i in tqdm(range(num_frames), desc="QEAN (fast)", disable=not progress):
         j = i % audio_chunk
         if j == 0:
@@ -177,8 +178,9 @@ def generate_fast(
             h_motion = model.encode_motion(motion)
         else:
             h_motion = motion_tokens.encode(i)
-        frame = model.decode(h_motion, encoded[:, j], num_outputs=1)
+        frame = model.to_frames(model.decode(h_motion, encoded[:, j], num_outputs=1), recent)
         out.append(frame)
+        recent = torch.cat([recent[:, 1:], frame], dim=1)
         if motion_tokens is None:
             motion = torch.cat([motion[:, 1:], frame], dim=1)
         elif i + 1 < num_frames:

@@ -14,6 +14,17 @@ All transformers: pre-LayerNorm blocks, 16 heads, hidden 800, MLP 3072 with GELU
 given by [QEAN]; the defaults are FACT's (audio 2, motion 2, cross-modal 12). The learnable absolute
 position embeddings are [QEAN] Table 2's ablation baseline that Spin Position Embedding replaces;
 ``learned_positions`` adds them back (default off).
+
+``smoothing_stages`` > 0 (ours, default 0 = [QEAN]) puts a causal low-pass at the output, trained through:
+the head's outputs ``x`` become frames by the cascade of ``smoothing_stages`` moving averages of decay
+``smoothing_decay`` carried on from the input's last frames,
+``y_t = (1 - d)^K x_t - sum_{j=1..K} C(K, j) (-d)^j y_{t-j}``
+(:meth:`~skeleton_mamba.tasks.training.causal_smoothing.CausalSmoothing.continued`). Generation keeps one
+frame per step, each from a network call that sees a window moved by one frame, so the network's error is
+drawn afresh at every frame: at 60 fps it is white noise on the pose, far above the dance's 1-3 Hz, and the
+dance trembles. The filter's only state is the last ``K`` frames, which the window holds, so training with
+the true past (teacher forcing) trains the filter exactly as generation runs it, and its error reaches the
+dance low-passed.
 """
 
 from __future__ import annotations
@@ -28,6 +39,7 @@ from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
+from skeleton_mamba.tasks.training.causal_smoothing import CausalSmoothing
 
 __all__ = [
     "QEAN",
@@ -60,6 +72,8 @@ class QEANConfig:
     music_frames: int = 240
     predict_frames: int = 20
     learned_positions: bool = False
+    smoothing_stages: int = 0
+    smoothing_decay: float = 0.5
 
 
 class _MLP(nn.Sequential):
@@ -208,6 +222,11 @@ class QEAN(PretrainedMixin, nn.Module):
         )
         self.norm = nn.LayerNorm(c.hidden)
         self.head = nn.Linear(c.hidden, c.motion_dim)
+        if c.smoothing_stages > c.seed_frames:
+            raise ValueError(
+                f"smoothing_stages ({c.smoothing_stages}) must not exceed seed_frames ({c.seed_frames})"
+            )
+        self.smoothing = CausalSmoothing(c.smoothing_stages, c.smoothing_decay)
 
     def encode_music(self, music: torch.Tensor) -> torch.Tensor:
         """h^z: (B, 240, 35) -> (B, 240, hidden). Depends on the music only (cached by fast generation)."""
@@ -232,8 +251,14 @@ class QEAN(PretrainedMixin, nn.Module):
             x = block(x, num_queries=n if i == last else None)
         return self.head(self.norm(x[:, :n]))
 
+    def to_frames(self, out: torch.Tensor, motion: torch.Tensor) -> torch.Tensor:
+        """The head's output (B, n, 219) as frames: the output low-pass carried on from the last frames of
+        ``motion`` (B, >= smoothing_stages, 219) when ``smoothing_stages`` > 0, else unchanged ([QEAN])."""
+        return self.smoothing.continued(out, motion)
+
     def forward(
         self, motion: torch.Tensor, music: torch.Tensor, num_outputs: int | None = None
     ) -> torch.Tensor:
         """Seed motion (B, 120, 219) and music (B, 240, 35) -> next frames (B, predict_frames, 219)."""
-        return self.decode(self.encode_motion(motion), self.encode_music(music), num_outputs)
+        out = self.decode(self.encode_motion(motion), self.encode_music(music), num_outputs)
+        return self.to_frames(out, motion)

@@ -41,7 +41,7 @@ from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
 from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
 
-__all__ = ["QEANModule", "QEAN_TABLE1"]
+__all__ = ["QEANModule", "QEAN_TABLE1", "features_to_motion"]
 
 # [QEAN] Table 1 (QEAN row and the AIST++ ground-truth row), printed beside our test figures.
 QEAN_TABLE1 = {
@@ -53,6 +53,19 @@ QEAN_TABLE1 = {
 }
 PAPER_SEQUENCES = 40  # generated sequences of [QEAN]'s protocol (crossmodal val + test)
 PAPER_FRAMES = 1200  # frames generated after each seed motion (20 s at 60 fps)
+
+
+def features_to_motion(features: torch.Tensor) -> MotionData:
+    """A (T, 219) motion vector sequence -> our motion format (SMPL poses, root, joints; 60 fps)."""
+    poses, root = features_to_smpl(features.double())
+    return MotionData(
+        fps=FPS,
+        skeleton="smpl24",
+        poses=poses.cpu().numpy().astype(np.float32),
+        trans=root.cpu().numpy().astype(np.float32),
+        scaling=1.0,
+        joints=features_to_joints(features.double()).cpu().numpy().astype(np.float32),
+    )
 
 
 class QEANModule(BackboneModule):
@@ -73,6 +86,13 @@ class QEANModule(BackboneModule):
         render: also render an mp4 at predict time.
         protocol: dance-evaluation protocol of the test loop, ``"fact"`` (default, [QEAN]'s), ``"bailando"``
             or ``"edge"`` (see :mod:`~skeleton_mamba.tasks.motion.metrics.protocols`).
+        rollout_probability: share of the training windows whose seed ends in the model's own frames (ours;
+            0, the default, is [QEAN]'s teacher forcing). Generation feeds the network its own frames, which
+            teacher forcing never shows it: each step's small error pulls the dance towards the mean, and it
+            freezes (exposure bias). With windows that carry R earlier frames (the data's
+            ``rollout_frames``), the network first predicts R frames from the R-earlier seed (no gradient),
+            they replace the seed's last R frames, and the loss asks for the true future from there, so the
+            network learns to return to the dance from its own frames.
     """
 
     def __init__(
@@ -87,9 +107,12 @@ class QEANModule(BackboneModule):
         output_dir: str = "qean_predictions",
         render: bool = True,
         protocol: str = "fact",
+        rollout_probability: float = 0.0,
     ) -> None:
         super().__init__()
         network = config_from(QEANConfig, network)
+        if not 0.0 <= rollout_probability <= 1.0:
+            raise ValueError(f"rollout_probability must be in [0, 1], got {rollout_probability}")
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         ignore = ("network",)
@@ -123,8 +146,27 @@ class QEANModule(BackboneModule):
                     "value (sm links them from the data module)"
                 )
 
+    def rollout_seed(self, motion: torch.Tensor, music: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """A training window's seed and music: motion (B, R + S, 219) and music (B, R + M, 35) carrying R
+        earlier frames -> seed (B, S, 219), music (B, M, 35). The seed is the last S true frames, or, for a
+        ``rollout_probability`` share of the windows, its last R frames are the network's prediction (no
+        gradient) from the seed R frames earlier (frames ``[0, S)``, music ``[0, M)``)."""
+        c = self.model.config
+        extra = motion.shape[1] - c.seed_frames
+        seed, future_music = motion[:, extra:], music[:, extra:]
+        if extra == 0 or self.hparams.rollout_probability == 0 or not self.training:
+            return seed, future_music
+        rolled = torch.rand(motion.shape[0], device=motion.device) < self.hparams.rollout_probability
+        if not rolled.any():
+            return seed, future_music
+        with torch.no_grad():
+            own = self.model(motion[rolled, : c.seed_frames], music[rolled, : c.music_frames])[:, :extra]
+        seed = seed.clone()
+        seed[rolled, c.seed_frames - extra :] = own
+        return seed, future_music
+
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
-        pred = self.model(batch["motion"], batch["music"])
+        pred = self.model(*self.rollout_seed(batch["motion"], batch["music"]))
         loss = F.mse_loss(pred, batch["target"])
         self.log("train/loss", loss, prog_bar=True, batch_size=pred.shape[0])
         return loss
@@ -161,7 +203,11 @@ class QEANModule(BackboneModule):
         rank_zero_info(f"QEAN test: real set of {self._reference_count} AIST++ clips")
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
-        full = self.generate(batch["seed"], batch["music"])
+        self.score_generated(batch, self.generate(batch["seed"], batch["music"]))
+
+    def score_generated(self, batch: dict, full: torch.Tensor) -> torch.Tensor:
+        """Add the generations ``full`` (B, 120 + G, 219) of a test batch to the test metrics; returns their
+        joints (B, 120 + G, 24, 3)."""
         joints = features_to_joints(full.double())  # (B, 120 + G, 24, 3)
         protocol = self.test_evaluation.protocol
         cache = None if self.contract is None else self.contract.music_cache_dir  # the data's feature cache
@@ -172,8 +218,11 @@ class QEANModule(BackboneModule):
                 beats = protocol.music_beats(batch["music_path"][i], cache_dir=cache)
             self.test_evaluation.add(joints[i].cpu(), FPS, beats)
         self._generated_count += full.shape[0]
+        return joints
 
-    def on_test_epoch_end(self) -> None:
+    def test_scores(self) -> dict[str, float]:
+        """The test figures of everything scored since the last call (FID_k ... BeatAlign, PFC when the
+        protocol has it); the generated set is cleared, the real set kept."""
         result = self.test_evaluation.compute()
         values = {
             "FID_k": result["FID_k"],
@@ -184,10 +233,19 @@ class QEANModule(BackboneModule):
         }
         if "PFC" in result:
             values["PFC"] = result["PFC"]
-        for name, value in values.items():
-            self.log(f"test/{name}", float(value))
         self.test_evaluation.reset(keep_real=True)
+        return {name: float(value) for name, value in values.items()}
+
+    def on_test_epoch_end(self) -> None:
+        values = self.test_scores()
+        for name, value in values.items():
+            self.log(f"test/{name}", value)
         rank_zero_info(self.results_table(values))
+
+    def constant_real_features(self) -> dict[str, int]:
+        """Kinetic and geometric feature dimensions constant over the test's real set (see
+        :meth:`~skeleton_mamba.tasks.motion.metrics.fid.FrechetMotionDistance.constant_real_features`)."""
+        return {kind: fid.constant_real_features() for kind, fid in self.test_evaluation.fid.items()}
 
     def results_table(self, values: dict[str, float]) -> str:
         """Our test figures beside [QEAN] Table 1, headed by the protocol run and its comparability."""
@@ -212,6 +270,14 @@ class QEANModule(BackboneModule):
         for name, value in values.items():
             paper, gt = QEAN_TABLE1.get(name, ("-", None))
             lines.append(f"{name:<10} {value:>10.3f} {paper:>12} {'-' if gt is None else gt:>10}")
+        for kind, constant in self.constant_real_features().items():
+            if constant:
+                short = kind[0]
+                lines.append(
+                    f"FID_{short} / Dist_{short}: {constant} {kind} features never vary over the real set; "
+                    "the reference normalisation divides them by std + 1e-10, so a dance that sets them "
+                    "scores ~1e10 or more (a property of the real set, not a measure of the dance)"
+                )
         return "\n".join(lines)
 
     # ----- predict -----
@@ -221,15 +287,7 @@ class QEANModule(BackboneModule):
         full = self.generate(batch["seed"], batch["music"], progress=False)  # Lightning's bar counts batches
         written = []
         for i, name in enumerate(batch["name"]):
-            poses, root = features_to_smpl(full[i].double())
-            motion = MotionData(
-                fps=FPS,
-                skeleton="smpl24",
-                poses=poses.cpu().numpy().astype(np.float32),
-                trans=root.cpu().numpy().astype(np.float32),
-                scaling=1.0,
-                joints=features_to_joints(full[i].double()).cpu().numpy().astype(np.float32),
-            )
+            motion = features_to_motion(full[i])
             music, render = batch["music_path"][i], self.hparams.render
             files = write_motion(motion, self.hparams.output_dir, name, music=music, render=render)
             paths = [p for p in vars(files).values() if p is not None]

@@ -16,10 +16,8 @@ the two; a training item is a window ``{motion (W, 24, 12), music (W, 34)}`` tak
 
 from __future__ import annotations
 
-import pickle
 from pathlib import Path
 
-import numpy as np
 import torch
 from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
@@ -28,59 +26,11 @@ from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, 
 from skeleton_mamba.tasks.motion.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.music import load_audio
-from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
-from skeleton_mamba.tasks.motion.synthetic.dance import STYLES
+from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
 
-__all__ = ["StreamDanceDataModule", "write_synthetic_aistpp"]
-
-GENRES = ("BR", "PO", "LO", "MH", "LH", "WA", "KR", "JS", "JB", "HO")
-SCALING = 93.0  # AIST++ stores smpl_trans in units of smpl_scaling
-
-
-def write_synthetic_aistpp(
-    root: str | Path, count: int = 8, duration_s: float = 12.0, val_count: int = 2, seed: int = 0
-) -> list[str]:
-    """Write ``count`` SYNTHETIC dances + music in the AIST++ layout under ``root``; returns their names.
-
-    The last ``val_count`` names go to ``splits/crossmodal_val.txt``, the others to ``crossmodal_train.txt``.
-    """
-
-    if not 0 <= val_count < count <= 10 * len(GENRES):
-        raise ValueError(f"need 0 <= val_count < count <= {10 * len(GENRES)}, got {val_count}, {count}")
-    root = Path(root)
-    for folder in ("motions", "music", "splits"):
-        (root / folder).mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(seed)
-    styles = sorted(STYLES)
-    names = []
-    for k in range(count):
-        genre, index = GENRES[k % len(GENRES)], k // len(GENRES)
-        name = f"g{genre}_sBM_cAll_d{k:02d}_m{genre}{index}_ch01"
-        bpm = float(rng.integers(90, 141))
-        motion = synthesize_dance(bpm, duration_s, fps=60.0, style=styles[k % len(styles)], seed=seed + k)
-        data = {
-            "smpl_poses": motion.poses.reshape(-1, 72).astype(np.float32),
-            "smpl_trans": (motion.root_position() * SCALING).astype(np.float32),
-            "smpl_scaling": np.array([SCALING], dtype=np.float32),
-        }
-        tmp = root / "motions" / f".{name}.pkl.tmp"
-        with open(tmp, "wb") as f:
-            pickle.dump(data, f)
-        tmp.replace(root / "motions" / f"{name}.pkl")
-        write_music(
-            root / "music" / f"{music_id(name)}.wav", synthesize_music(bpm, duration_s, seed=seed + k)
-        )
-        names.append(name)
-    train, val = names[: count - val_count], names[count - val_count :]
-    (root / "splits" / "crossmodal_train.txt").write_text("\n".join(train) + "\n", encoding="utf-8")
-    (root / "splits" / "crossmodal_val.txt").write_text("\n".join(val) + "\n", encoding="utf-8")
-    (root / "SYNTHETIC.txt").write_text(
-        "SYNTHETIC demo data: procedural dances and synthesised drum tracks in the AIST++ layout.\n",
-        encoding="utf-8",
-    )
-    return names
+__all__ = ["StreamDanceDataModule"]
 
 
 def audio_rate(path: Path) -> int:

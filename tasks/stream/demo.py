@@ -38,6 +38,7 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
 )
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
 from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.stream.features import FPS
 from skeleton_mamba.tasks.stream.model import (
@@ -48,8 +49,6 @@ from skeleton_mamba.tasks.stream.model import (
 )
 
 __all__ = ["StreamDanceDemo", "dance_to_features"]
-
-LABEL = "SYNTHETIC demo data (procedural dances, synthesised drum tracks)"
 
 
 @torch.no_grad()

@@ -12,8 +12,8 @@ on every joint), the per-joint form of the 219-d [QEAN] / [FACT] vector
 (``tasks.qean.representation``). The music is a per-frame input, not a cross-attention context, so
 nothing can attend to future music: the network is causal end to end, and :meth:`step` (one frame,
 constant memory) equals :meth:`forward` (a whole sequence). ``smoothing`` is the causal low-pass of
-:mod:`.output_smoothing` (trained through; off with 0 stages), its stages' values part of the stream's
-:class:`DancerState`.
+:mod:`~skeleton_mamba.tasks.training.causal_smoothing` (trained through; off with 0 stages), its stages'
+values part of the stream's :class:`DancerState`.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from skeleton_mamba.tasks.motion.fact_features import features_to_joints, featur
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
-from skeleton_mamba.tasks.stream.output_smoothing import CausalSmoothing
+from skeleton_mamba.tasks.training.causal_smoothing import CausalSmoothing
 
 __all__ = [
     "POSE_CHANNELS",

@@ -27,7 +27,7 @@ class StreamDanceModule(BackboneModule):
         music_dim: music features per frame (34, :mod:`.features`).
         input_noise: std of the noise added to the teacher-forced previous poses.
         smoothing_stages: moving averages of the network's causal output low-pass, trained through
-            (:mod:`.output_smoothing`; 0: none).
+            (:mod:`~skeleton_mamba.tasks.training.causal_smoothing`; 0: none).
         smoothing_decay: their decay.
         lr: AdamW learning rate.
         weight_decay: AdamW weight decay.

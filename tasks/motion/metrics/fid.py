@@ -163,6 +163,17 @@ class _ReferenceNormalisedMetric(Metric):
         super().reset()
         self.real_features = kept
 
+    def constant_real_features(self, tolerance: float = 1e-8) -> int:
+        """How many feature dimensions do not vary over the real set (population std <= ``tolerance``).
+
+        The reference normalisation divides by ``std + 1e-10``, so a generated set that differs from the real
+        one in any such dimension gets a distance of order 1e10-1e20: a property of a small or uniform real
+        set (e.g. a synthetic one), which a report should state beside the figure."""
+        real = self.real_features
+        if isinstance(real, list) and not real:
+            return 0
+        return int((dim_zero_cat(real).to(torch.float64).std(0, correction=0) <= tolerance).sum())
+
     def _normalised_sets(self) -> tuple[torch.Tensor, torch.Tensor]:
         if (isinstance(self.real_features, list) and not self.real_features) or (
             isinstance(self.fake_features, list) and not self.fake_features

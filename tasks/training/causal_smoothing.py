@@ -1,4 +1,4 @@
-"""A causal low-pass at the live dancer's output: a cascade of exponential moving averages, trained through.
+"""A causal low-pass at a motion model's output: a cascade of exponential moving averages, trained through.
 
 The live dancer regresses every pose frame on its own; what it has not learned is an error of its own at
 each frame, driven by the frame-level music features (an onset spike moves the pose for one frame), so the
@@ -14,6 +14,13 @@ rest on it), so a stream has no fade-in from zero::
 
     y = smoothing.sequence(x)                    # x (B, T, ...) -> y (B, T, ...), causal
     y_t, state = smoothing.step(x_t, state, started)   # the same, one frame at a time
+    y = smoothing.continued(x, past)             # the same, its state given by its last K outputs
+
+The cascade's transfer function ``(1 - d)^K / (1 - d z^-1)^K`` is also the recurrence over its own past
+outputs ``y_t = (1 - d)^K x_t - sum_{j=1..K} C(K, j) (-d)^j y_{t-j}`` (:meth:`CausalSmoothing.continued`):
+an autoregressive generator whose input window holds its last ``K`` output frames needs no other state, and
+teacher forcing (the true past in that window) trains exactly the filter that generation runs ([QEAN]'s
+dancer, ``QEANConfig.smoothing_stages``).
 """
 
 from __future__ import annotations
@@ -100,6 +107,30 @@ class CausalSmoothing(nn.Module):
             y = self.decay * previous + (1.0 - self.decay) * y
             values.append(y)
         return y, torch.stack(values)
+
+    def recurrence(self) -> tuple[float, list[float]]:
+        """The input gain ``(1 - d)^K`` and the feedback coefficients ``c_j = -C(K, j) (-d)^j``, j = 1 .. K,
+        of ``y_t = (1 - d)^K x_t + sum_j c_j y_{t-j}``."""
+        k, d = self.stages, self.decay
+        return (1.0 - d) ** k, [-math.comb(k, j) * (-d) ** j for j in range(1, k + 1)]
+
+    def continued(self, x: torch.Tensor, past: torch.Tensor) -> torch.Tensor:
+        """x (B, n, ...) the next inputs and past (B, >= K, ...) the filter's last K outputs -> its next n
+        outputs (B, n, ...), the recurrence of the module docstring (the identity when disabled)."""
+        if not self.enabled:
+            return x
+        if past.shape[1] < self.stages or past.shape[2:] != x.shape[2:]:
+            raise ValueError(
+                f"past must be (B, >= {self.stages}, {tuple(x.shape[2:])}), got {tuple(past.shape)}"
+            )
+        gain, feedback = self.recurrence()
+        outputs = list(past[:, -self.stages :].unbind(1))
+        for t in range(x.shape[1]):
+            y = gain * x[:, t]
+            for j, c in enumerate(feedback, start=1):
+                y = y + c * outputs[-j]
+            outputs.append(y)
+        return torch.stack(outputs[self.stages :], dim=1)
 
     def extra_repr(self) -> str:
         return f"stages={self.stages}, decay={self.decay}"

@@ -1,6 +1,7 @@
-"""The live dancer's causal output low-pass (``tasks/stream/output_smoothing.py``): against scipy's IIR filter
-with the stages at rest on the first frame, its frequency response against the measured one, step = sequence,
-and the dancer's step equal to its forward with the low-pass (also through ``DancerState``)."""
+"""The causal output low-pass (``tasks/training/causal_smoothing.py``): against scipy's IIR filter with the
+stages at rest on the first frame, its frequency response against the measured one, step = sequence, its
+recurrence over its last outputs (QEAN's form) against scipy's cascade carried on, and the dancer's step equal
+to its forward with the low-pass (also through ``DancerState``)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from scipy import signal
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.stream.model import StreamDancer
-from skeleton_mamba.tasks.stream.output_smoothing import CausalSmoothing
+from skeleton_mamba.tasks.training.causal_smoothing import CausalSmoothing
 
 
 def _scipy_cascade(x: np.ndarray, stages: int, decay: float) -> np.ndarray:
@@ -29,6 +30,22 @@ def test_sequence_is_scipys_cascade_at_rest_on_the_first_frame(stages, decay):
     x = np.random.default_rng(stages).standard_normal((3, 200, 5)) + 2.0
     ours = CausalSmoothing(stages, decay).sequence(torch.from_numpy(x)).numpy()
     np.testing.assert_allclose(ours, _scipy_cascade(x, stages, decay), atol=1e-8)
+
+
+@pytest.mark.parametrize(("stages", "decay"), [(1, 0.5), (3, 0.5), (8, 0.6)])
+def test_continued_is_the_cascade_carried_on_from_its_last_outputs(stages, decay):
+    """The all-pole recurrence over the last K outputs (QEAN's form) continues scipy's cascade exactly."""
+    x = np.random.default_rng(stages).standard_normal((2, 120, 3))
+    full = _scipy_cascade(x, stages, decay)
+    cut = 70
+    ours = CausalSmoothing(stages, decay).continued(
+        torch.from_numpy(x[:, cut:]), torch.from_numpy(full[:, :cut])
+    )
+    np.testing.assert_allclose(ours.numpy(), full[:, cut:], atol=1e-9)
+    with pytest.raises(ValueError, match="past must be"):
+        CausalSmoothing(stages, decay).continued(torch.zeros(2, 4, 3), torch.zeros(2, stages - 1, 3))
+    identity = CausalSmoothing(0)
+    assert identity.continued(torch.ones(1, 2, 3), torch.zeros(1, 0, 3)).eq(1).all()
 
 
 def test_step_equals_sequence_and_a_constant_passes_unchanged():
