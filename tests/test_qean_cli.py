@@ -134,6 +134,14 @@ def test_results_table_says_whether_it_is_the_paper_protocol():
     assert "BeatAlign       0.250        0.239      0.292" in table
     module._generated_count = 20
     assert "NOT COMPARABLE with [QEAN] Table 1: 20 sequences instead of 40" in module.results_table(values)
+    # one generated sequence: FID and Dist are not defined; the table says so instead of failing
+    module._generated_count = 1
+    table = module.results_table({"BeatAlign": 0.25})
+    assert "FID and Dist need at least 2 generated sequences (1 scored)" in table and "FID_k " not in table
+    module.test_evaluation.add(torch.zeros(150, 24, 3, dtype=torch.float64), 60.0, real=True)
+    module.test_evaluation.add(torch.zeros(150, 24, 3, dtype=torch.float64), 60.0, real=True)
+    module.test_evaluation.add(torch.randn(150, 24, 3, dtype=torch.float64), 60.0, np.array([30, 60]))
+    assert set(module.test_scores()) == {"BeatAlign"}
 
 
 def test_test_metrics_and_predict(aistpp, tmp_path):

@@ -222,19 +222,14 @@ class QEANModule(BackboneModule):
 
     def test_scores(self) -> dict[str, float]:
         """The test figures of everything scored since the last call (FID_k ... BeatAlign, PFC when the
-        protocol has it); the generated set is cleared, the real set kept."""
+        protocol has it; FID and Dist only from 2 generated sequences on); the generated set is cleared, the
+        real set kept."""
         result = self.test_evaluation.compute()
-        values = {
-            "FID_k": result["FID_k"],
-            "FID_g": result["FID_g"],
-            "Dist_k": result["Div_k"],
-            "Dist_g": result["Div_g"],
-            "BeatAlign": result["BeatAlign"],
-        }
-        if "PFC" in result:
-            values["PFC"] = result["PFC"]
+        names = {"FID_k": "FID_k", "FID_g": "FID_g", "Dist_k": "Div_k", "Dist_g": "Div_g"}
+        names.update(BeatAlign="BeatAlign", PFC="PFC")
+        values = {ours: float(result[key]) for ours, key in names.items() if key in result}
         self.test_evaluation.reset(keep_real=True)
-        return {name: float(value) for name, value in values.items()}
+        return values
 
     def on_test_epoch_end(self) -> None:
         values = self.test_scores()
@@ -267,6 +262,8 @@ class QEANModule(BackboneModule):
             f"audio stack: {describe_audio_stack()}",
             f"{'metric':<10} {'ours':>10} {'QEAN (paper)':>12} {'AIST++ GT':>10}",
         ]
+        if "FID_k" not in values:
+            lines.append(f"FID and Dist need at least 2 generated sequences ({sequences} scored)")
         for name, value in values.items():
             paper, gt = QEAN_TABLE1.get(name, ("-", None))
             lines.append(f"{name:<10} {value:>10.3f} {paper:>12} {'-' if gt is None else gt:>10}")
