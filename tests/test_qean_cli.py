@@ -12,7 +12,7 @@ import torch
 from gltf_reader import glb_joint_positions
 from lightning.pytorch import Trainer
 
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.fact_features import smpl_to_features
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
@@ -160,7 +160,8 @@ def test_test_metrics_and_predict(aistpp, tmp_path):
     paths = {p.suffix: p for p in trainer.predict(module, datamodule=dm)[0]}
     assert sorted(paths) == [".bvh", ".glb", ".mp4", ".npz", ".wav"]
     with np.load(paths[".npz"], allow_pickle=False) as saved:
-        assert saved["smpl_poses"].shape == (12 + 20, 72) and saved["joints"].shape == (32, 24, 3)
+        # the whole 1.2 s song at 60 fps (librosa's centred frames: one more), not generate_frames = 20
+        assert saved["smpl_poses"].shape == (73, 72) and saved["joints"].shape == (73, 24, 3)
         assert float(saved["fps"]) == 60.0
         joints = saved["joints"]
     assert paths[".mp4"].stat().st_size > 0  # rendered with the music's slice (.wav)
@@ -206,3 +207,15 @@ def test_test_loop_under_the_bailando_protocol(aistpp, caplog):
     assert "protocol bailando:" in table and "protocol bailando ([QEAN] Table 1 follows FACT's)" in table
     with pytest.raises(ValueError, match="fact, bailando, edge"):
         QEANModule(**TINY_MODEL, protocol="lodge")
+
+
+def test_predict_refuses_music_no_longer_than_the_seed(aistpp, tmp_path):
+    """``sm predict`` dances the whole song after the seed: a track within the seed's 0.2 s has nothing to
+    dance, and says so naming the file."""
+    short = tmp_path / "short.wav"
+    soundfile.write(short, np.zeros(2205, dtype=np.float32), 22050)  # 0.1 s
+    dm = _data(aistpp, predict_seed=str(aistpp / "motions" / f"{NAMES[0]}.pkl"), predict_music=str(short))
+    with pytest.raises(
+        DataFileError, match=r"short\.wav: 0\.1\d s of music, no longer than the 12-frame seed"
+    ):
+        dm.setup("predict")

@@ -103,7 +103,8 @@ def test_sm_fit_qean_mamba_then_predict_from_the_checkpoint(aistpp, tmp_path):
     stem = f"mPO1_{TEST[0]}"
     npz, mp4 = tmp_path / "predictions" / f"{stem}.npz", tmp_path / "predictions" / f"{stem}.mp4"
     with np.load(npz, allow_pickle=False) as saved:
-        assert saved["smpl_poses"].shape == (12 + 20, 72) and saved["joints"].shape == (32, 24, 3)
+        frames = len(saved["joints"])  # the whole 1 s song danced (generate_frames is the test's length)
+        assert abs(frames - 60) <= 1 and saved["smpl_poses"].shape == (frames, 72)
         assert float(saved["fps"]) == 60.0 and str(saved["skeleton"]) == "smpl24"
         poses, trans, scaling = saved["smpl_poses"], saved["smpl_trans"], saved["smpl_scaling"]
         root_position = trans / scaling

@@ -26,7 +26,8 @@ Samples (all at 60 fps, motion frame t aligned with music frame t):
   and ``music`` (R + music_frames) start R frames earlier (for :class:`~.module.QEANModule`'s rollouts);
 * test: one item per sequence: its first ``seed_frames`` frames as ``seed`` and its music features
   zero-padded to the ``generate_frames + music_frames - 1`` frames that generation reads;
-* predict: ``predict_seed`` (an AIST++ ``.pkl`` or our ``.npz``) and ``predict_music`` (any audio file).
+* predict: ``predict_seed`` (an AIST++ ``.pkl`` or our ``.npz``) and ``predict_music`` (any audio file);
+  the dance lasts as long as the music (``generate_frames`` is the test's length).
 
 ``synthetic: true`` marks the files as generated stand-ins (the test table says its figures are not
 comparable with [QEAN] Table 1) and, when ``<root>/motions`` does not exist, writes the SYNTHETIC demo set
@@ -51,7 +52,7 @@ from tqdm import tqdm
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.cli_options import progress_default
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
-from skeleton_mamba.tasks.motion.fact_features import features_to_joints, motion_to_features
+from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
@@ -137,7 +138,8 @@ class AISTPPDanceDataModule(LightningDataModule):
         seed_frames: seed motion frames (120).
         music_frames: music frames per window (240).
         predict_frames: frames predicted per window (20).
-        generate_frames: frames generated after the seed at test time (1200 = 20 s).
+        generate_frames: frames generated after the seed at test time (1200 = 20 s); `sm predict` dances the
+            whole music instead.
         window_stride: frames between training windows.
         rollout_frames: frames before each training window that it also carries (0: none, [QEAN]'s windows),
             for ``QEANModule.rollout_probability``; at most ``predict_frames``.
@@ -292,12 +294,23 @@ class AISTPPDanceDataModule(LightningDataModule):
             yield features_to_joints(self.sequence(name)[0])
 
     # ----- datasets -----
-    def _generation_item(self, name: str, seed: torch.Tensor, music: torch.Tensor, music_path: Path) -> dict:
+    def _generation_item(
+        self, name: str, seed: torch.Tensor, music: torch.Tensor, music_path: Path, frames: int | None = None
+    ) -> dict:
+        """One generation: the seed's first ``seed_frames``, the music padded for ``frames`` generated frames
+        (``generate_frames`` unless given), and ``frames`` itself."""
         h = self.hparams
         if len(seed) < h.seed_frames:
             raise DataFileError(f"{name}: the seed motion has {len(seed)} frames, QEAN needs {h.seed_frames}")
-        padded = pad_music(music[None], h.generate_frames, h.music_frames)[0]
-        return {"seed": seed[: h.seed_frames], "music": padded, "name": name, "music_path": str(music_path)}
+        frames = h.generate_frames if frames is None else frames
+        padded = pad_music(music[None], frames, h.music_frames)[0]
+        return {
+            "seed": seed[: h.seed_frames],
+            "music": padded,
+            "name": name,
+            "music_path": str(music_path),
+            "frames": frames,
+        }
 
     def _predict_items(self) -> list[dict]:
         h = self.hparams
@@ -311,11 +324,14 @@ class AISTPPDanceDataModule(LightningDataModule):
             raise FileNotFoundError(f"{seed_path}: seed motion not found")
         motion = load_aistpp_motion(seed_path) if seed_path.suffix == ".pkl" else load_motion(seed_path)
         name = f"{music_path.stem}_{seed_path.stem}"
-        return [
-            self._generation_item(
-                name, motion_to_features(motion), self.music_features(music_path), music_path
+        music = self.music_features(music_path)  # (T, 35): the whole song, its frame 0 at the seed's first
+        frames = len(music) - h.seed_frames  # the song is danced to its end
+        if frames < 1:
+            raise DataFileError(
+                f"{music_path}: {len(music) / FPS:.2f} s of music, no longer than the {h.seed_frames}-frame "
+                f"seed ({h.seed_frames / FPS:.2f} s): nothing to dance"
             )
-        ]
+        return [self._generation_item(name, motion_to_features(motion), music, music_path, frames)]
 
     def setup(self, stage: str) -> None:
         h = self.hparams

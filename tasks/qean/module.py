@@ -30,6 +30,7 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.cli_options import progress_default
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, features_to_smpl
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
@@ -177,10 +178,18 @@ class QEANModule(BackboneModule):
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
 
     # ----- generation -----
-    def generate(self, seed: torch.Tensor, music: torch.Tensor, progress: bool = False) -> torch.Tensor:
-        """Seed (B, 120, 219) + music (B, T, 35) -> ``[seed | generated]`` (B, 120 + generate_frames, 219)."""
+    def generate(
+        self, seed: torch.Tensor, music: torch.Tensor, progress: bool = False, frames: int | None = None
+    ) -> torch.Tensor:
+        """Seed (B, 120, 219) + music (B, T, 35) -> ``[seed | generated]`` (B, 120 + G, 219), G = ``frames``
+        or ``generate_frames``."""
         frames = generate_fast(
-            self.model, seed, music, self.hparams.generate_frames, self.hparams.audio_chunk, progress
+            self.model,
+            seed,
+            music,
+            self.hparams.generate_frames if frames is None else frames,
+            self.hparams.audio_chunk,
+            progress,
         )
         return torch.cat([seed[:, -self.model.config.seed_frames :], frames], dim=1)
 
@@ -281,7 +290,8 @@ class QEANModule(BackboneModule):
     def predict_step(self, batch: dict, batch_idx: int) -> list[Path]:
         """Generate and write ``<output_dir>/<name>.npz / .bvh / .glb`` (and ``.mp4`` with its ``.wav``, the
         music's slice of the dance's length, when ``render``); returns the written paths."""
-        full = self.generate(batch["seed"], batch["music"], progress=False)  # Lightning's bar counts batches
+        frames = int(batch["frames"].max())  # the song's length after the seed (batches of one song)
+        full = self.generate(batch["seed"], batch["music"], progress=progress_default(), frames=frames)
         written = []
         for i, name in enumerate(batch["name"]):
             motion = features_to_motion(full[i])
