@@ -97,14 +97,17 @@ def test_sm_dance_says_when_the_video_is_shorter_than_the_music(inputs, capsys):
     assert "the dance covers the first 5.0 s" in err
 
 
-def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch):
+@pytest.mark.parametrize("sampler", ["ddim", "dpmpp", "unipc"])
+def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch, sampler):
+    """Long-form stitching (in-painted overlaps) through every sampler that takes steps."""
     from skeleton_mamba.tasks.motion.motion_file import load_motion
 
     tmp, ckpt, wav = inputs
     monkeypatch.setattr(EMM, "forward", _walking_forward)
     # 360 frames: 4 windows of 150 / 75; no head guidance, which would move the oracle's walk
-    assert _dance(tmp, ckpt, wav, tmp / "walk.npz", "--no-render", "--head", "none") == 0
-    root = load_motion(tmp / "walk.npz").root_position()
+    out = tmp / f"walk_{sampler}.npz"
+    assert _dance(tmp, ckpt, wav, out, "--no-render", "--head", "none", "--sampler", sampler) == 0
+    root = load_motion(out).root_position()
     steps = np.linalg.norm(np.diff(root[:, [0, 2]], axis=0), axis=1)
     normal = np.hypot(STEP_X, STEP_Z)
     # every frame-to-frame step, the seams at frames 75, 150, 225 (window starts) included, is the walk's

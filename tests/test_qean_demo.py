@@ -103,7 +103,7 @@ def test_demo_recipe_is_a_small_qean_on_the_synthetic_set():
     assert "skeleton_mamba.tasks.qean.demo.QEANDemo" in callbacks
     # against trembling and freezing: the output low-pass and rollouts of the seed's last 20 frames
     assert network["smoothing_stages"] == 8 and network["smoothing_decay"] == 0.6
-    assert recipe["model"]["init_args"]["rollout_probability"] == 0.5 and data["rollout_frames"] == 20
+    assert recipe["model"]["init_args"]["rollout_probability"] == 1.0 and data["rollout_frames"] == 20
 
 
 def test_the_demo_qean_overfits_two_windows(tmp_path):

@@ -28,7 +28,6 @@ windows are turned back and joined (:mod:`.window_frames`).
 from __future__ import annotations
 
 import dataclasses
-import inspect
 from pathlib import Path
 
 import torch
@@ -36,7 +35,7 @@ import torch
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.egodance.dance_args import build_parser
 from skeleton_mamba.tasks.egodance.dance_inputs import DanceInputs, sample_inputs, track_inputs
-from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, SyntheticEgoDanceDataModule
+from skeleton_mamba.tasks.egodance.data import data_module_from_hparams
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
@@ -132,9 +131,7 @@ def _score_against_truth(tokens: torch.Tensor, inputs: DanceInputs, fps: float) 
 def held_out_samples(data_hparams: dict) -> dict[str, list[Path]]:
     """``test`` and ``val`` sample folders of the data a checkpoint was trained on, from its data module's
     hyper-parameters (the generated demo set when they have a ``count``, else an EgoAIST++ build)."""
-    cls = SyntheticEgoDanceDataModule if "count" in data_hparams else EgoDanceDataModule
-    accepted = inspect.signature(cls.__init__).parameters
-    data = cls(**{k: v for k, v in data_hparams.items() if k in accepted})
+    data = data_module_from_hparams(data_hparams)
     try:
         splits = data.split_folders()
     except FileNotFoundError as err:  # DatasetNotFoundError says what is missing and how to build it

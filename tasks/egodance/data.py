@@ -27,6 +27,7 @@ instead (:meth:`SyntheticEgoDanceDataModule.assign_splits`).
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import zlib
@@ -64,6 +65,7 @@ __all__ = [
     "EgoDanceDataModule",
     "SyntheticEgoDanceDataModule",
     "assign_splits",
+    "data_module_from_hparams",
     "initial_heading",
 ]
 
@@ -431,3 +433,12 @@ class SyntheticEgoDanceDataModule(EgoDanceDataModule):
         )
         run_build(config, motions)
         self.root = self.source_root / "ego"
+
+
+def data_module_from_hparams(hparams: dict) -> EgoDanceDataModule:
+    """The data module a checkpoint was trained with, from its saved hyper-parameters
+    (``datamodule_hyper_parameters``): the generated demo set when they have a ``count``, else an
+    EgoAIST++ build; settings the class does not take are left out."""
+    cls = SyntheticEgoDanceDataModule if "count" in hparams else EgoDanceDataModule
+    accepted = inspect.signature(cls.__init__).parameters
+    return cls(**{k: v for k, v in hparams.items() if k in accepted})

@@ -30,7 +30,7 @@ import warnings
 from pathlib import Path
 
 import torch
-from lightning.pytorch import Callback, LightningModule, Trainer
+from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.egodance.builder.layout import read_meta
 from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
@@ -40,15 +40,15 @@ from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.music import BEAT
-from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.view import write_view
+from skeleton_mamba.tasks.training.demo_callback import DemoCallback
 
 __all__ = ["DanceDemo"]
 
 LABEL = "SYNTHETIC demo data (procedural dances, synthesised music, procedural rooms)"
 
 
-class DanceDemo(Callback):
+class DanceDemo(DemoCallback):
     """Sample and render dances for held-out windows at the end of training.
 
     Args:
@@ -77,10 +77,8 @@ class DanceDemo(Callback):
         if score_samples is not None and score_samples < 1:
             raise ValueError(f"score_samples must be at least 1 (or None: every window), got {score_samples}")
         self.score_samples = score_samples
-        self.out_subdir = out_subdir
-        self.render = render
+        super().__init__(out_subdir, render, width, height)
         self.render_reference = render_reference
-        self.style = RenderStyle(width=width, height=height)
         if not long_sample_s >= 0:
             raise ValueError(f"long_sample_s must be >= 0 seconds, got {long_sample_s}")
         self.long_sample_s = long_sample_s
@@ -115,9 +113,6 @@ class DanceDemo(Callback):
             title="EMM, long-form (synthetic demo)",
         )
         return {**scores, "files": {k: str(v) for k, v in vars(files).items() if v is not None}}
-
-    def out_dir(self, trainer: Trainer) -> Path:
-        return Path(trainer.log_dir or trainer.default_root_dir) / self.out_subdir
 
     def on_fit_end(self, trainer: Trainer, pl_module: LightningModule) -> None:
         if not trainer.is_global_zero:

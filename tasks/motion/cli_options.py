@@ -29,7 +29,7 @@ __all__ = [
     "sampling_overrides",
 ]
 
-SAMPLERS = ("ddim", "ddpm")  # the diffusion samplers (tasks/training/diffusion/sampling.py runs them)
+SAMPLERS = ("ddim", "ddpm", "dpmpp", "unipc")  # the diffusion samplers (tasks/training/diffusion/sampling.py)
 
 
 class SmHelpFormatter(argparse.HelpFormatter):
@@ -153,19 +153,22 @@ def _steps(text: str) -> int:
     try:
         steps = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of DDIM steps, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a number of sampling steps, got {text!r}") from None
     if steps < 1:
-        raise argparse.ArgumentTypeError(f"expected at least 1 DDIM step, got {steps}")
+        raise argparse.ArgumentTypeError(f"expected at least 1 sampling step, got {steps}")
     return steps
 
 
 def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--sampler ddim|ddpm``, ``--steps N`` (DDIM steps; alone it selects DDIM), ``--eta`` and
-    ``--guidance`` of the generative commands (``sm dance``, ``sm generate``), each defaulting to the
-    checkpoint's :class:`~skeleton_mamba.tasks.training.diffusion.sampling.SamplingOptions`."""
+    """``--sampler ddim|ddpm|dpmpp|unipc``, ``--steps N`` (alone on a DDPM model it selects DDIM),
+    ``--eta`` and ``--guidance`` of the generative commands (``sm dance``, ``sm generate``), each defaulting
+    to the checkpoint's :class:`~skeleton_mamba.tasks.training.diffusion.sampling.SamplingOptions`."""
     parser.add_argument("--sampler", choices=SAMPLERS, default=None, help="default: the checkpoint's")
     parser.add_argument(
-        "--steps", type=_steps, default=None, help="DDIM steps (alone: DDIM; default: the checkpoint's)"
+        "--steps",
+        type=_steps,
+        default=None,
+        help="steps of ddim, dpmpp or unipc (alone on a ddpm checkpoint: ddim; default: the checkpoint's)",
     )
     parser.add_argument(
         "--eta",

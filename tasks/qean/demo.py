@@ -23,9 +23,8 @@ from __future__ import annotations
 
 import json
 import warnings
-from pathlib import Path
 
-from lightning.pytorch import Callback, LightningModule, Trainer
+from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.export import write_motion
@@ -36,15 +35,15 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     held_out_dynamics_checks,
 )
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
 from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.qean.module import features_to_motion
+from skeleton_mamba.tasks.training.demo_callback import DemoCallback
 
 __all__ = ["QEANDemo"]
 
 
-class QEANDemo(Callback):
+class QEANDemo(DemoCallback):
     """Generate from the held-out seeds and music at the end of training, score and write the dances.
 
     Args:
@@ -63,13 +62,8 @@ class QEANDemo(Callback):
         width: int = 480,
         height: int = 352,
     ) -> None:
+        super().__init__(out_subdir, render, width, height)
         self.num_samples = num_samples
-        self.out_subdir = out_subdir
-        self.render = render
-        self.style = RenderStyle(width=width, height=height)
-
-    def out_dir(self, trainer: Trainer) -> Path:
-        return Path(trainer.log_dir or trainer.default_root_dir) / self.out_subdir
 
     def on_fit_end(self, trainer: Trainer, pl_module: LightningModule) -> None:
         if not trainer.is_global_zero:

@@ -30,7 +30,6 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.cli_options import progress_default
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, features_to_smpl
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
@@ -291,7 +290,7 @@ class QEANModule(BackboneModule):
         """Generate and write ``<output_dir>/<name>.npz / .bvh / .glb`` (and ``.mp4`` with its ``.wav``, the
         music's slice of the dance's length, when ``render``); returns the written paths."""
         frames = int(batch["frames"].max())  # the song's length after the seed (batches of one song)
-        full = self.generate(batch["seed"], batch["music"], progress=progress_default(), frames=frames)
+        full = self.generate(batch["seed"], batch["music"], frames=frames)  # Lightning's bar counts songs
         written = []
         for i, name in enumerate(batch["name"]):
             motion = features_to_motion(full[i])

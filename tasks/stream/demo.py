@@ -22,10 +22,9 @@ from __future__ import annotations
 
 import json
 import warnings
-from pathlib import Path
 
 import torch
-from lightning.pytorch import Callback, LightningModule, Trainer
+from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.aistpp import music_id
 from skeleton_mamba.tasks.motion.atomic import atomic_open
@@ -37,7 +36,6 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     held_out_dynamics_checks,
 )
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
 from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.stream.features import FPS
@@ -47,6 +45,7 @@ from skeleton_mamba.tasks.stream.model import (
     tokens_to_features,
     tokens_to_motion,
 )
+from skeleton_mamba.tasks.training.demo_callback import DemoCallback
 
 __all__ = ["StreamDanceDemo", "dance_to_features"]
 
@@ -69,7 +68,7 @@ def _joints(tokens: torch.Tensor) -> torch.Tensor:
     return features_to_joints(tokens_to_features(tokens.double()))
 
 
-class StreamDanceDemo(Callback):
+class StreamDanceDemo(DemoCallback):
     """Dance to the held-out music at the end of training, score and write it.
 
     Args:
@@ -101,12 +100,7 @@ class StreamDanceDemo(Callback):
         self.num_samples = num_samples
         self.score_samples = score_samples
         self.seconds = seconds
-        self.out_subdir = out_subdir
-        self.render = render
-        self.style = RenderStyle(width=width, height=height)
-
-    def out_dir(self, trainer: Trainer) -> Path:
-        return Path(trainer.log_dir or trainer.default_root_dir) / self.out_subdir
+        super().__init__(out_subdir, render, width, height)
 
     def on_fit_end(self, trainer: Trainer, pl_module: LightningModule) -> None:
         if not trainer.is_global_zero:

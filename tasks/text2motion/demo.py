@@ -25,10 +25,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
-from pathlib import Path
 
 import torch
-from lightning.pytorch import Callback, LightningModule, Trainer
+from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
@@ -42,6 +41,7 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
 from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores, format_caption_scores
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
+from skeleton_mamba.tasks.training.demo_callback import DemoCallback
 from skeleton_mamba.tasks.training.diffusion import SamplingOptions
 
 __all__ = ["LABEL", "TextToMotionDemo", "demo_stem"]
@@ -56,7 +56,7 @@ def demo_stem(index: int, prompt: str) -> str:
     return f"synthetic_{index:02d}_{slug(words)}"
 
 
-class TextToMotionDemo(Callback):
+class TextToMotionDemo(DemoCallback):
     """Generate and render motions for prompts at the end of training.
 
     Args:
@@ -87,8 +87,7 @@ class TextToMotionDemo(Callback):
         self.frames = parse_length(length)
         if render not in (None, "mp4", "gif"):
             raise ValueError(f"render must be 'mp4', 'gif' or null, got {render!r}")
-        self.out_subdir = out_subdir
-        self.render = render
+        super().__init__(out_subdir, render)
         self.sampler = sampler
         self.sampling_steps = sampling_steps
         self.seed = seed
@@ -96,9 +95,6 @@ class TextToMotionDemo(Callback):
             raise ValueError("scoring needs score_captions >= 2 and score_samples >= 2 (or score_captions 0)")
         self.score_captions = score_captions
         self.score_samples = score_samples
-
-    def out_dir(self, trainer: Trainer) -> Path:
-        return Path(trainer.log_dir or trainer.default_root_dir) / self.out_subdir
 
     def on_fit_end(self, trainer: Trainer, pl_module: LightningModule) -> None:
         if not trainer.is_global_zero:

@@ -8,9 +8,9 @@ repetition it writes, in ``DIR``:
 - ``NNN_<words>.gif`` / ``.mp4`` with ``--render gif|mp4``.
 
 ``--length`` is seconds with an ``s`` suffix (``6s`` = 120 frames) or a frame count (``120``).
-Sampling takes the checkpoint's settings unless ``--sampler ddim|ddpm``, ``--steps`` (DDIM steps; alone it
-selects DDIM), ``--eta`` or ``--guidance`` (the classifier-free guidance scale) say otherwise, as for
-``sm dance``.
+Sampling takes the checkpoint's settings unless ``--sampler ddim|ddpm|dpmpp|unipc``, ``--steps`` (alone on a
+DDPM checkpoint it selects DDIM), ``--eta`` or ``--guidance`` (the classifier-free guidance scale) say
+otherwise, as for ``sm dance``; ``dpmpp`` / ``unipc`` are the few-step solvers [DPM-Solver++] and [UniPC].
 """
 
 from __future__ import annotations

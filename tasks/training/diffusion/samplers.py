@@ -25,6 +25,8 @@ __all__ = [
     "ddpm_sample",
     "ddim_sample",
     "ddim_timesteps",
+    "initial_noise",
+    "predict_x0",
 ]
 
 Denoiser = Callable[[torch.Tensor, torch.Tensor, Any], torch.Tensor]
@@ -101,7 +103,7 @@ def guided_x0(
     return unc_x0 + guidance_weight * (cond_x0 - unc_x0)
 
 
-def _predict_x0(
+def predict_x0(
     denoiser: Denoiser,
     x: torch.Tensor,
     t: torch.Tensor,
@@ -110,6 +112,8 @@ def _predict_x0(
     clip_x0: float | None,
     guidance: Sequence[GuidanceTerm],
 ) -> torch.Tensor:
+    """x0_hat (B, ...) of every sampler: guided (:func:`guided_x0`), clamped to ``clip_x0``, then adjusted by
+    each guidance term's ``adjust_x0``."""
     x0 = guided_x0(denoiser, x, t, cond, guidance_weight)
     if clip_x0 is not None:
         x0 = x0.clamp(-clip_x0, clip_x0)
@@ -118,7 +122,8 @@ def _predict_x0(
     return x0
 
 
-def _initial_noise(shape, x_T, generator, device, dtype) -> torch.Tensor:
+def initial_noise(shape, x_T, generator, device, dtype) -> torch.Tensor:
+    """``x_T`` if given, else standard normal noise of ``shape`` drawn on the CPU with ``generator``."""
     if x_T is not None:
         return x_T
     return torch.randn(shape, generator=generator, device="cpu", dtype=dtype).to(device)
@@ -161,7 +166,7 @@ def ddpm_sample(
     Returns:
         x0 samples (B, ...).
     """
-    x = _initial_noise(shape, x_T, generator, device, dtype)
+    x = initial_noise(shape, x_T, generator, device, dtype)
     if post_step is not None:
         last = torch.full((x.shape[0],), diffusion.num_steps - 1, device=x.device, dtype=torch.long)
         x = post_step(x, None, _extract(diffusion.alphas_cumprod, last, x).sqrt())
@@ -169,7 +174,7 @@ def ddpm_sample(
         reversed(range(diffusion.num_steps)), total=diffusion.num_steps, disable=not progress, desc="DDPM"
     ):
         t = torch.full((x.shape[0],), i, device=x.device, dtype=torch.long)
-        x0 = _predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
+        x0 = predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
         mean, var, log_var = diffusion.q_posterior(x0, x, t)
         for term in guidance:
             mean = term.adjust_mean(mean, var, x, t)
@@ -216,14 +221,14 @@ def ddim_sample(
     abar_prev = 1 after the last step, so the final x equals the last x0_hat. Other arguments as
     :func:`ddpm_sample`.
     """
-    x = _initial_noise(shape, x_T, generator, device, dtype)
+    x = initial_noise(shape, x_T, generator, device, dtype)
     steps = ddim_timesteps(diffusion.num_steps, sampling_steps)
     if post_step is not None:
         first = torch.full((x.shape[0],), steps[0], device=x.device, dtype=torch.long)
         x = post_step(x, None, _extract(diffusion.alphas_cumprod, first, x).sqrt())
     for k, i in enumerate(tqdm(steps, disable=not progress, desc="DDIM")):
         t = torch.full((x.shape[0],), i, device=x.device, dtype=torch.long)
-        x0 = _predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
+        x0 = predict_x0(denoiser, x, t, cond, guidance_weight, clip_x0, guidance)
         eps = diffusion.predict_noise_from_x0(x, t, x0)
         abar = _extract(diffusion.alphas_cumprod, t, x)
         if k + 1 < len(steps):

@@ -2,7 +2,9 @@
 
 Every task names its sampling options the same way (module arguments, recipes, :class:`SamplingOptions`):
 ``sampler`` (``"ddim"``: DDIM over ``sampling_steps`` timesteps with noise ``eta``; ``"ddpm"``: ancestral
-sampling through all T steps, where ``sampling_steps`` and ``eta`` do not apply) and ``guidance_weight``
+sampling through all T steps, where ``sampling_steps`` and ``eta`` do not apply; ``"dpmpp"`` / ``"unipc"``:
+the multistep ODE solvers DPM-Solver++ and UniPC over ``sampling_steps`` timesteps, deterministic, where
+``eta`` does not apply, :mod:`~.solvers`) and ``guidance_weight``
 (the classifier-free guidance weight w). Task-specific terms (EgoMusic's head guidance) are
 :class:`~.samplers.GuidanceTerm` objects passed as ``guidance``.
 """
@@ -19,6 +21,7 @@ import torch
 from skeleton_mamba.tasks.motion.cli_options import SAMPLERS  # torch-free: the commands' --help lists them
 from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion
 from skeleton_mamba.tasks.training.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.training.diffusion.solvers import SOLVERS, solver_sample
 
 __all__ = ["SAMPLERS", "SamplingOptions", "sample"]
 
@@ -28,8 +31,8 @@ class SamplingOptions:
     """How a task samples (module docstring for the names); checked when made.
 
     Args:
-        sampler: ``"ddim"`` or ``"ddpm"``.
-        sampling_steps: DDIM timesteps (DDPM runs all T).
+        sampler: ``"ddim"``, ``"ddpm"``, ``"dpmpp"`` or ``"unipc"``.
+        sampling_steps: timesteps of DDIM and the solvers (DDPM runs all T).
         eta: DDIM noise (0: deterministic; 1: EDGE).
         guidance_weight: classifier-free guidance weight w (1: plain conditional, 0: unconditional).
     """
@@ -63,10 +66,10 @@ class SamplingOptions:
     ) -> SamplingOptions:
         """These options with the given ones replaced (``None`` keeps a setting).
 
-        A step count given without a sampler selects DDIM, the sampler that takes one (``sm generate
-        --steps 10`` on a DDPM model samples DDIM with 10 steps).
+        A step count given without a sampler keeps a sampler that takes one and otherwise selects DDIM
+        (``sm generate --steps 10`` on a DDPM model samples DDIM with 10 steps).
         """
-        if sampler is None and sampling_steps is not None:
+        if sampler is None and sampling_steps is not None and self.sampler == "ddpm":
             sampler = "ddim"
         given = dict(sampler=sampler, sampling_steps=sampling_steps, eta=eta, guidance_weight=guidance_weight)
         return dataclasses.replace(self, **{k: v for k, v in given.items() if v is not None})
@@ -75,7 +78,9 @@ class SamplingOptions:
         """The options as a plain dict, without those the sampler does not use (for reports)."""
         out = dataclasses.asdict(self)
         if self.sampler == "ddpm":
-            del out["sampling_steps"], out["eta"]
+            del out["sampling_steps"]
+        if self.sampler != "ddim":
+            del out["eta"]
         return out
 
 
@@ -101,7 +106,7 @@ def sample(
         sampler: as :class:`SamplingOptions` (``sample(..., **asdict(options))``).
         sampling_steps: as :class:`SamplingOptions`.
         eta: as :class:`SamplingOptions`.
-        **kwargs: the sampler's other options, alike for both (:func:`~.samplers.ddpm_sample`):
+        **kwargs: the sampler's other options, alike for all (:func:`~.samplers.ddpm_sample`):
             ``guidance_weight``; ``guidance`` terms (e.g. EgoMusic's head guidance); ``clip_x0``;
             ``post_step`` (e.g. window consistency); ``x_T``; ``generator``; ``device``, ``dtype``;
             ``progress``.
@@ -109,4 +114,6 @@ def sample(
     SamplingOptions(sampler, sampling_steps, eta)  # checks them
     if sampler == "ddpm":
         return ddpm_sample(diffusion, denoiser, shape, cond, **kwargs)
+    if sampler in SOLVERS:
+        return solver_sample(diffusion, denoiser, shape, cond, sampler, sampling_steps, **kwargs)
     return ddim_sample(diffusion, denoiser, shape, cond, sampling_steps=sampling_steps, eta=eta, **kwargs)
