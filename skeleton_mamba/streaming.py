@@ -27,12 +27,11 @@ Nothing else is kept, so the state's size is fixed whatever the number of frames
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 from dataclasses import dataclass
 
 import torch
 
+from skeleton_mamba.allocator import keep_freed_memory  # re-exported: streaming's callers set it
 from skeleton_mamba.frame_ops import FrameOps
 
 
@@ -159,32 +158,6 @@ def step(
         y = frame_forward(model, x, state.conv, state.ssm, context, context_mask, ops)
     state.frames += 1
     return y, state
-
-
-# glibc mallopt parameters (malloc.h) and the values keep_freed_memory sets.
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-MMAP_THRESHOLD = 32 << 20  # the largest glibc accepts on 64-bit
-TRIM_THRESHOLD = 1 << 30
-
-
-def keep_freed_memory() -> bool:
-    """Let glibc keep freed memory for reuse instead of returning it to the kernel (process-wide).
-
-    A step allocates and frees the same few hundred kB buffers every frame. With glibc's adaptive
-    defaults, blocks above the mmap threshold are fresh mappings and the top of the heap is trimmed
-    when enough is free, so a frame could start with thousands of minor page faults (measured: about
-    4,000 per paper-width frame, 16 MB of zero-filled pages) depending on the order of allocations.
-    Fixed thresholds (mmap above 32 MiB, trim above 1 GiB) keep the blocks in the heap: 0 faults per
-    frame, and the resident memory stays at its high-water mark (flat). Returns False (nothing done)
-    where the C library has no ``mallopt`` (not glibc).
-    """
-    path = ctypes.util.find_library("c")
-    try:
-        mallopt = ctypes.CDLL(path).mallopt
-    except (OSError, AttributeError, TypeError):
-        return False
-    mmap_set = bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD))
-    return mmap_set and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
 
 
 __all__ = [

@@ -43,7 +43,7 @@ from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_sampl
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
-from skeleton_mamba.tasks.egodance.representation import encode_motion
+from skeleton_mamba.tasks.egodance.representation import FPS, encode_motion
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.cli_options import progress_default
@@ -55,10 +55,6 @@ from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
 from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npz
 from skeleton_mamba.tasks.training.base_data import SplitDataModule
-
-FPS = 30
-"""Motion and music frame rate of EgoAIST++ samples (what ``sm make-ego`` writes): the data modules' default,
-linked from them to the model (:class:`~skeleton_mamba.tasks.training.base_data.DataContract`)."""
 
 __all__ = [
     "EgoDanceDataset",

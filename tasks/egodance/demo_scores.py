@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import torch
 
+from skeleton_mamba.tasks.egodance.representation import FPS
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_checks, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.ground import foot_skating_ratio, ground_penetration
@@ -83,7 +84,7 @@ def score_held_out(
     truths: list[torch.Tensor],
     beats: list[torch.Tensor],
     train: list[torch.Tensor],
-    fps: float = 30.0,
+    fps: float = FPS,
 ) -> dict[str, dict[str, float]]:
     """Column (:data:`COLUMNS`) -> metric -> mean over the held-out windows.
 

@@ -15,14 +15,14 @@ import torch
 from torch import nn
 from torchmetrics import MeanMetric
 
-from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT
+from skeleton_mamba.tasks.egodance.representation import FPS, HEAD_JOINT
 from skeleton_mamba.tasks.motion.metrics.mmv import MMV, visual_beats
 from skeleton_mamba.tasks.motion.music import BEAT
 
 __all__ = ["DanceMetrics", "video_beats"]
 
 
-def video_beats(frames: torch.Tensor, fps: float = 30.0) -> list[np.ndarray]:
+def video_beats(frames: torch.Tensor, fps: float = FPS) -> list[np.ndarray]:
     """The visual beats B_z of MMV for a batch of frames (B, T, 3, H, W) in [0, 1] (motion-frame indices)."""
     videos = (frames.detach().float().clamp(0, 1) * 255).round().to(torch.uint8).permute(0, 1, 3, 4, 2)
     return [visual_beats(v.cpu().numpy(), fps) for v in videos]
@@ -36,7 +36,7 @@ class DanceMetrics(nn.Module):
     models: MMV is then not computed).
     """
 
-    def __init__(self, fps: float = 30.0):
+    def __init__(self, fps: float = FPS):
         super().__init__()
         self.mpjpe, self.root, self.head = MeanMetric(), MeanMetric(), MeanMetric()
         self.mmv = MMV(fps=fps, head_joint=HEAD_JOINT)

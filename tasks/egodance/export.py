@@ -9,6 +9,7 @@ from pathlib import Path
 
 import torch
 
+from skeleton_mamba.tasks.egodance.representation import FPS
 from skeleton_mamba.tasks.egodance.sampling import tokens_to_motion
 from skeleton_mamba.tasks.motion.export import DanceFiles, write_motion
 from skeleton_mamba.tasks.motion.render import RenderStyle
@@ -22,7 +23,7 @@ def write_dance(
     name: str,
     music: str | Path | None = None,
     music_start_s: float = 0.0,
-    fps: float = 30.0,
+    fps: float = FPS,
     render: bool = True,
     style: RenderStyle | None = None,
     title: str | None = None,

@@ -35,7 +35,6 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchmetrics import MeanMetric
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.egodance.data import FPS
 from skeleton_mamba.tasks.egodance.evaluation import DanceMetrics, video_beats
 from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadEstimatorConfig,
@@ -47,7 +46,7 @@ from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.prediction_writer import DancePredictionWriter
-from skeleton_mamba.tasks.egodance.representation import motion_joints
+from skeleton_mamba.tasks.egodance.representation import FPS, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
@@ -154,7 +153,7 @@ class EgoDanceModule(BackboneModule):
             ``network.resnet_layers`` (an explicit choice, warned).
         image_size: ResNet input size. Linked from the data module (not user-settable under ``sm``).
         fps: motion and music frame rate of the test metrics. Linked from the data module (its default
-            :data:`.data.FPS` when the module is built alone).
+            :data:`.representation.FPS` when the module is built alone).
         window: the training window (frames). Linked from the data module: longer test and predict
             sequences are danced long-form in windows of this length (:func:`.sampling.sample_long_dance`).
         canonicalize_init_head: the data's windows face their first frame's head heading. Linked from the

@@ -28,6 +28,7 @@ from skeleton_mamba.tasks.motion.rotations import (
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
 
 __all__ = [
+    "FPS",
     "NUM_JOINTS",
     "NUM_CHANNELS",
     "FOOT_JOINTS",
@@ -41,6 +42,11 @@ __all__ = [
     "decode_motion",
     "motion_joints",
 ]
+
+FPS = 30
+"""Motion and music frame rate of EgoAIST++ samples (what ``sm make-ego`` writes) and of EMM ([EgoMusic]): the
+data modules' default, linked from them to the model, and the default of every function of this task that
+takes a frame rate."""
 
 NUM_JOINTS = 24
 NUM_CHANNELS = 10

@@ -17,6 +17,7 @@ from skeleton_mamba.tasks.egodance.dance_args import DEFAULT_BATCH_WINDOWS  # to
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
+    FPS,
     NUM_CHANNELS,
     NUM_JOINTS,
     decode_motion,
@@ -194,7 +195,7 @@ def sample_long_dance(
     )
 
 
-def tokens_to_motion(tokens: torch.Tensor, fps: float = 30.0) -> MotionData:
+def tokens_to_motion(tokens: torch.Tensor, fps: float = FPS) -> MotionData:
     """(T, 24, 10) tokens -> :class:`MotionData` with SMPL axis-angle poses, root and FK joints."""
     rotations, root, _ = decode_motion(tokens.detach().cpu().float())
     return MotionData(

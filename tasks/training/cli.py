@@ -24,8 +24,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from skeleton_mamba import __version__
+from skeleton_mamba.allocator import keep_freed_memory
 from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
-from skeleton_mamba.tasks.training.allocator import keep_freed_memory
 from skeleton_mamba.tasks.training.library_noise import silence_library_noise
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults
 
