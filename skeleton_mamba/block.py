@@ -37,6 +37,14 @@ class SkeletonMambaBlock(nn.Module):
             ``heads``, ``mlp_dim``, ``context_dim``, ``dropout``, ``mixer``, ``cpu_slice_elements``,
             ``causal``; the defaults are :class:`~skeleton_mamba.config.SkeletonMambaConfig`'s).
         skeleton: the joints' groups (``config.group_paths`` ``None``: its group paths).
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import MixerConfig, SkeletonMambaBlock, SkeletonMambaConfig, get_skeleton
+        >>> config = SkeletonMambaConfig("ntu25", dim=16, heads=2, mlp_dim=32, mixer=MixerConfig(headdim=8))
+        >>> block = SkeletonMambaBlock(config, get_skeleton("ntu25"))
+        >>> block(torch.randn(2, 10, 25, 16)).shape  # Group, Joint and Temporal Scan, MLP: (B, T, J, D)
+        torch.Size([2, 10, 25, 16])
     """
 
     def __init__(self, config: SkeletonMambaConfig, skeleton: Skeleton):

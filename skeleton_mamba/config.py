@@ -22,6 +22,12 @@ class MixerConfig:
     ``RMSNorm(y) * silu(z)`` instead of ``RMSNorm(y * silu(z))``; ``dt_limit``: clamp of
     ``softplus(dt + dt_bias)`` to ``(min, max)``; ``bias``: biases of ``in_proj`` and ``out_proj``;
     ``conv_bias``: bias of the causal convolution.
+
+    Examples:
+        >>> from skeleton_mamba import MixerConfig
+        >>> config = MixerConfig(d_state=16, headdim=8)
+        >>> config.expand, config.chunk_size  # inner width = expand * d_model, split in heads of headdim
+        (2, 64)
     """
 
     d_state: int = 64
@@ -74,6 +80,12 @@ class SkeletonMambaConfig:
             of its widest intermediate (4 Mi elements: 16 MB in fp32), so intermediates stay in
             cache and off fresh page-faulting mappings; exact, as frames and sequences are
             independent. ``None``: one call over everything. Not used on CUDA.
+
+    Examples:
+        >>> from skeleton_mamba import SkeletonMambaConfig
+        >>> config = SkeletonMambaConfig(skeleton="smpl24", in_channels=6, dim=128, depth=8)  # [EgoMusic]
+        >>> config.dim, config.depth, config.mlp_dim  # D, N and the MLP width
+        (128, 8, 1024)
     """
 
     skeleton: str = "smpl24"

@@ -23,7 +23,15 @@ from skeleton_mamba.mixer import Mamba2Mixer
 
 
 class GroupScan(nn.Module):
-    """(B, T, G, E) group tokens -> (B, T, G, E)."""
+    """(B, T, G, E) group tokens -> (B, T, G, E).
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import GroupScan, MixerConfig
+        >>> scan = GroupScan(16, paths=[[0, 1, 2], [2, 1, 0]], mixer=MixerConfig(headdim=8))  # 2 scan orders
+        >>> scan(torch.randn(2, 10, 3, 16)).shape  # (B, T, G, E)
+        torch.Size([2, 10, 3, 16])
+    """
 
     def __init__(
         self,

@@ -15,7 +15,15 @@ from skeleton_mamba.mixer import Mamba2Mixer
 
 
 class JointScan(nn.Module):
-    """(B, T, G, P*D) group tokens -> (B, T, G, P, D) joint tokens."""
+    """(B, T, G, P*D) group tokens -> (B, T, G, P, D) joint tokens.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import JointScan, MixerConfig
+        >>> scan = JointScan(8, group_size=3, mixer=MixerConfig(headdim=8))
+        >>> scan(torch.randn(2, 10, 5, 24)).shape  # (B, T, G, P * D) -> (B, T, G, P, D)
+        torch.Size([2, 10, 5, 3, 8])
+    """
 
     def __init__(self, dim: int, group_size: int, mixer: MixerConfig | None = None):
         super().__init__()

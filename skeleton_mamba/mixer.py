@@ -35,7 +35,20 @@ from skeleton_mamba.ssd.precision import outside_autocast
 
 
 class Mamba2Mixer(nn.Module):
-    """Sequence mixer (B, L, d_model) -> (B, L, d_model), causal along L."""
+    """Sequence mixer (B, L, d_model) -> (B, L, d_model), causal along L.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import Mamba2Mixer, MixerConfig
+        >>> mixer = Mamba2Mixer(16, MixerConfig(d_state=8, headdim=8))
+        >>> u = torch.randn(1, 20, 16)
+        >>> mixer(u).shape  # (B, L, d_model) -> (B, L, d_model)
+        torch.Size([1, 20, 16])
+        >>> v = u.clone()
+        >>> v[:, 10:] += 1.0  # change the future only
+        >>> torch.allclose(mixer(u)[:, :10], mixer(v)[:, :10])  # a causal scan: the past is unchanged
+        True
+    """
 
     def __init__(self, d_model: int, config: MixerConfig | None = None):
         super().__init__()

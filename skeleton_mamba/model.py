@@ -29,6 +29,15 @@ class SkeletonMamba(PretrainedMixin, nn.Module):
         config: a :class:`SkeletonMambaConfig` (defaults: [EgoMusic] supp. Table 2, D 128, G 5, P 6, N 8).
 
     ``save_pretrained`` / ``from_pretrained`` / ``push_to_hub``: :mod:`skeleton_mamba.pretrained`.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
+        >>> config = SkeletonMambaConfig(
+        ...     "ntu25", in_channels=3, dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(headdim=8)
+        ... )
+        >>> SkeletonMamba(config)(torch.randn(2, 10, 25, 3)).shape  # (B, T, J, xyz) -> (B, T, J, dim)
+        torch.Size([2, 10, 25, 16])
     """
 
     pretrained_task = "Skeleton Mamba backbone: (B, T, J, C) joint features to (B, T, J, D) tokens."

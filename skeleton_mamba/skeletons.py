@@ -54,6 +54,13 @@ class Skeleton:
         parents: parent index per joint, ``-1`` for the root (a tree; not necessarily sorted).
         mirror: the joint index that each joint maps to under the left/right mirror.
         groups: ``G`` tuples of ``P`` joint indices for the Human Tokenizer (may overlap).
+
+    Examples:
+        >>> from skeleton_mamba import Skeleton
+        >>> arm = Skeleton("arm", ("shoulder", "elbow", "wrist"), parents=(-1, 0, 1), mirror=(0, 1, 2),
+        ...                groups=((0, 1), (1, 2)))
+        >>> arm.parents, arm.groups
+        ((-1, 0, 1), ((0, 1), (1, 2)))
     """
 
     name: str
@@ -276,7 +283,16 @@ SKELETONS: dict[str, Skeleton] = {s.name: s for s in (SMPL24, HUMANML3D22, NTU25
 
 
 def get_skeleton(skeleton: str | Skeleton) -> Skeleton:
-    """Look a skeleton up by name (``smpl24``, ``humanml3d22``, ``ntu25``, ``openpose18``)."""
+    """Look a skeleton up by name (``smpl24``, ``humanml3d22``, ``ntu25``, ``openpose18``).
+
+    Examples:
+        >>> from skeleton_mamba import SKELETONS, get_skeleton
+        >>> sorted(SKELETONS)  # the registered skeletons
+        ['humanml3d22', 'ntu25', 'openpose18', 'smpl24']
+        >>> smpl = get_skeleton("smpl24")
+        >>> len(smpl.joint_names), [len(group) for group in smpl.groups]  # G = 5 groups of P = 6 joints
+        (24, [6, 6, 6, 6, 6])
+    """
     if isinstance(skeleton, Skeleton):
         return skeleton
     try:

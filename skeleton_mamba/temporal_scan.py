@@ -50,7 +50,18 @@ def check_prefix_mask(mask: torch.Tensor) -> None:
 
 
 class TemporalScan(nn.Module):
-    """(B, T, J, D) -> (B, T, J, D), each joint scanned along T in both directions."""
+    """(B, T, J, D) -> (B, T, J, D), each joint scanned along T in both directions.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import MixerConfig, TemporalScan
+        >>> scan = TemporalScan(16, MixerConfig(headdim=8), causal=True)  # forward only, for streaming
+        >>> x = torch.randn(1, 20, 2, 16)  # (B, T, J, D)
+        >>> y = x.clone()
+        >>> y[:, 10:] += 1.0
+        >>> torch.allclose(scan(x)[:, :10], scan(y)[:, :10])  # frame t sees frames <= t only
+        True
+    """
 
     def __init__(
         self,

@@ -23,7 +23,16 @@ def _group_index(groups: Sequence[Sequence[int]]) -> torch.Tensor:
 
 
 class HumanTokenizer(nn.Module):
-    """(B, T, J, D) joint tokens -> (B, T, G, P*D) group tokens."""
+    """(B, T, J, D) joint tokens -> (B, T, G, P*D) group tokens.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import HumanTokenizer
+        >>> x = torch.tensor([10.0, 11.0, 12.0]).view(1, 1, 3, 1)  # (B, T, J = 3, D = 1)
+        >>> HumanTokenizer([[0, 1], [1, 2]])(x).flatten(0, 1)  # (B, T, G, P * D): joint 1 in both groups
+        tensor([[[10., 11.],
+                 [11., 12.]]])
+    """
 
     def __init__(self, groups: Sequence[Sequence[int]]):
         super().__init__()
@@ -35,7 +44,15 @@ class HumanTokenizer(nn.Module):
 
 
 class InverseHumanTokenizer(nn.Module):
-    """(B, T, G, P, D) per-group joint tokens -> (B, T, J, D), averaging joints shared by groups."""
+    """(B, T, G, P, D) per-group joint tokens -> (B, T, J, D), averaging joints shared by groups.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import InverseHumanTokenizer
+        >>> tokens = torch.tensor([0.0, 2.0, 4.0, 6.0]).view(1, 1, 2, 2, 1)  # (B, T, G = 2, P = 2, D = 1)
+        >>> InverseHumanTokenizer([[0, 1], [1, 2]], num_joints=3)(tokens).flatten()  # joint 1: mean(2, 4)
+        tensor([0., 3., 6.])
+    """
 
     def __init__(self, groups: Sequence[Sequence[int]], num_joints: int):
         super().__init__()

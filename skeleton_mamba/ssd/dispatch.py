@@ -102,6 +102,18 @@ def ssd(
 
     Returns:
         y (b, L, H, P) in x's dtype, or (y, final_state) when ``return_final_state``.
+
+    Examples:
+        >>> import torch
+        >>> from skeleton_mamba import ssd
+        >>> from skeleton_mamba.ssd import ssd_recurrence
+        >>> g = torch.Generator().manual_seed(0)
+        >>> x = torch.randn(1, 100, 2, 4, generator=g, dtype=torch.float64)  # (batch, L, heads, headdim)
+        >>> dt = torch.rand(1, 100, 2, generator=g, dtype=torch.float64)  # (batch, L, heads)
+        >>> A = -torch.rand(2, generator=g, dtype=torch.float64)  # (heads,)
+        >>> B, C = torch.randn(2, 1, 100, 1, 8, generator=g, dtype=torch.float64)  # (batch, L, groups, N)
+        >>> torch.allclose(ssd(x, dt, A, B, C), ssd_recurrence(x, dt, A, B, C))  # = the recurrence
+        True
     """
     kwargs = dict(
         D=D,

@@ -33,6 +33,7 @@ from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
 from skeleton_mamba.tasks.motion.music import (
     BEAT,
     HOP_LENGTH,
+    NUM_MUSIC_FEATURES,
     aist_start_bpm,
     compute_music_features,
     extract_music_features,
@@ -141,7 +142,8 @@ def edge_slice_features(
     cache = FeatureCache("music", cache_dir, enabled=use_cache)
     key = cache.key(path, settings)
     cached = cache.load(key)
-    if cached is not None and cached.ndim == 3 and cached.shape[1:] == (EDGE_SLICE_FRAMES, 35):
+    slice_shape = (EDGE_SLICE_FRAMES, NUM_MUSIC_FEATURES)
+    if cached is not None and cached.ndim == 3 and cached.shape[1:] == slice_shape:
         return cached
     native_sr = int(librosa.get_samplerate(path))
     audio = load_audio(path, native_sr)
@@ -162,7 +164,7 @@ def edge_slice_features(
         if len(features) < EDGE_SLICE_FRAMES:
             raise ValueError(f"{path}: slice {i} gives {len(features)} feature rows, EDGE expects 150")
         slices.append(features[:EDGE_SLICE_FRAMES])
-    out = np.stack(slices) if slices else np.zeros((0, EDGE_SLICE_FRAMES, 35), np.float32)
+    out = np.stack(slices) if slices else np.zeros((0, *slice_shape), np.float32)
     cache.store(key, out)
     return out
 
