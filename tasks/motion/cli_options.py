@@ -168,7 +168,8 @@ def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
         "--steps",
         type=_steps,
         default=None,
-        help="steps of ddim, dpmpp or unipc (alone on a ddpm checkpoint: ddim; default: the checkpoint's)",
+        help="steps of ddim, dpmpp or unipc (alone on a ddpm checkpoint: ddim; default: the checkpoint's, "
+        "20 for a solver chosen with --sampler)",
     )
     parser.add_argument(
         "--eta",
