@@ -51,6 +51,16 @@ QEAN_TABLE1 = {
     "Dist_g": (9.37, 7.556),
     "BeatAlign": (0.239, 0.292),
 }
+# Our test figures, named as [QEAN] Table 1 names them -> the key DanceEvaluation.compute() gives them under
+# (FID and Dist only from 2 generated sequences on; PFC only under the EDGE protocol).
+TEST_FIGURES = {
+    "FID_k": "FID_k",
+    "FID_g": "FID_g",
+    "Dist_k": "Div_k",
+    "Dist_g": "Div_g",
+    "BeatAlign": "BeatAlign",
+    "PFC": "PFC",
+}
 PAPER_SEQUENCES = 40  # generated sequences of [QEAN]'s protocol (crossmodal val + test)
 PAPER_FRAMES = 1200  # frames generated after each seed motion (20 s at 60 fps)
 
@@ -182,15 +192,9 @@ class QEANModule(BackboneModule):
     ) -> torch.Tensor:
         """Seed (B, 120, 219) + music (B, T, 35) -> ``[seed | generated]`` (B, 120 + G, 219), G = ``frames``
         or ``generate_frames``."""
-        frames = generate_fast(
-            self.model,
-            seed,
-            music,
-            self.hparams.generate_frames if frames is None else frames,
-            self.hparams.audio_chunk,
-            progress,
-        )
-        return torch.cat([seed[:, -self.model.config.seed_frames :], frames], dim=1)
+        count = self.hparams.generate_frames if frames is None else frames
+        generated = generate_fast(self.model, seed, music, count, self.hparams.audio_chunk, progress)
+        return torch.cat([seed[:, -self.model.config.seed_frames :], generated], dim=1)
 
     # ----- test -----
     def on_test_epoch_start(self) -> None:
@@ -233,9 +237,7 @@ class QEANModule(BackboneModule):
         protocol has it; FID and Dist only from 2 generated sequences on); the generated set is cleared, the
         real set kept."""
         result = self.test_evaluation.compute()
-        names = {"FID_k": "FID_k", "FID_g": "FID_g", "Dist_k": "Div_k", "Dist_g": "Div_g"}
-        names.update(BeatAlign="BeatAlign", PFC="PFC")
-        values = {ours: float(result[key]) for ours, key in names.items() if key in result}
+        values = {ours: float(result[key]) for ours, key in TEST_FIGURES.items() if key in result}
         self.test_evaluation.reset(keep_real=True)
         return values
 

@@ -142,6 +142,7 @@ TASKS_EXTRA_MODULES = (
     "jsonargparse",
     "torchmetrics",
     "transformers",
+    "diffusers",
     "librosa",
     "soundfile",
     "trimesh",
