@@ -36,6 +36,7 @@ from torch import nn
 
 from skeleton_mamba.causal_conv import causal_conv_taps
 from skeleton_mamba.ssd.discretize import compute_dtype, discretize_dt
+from skeleton_mamba.ssd.exportable import masked_quadratic
 from skeleton_mamba.ssd.precision import full_precision
 
 # Weights of at least this many entries go through oneDNN (fp32 on CPU): the Group Scan's in_proj
@@ -71,26 +72,20 @@ def short_mix(mixer, zxbcdt: torch.Tensor) -> torch.Tensor:
     """
     b, L, _ = zxbcdt.shape
     H, P, G, N = mixer.nheads, mixer.headdim, mixer.ngroups, mixer.d_state
-    R = H // G
     z0, x0, z, xbc, dt = mixer.split(zxbcdt)
     ct = compute_dtype(xbc)
     xbc = F.silu(causal_conv_taps(xbc, mixer.conv1d.weight[:, 0], mixer.conv1d.bias)).to(ct)
     x, B, C = mixer.split_xbc(xbc)
     x = x.view(b, L, H, P)
     delta = discretize_dt(dt, mixer.dt_bias, True, mixer.dt_limit, ct)  # (b, L, H)
-    # float64 cumulative log decays, per head: cs (b, H, L); mask (b, H, L, L), causal.
+    # float64 cumulative log decays, per head: cs (b, H, L).
     A = -torch.exp(mixer.A_log.to(torch.float64))
     a = (delta.to(torch.float64) * A).transpose(1, 2)  # (b, H, L)
     if torch.compiler.is_compiling():  # a reduction inductor fuses (its cumsum is a library call)
         cs = (a[..., None, :] * torch.ones(L, L, dtype=a.dtype, device=a.device).tril_()).sum(-1)
     else:
         cs = a.cumsum(dim=-1)
-    upper = torch.ones(L, L, dtype=torch.bool, device=x.device).triu_(1)
-    mask = (cs[..., :, None] - cs[..., None, :]).masked_fill_(upper, -torch.inf).exp_().to(ct)
-    # C Bᵀ once per B/C group, shared by its R heads: (b, G, L, L).
-    cb = torch.matmul(C.view(b, L, G, N).transpose(1, 2), B.view(b, L, G, N).permute(0, 2, 3, 1))
-    weight = mask.view(b, G, R, L, L).mul_(cb[:, :, None]).view(b, H, L, L)
-    y = torch.matmul(weight, (x * delta[..., None]).transpose(1, 2)).transpose(1, 2)  # (b, L, H, P)
+    y = masked_quadratic(x * delta[..., None], cs, B.view(b, L, G, N), C.view(b, L, G, N))  # (b, L, H, P)
     y = mixer.skip(y, x)
     return mixer.output(y.reshape(b, L, mixer.d_ssm).to(zxbcdt.dtype), z, z0, x0)
 

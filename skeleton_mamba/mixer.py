@@ -32,6 +32,7 @@ from skeleton_mamba.norm import RMSNormGated, upcast
 from skeleton_mamba.ssd import ssd
 from skeleton_mamba.ssd.discretize import apply_skip, compute_dtype, discretize_dt
 from skeleton_mamba.ssd.precision import outside_autocast
+from skeleton_mamba.ssd.recurrence import recurrence_step
 
 
 class Mamba2Mixer(nn.Module):
@@ -211,28 +212,28 @@ class Mamba2Mixer(nn.Module):
             xh = x.to(ct).view(b, h, p)
             decay = torch.exp(delta * -torch.exp(self.A_log.to(ct)))  # exp(Δ A), (B, H)
             xd = xh * delta[:, :, None]  # Δ x, (B, H, P)
+            Bg, Cg = B.to(ct).view(b, g, n), C.to(ct).view(b, g, n)
             if torch.compiler.is_compiling():
-                y = _state_update_pointwise(ssm_state, decay, xd, B.to(ct), C.to(ct), g)
+                y = _state_update_pointwise(ssm_state, decay, xd, Bg, Cg)
             else:
-                ssm_state.mul_(decay[:, :, None, None])
-                # Heads g*R .. g*R + R - 1 read B/C group g: one product per (stream, group), (B*G, R*P, N).
-                state = ssm_state.view(b * g, (h // g) * p, n)
-                state.baddbmm_(xd.view(b * g, -1, 1), B.to(ct).reshape(b * g, 1, n))  # += (Δx) ⊗ B
-                y = torch.bmm(state, C.to(ct).reshape(b * g, n, 1)).view(b, h, p)
+                _, y = recurrence_step(ssm_state, decay, xd, Bg, Cg, out=ssm_state)
             y = self.skip(y, xh)
         return self.out_proj(self.output(y.to(u.dtype).view(b, self.d_ssm), z, z0, x0))
 
 
 def _state_update_pointwise(
-    ssm_state: torch.Tensor, decay: torch.Tensor, xd: torch.Tensor, B: torch.Tensor, C: torch.Tensor, g: int
+    ssm_state: torch.Tensor, decay: torch.Tensor, xd: torch.Tensor, B: torch.Tensor, C: torch.Tensor
 ) -> torch.Tensor:
-    """h <- exp(Δ A) h + (Δ x) ⊗ B in place, and y = h C, as element-wise work and a reduction.
+    """Compiled twin of :func:`~skeleton_mamba.ssd.recurrence.recurrence_step` (kept: a second copy of
+    the step): h <- exp(Δ A) h + (Δ x) ⊗ B in place and y = h C, as element-wise work and a reduction.
 
     The form of :meth:`Mamba2Mixer.step` in compiled code (:class:`~skeleton_mamba.compiling.CompiledStep`):
     inductor computes the new state directly into ``ssm_state``'s storage (no matrix product whose result
-    is copied back). ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G*N) -> y (B, H, P).
+    is copied back). ``tests/test_streaming.py`` runs both forms and checks they equal the sequence mixer.
+    ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G, N) -> y (B, H, P).
     """
     b, h, p, n = ssm_state.shape
+    g = B.shape[1]
     r = h // g
     new = (ssm_state * decay[:, :, None, None]).view(b, g, r, p, n)
     new = new + xd.view(b, g, r, p, 1) * B.view(b, g, 1, 1, n)

@@ -25,6 +25,38 @@ import torch
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, apply_skip, compute_dtype, discretize_dt
 
 
+def masked_quadratic(xd: torch.Tensor, cs: torch.Tensor, B: torch.Tensor, C: torch.Tensor) -> torch.Tensor:
+    """(Lmask ∘ C Bᵀ)(Δ ⊙ X) over whole sequences from a zero state, per head h of B/C group g.
+
+    Lmask_ij = exp(cs_i - cs_j) for i ≥ j, else 0: the difference of the float64 cumulative sums is
+    masked to -inf above the diagonal before the exp (there it is positive and may overflow) and the mask
+    rounded once to xd's dtype. C Bᵀ is formed once per group. The form of :func:`ssd_exportable` and of
+    the frame path (:func:`skeleton_mamba.frame_ops.short_mix`). Inference only (in-place temporaries).
+
+    Args:
+        xd: (b, L, H, P) Δ ⊙ x in the compute dtype.
+        cs: (b, H, L) the inclusive cumulative sums of a = Δ·A over each sequence (float64).
+        B, C: (b, L, G, N) the projections in xd's dtype; head h reads group h // (H // G).
+
+    Returns:
+        (b, L, H, P) in xd's dtype.
+
+    Examples:
+        >>> import torch
+        >>> xd, B, C = torch.ones(1, 2, 1, 1), torch.ones(1, 2, 1, 1), torch.ones(1, 2, 1, 1)
+        >>> cs = torch.tensor([[[-1.0, -1.0]]], dtype=torch.float64)  # a = (-1, 0): no decay at step 2
+        >>> masked_quadratic(xd, cs, B, C).flatten().tolist()  # y_1 = 1, y_2 = exp(0) 1 + 1
+        [1.0, 2.0]
+    """
+    b, L, H, P = xd.shape
+    G = B.shape[2]
+    upper = torch.ones(L, L, dtype=torch.bool, device=xd.device).triu(1)
+    mask = (cs[..., :, None] - cs[..., None, :]).masked_fill_(upper, -torch.inf).exp_().to(xd.dtype)
+    cb = torch.matmul(C.transpose(1, 2), B.permute(0, 2, 3, 1))  # (b, G, L, L)
+    weight = mask.view(b, G, H // G, L, L).mul_(cb[:, :, None]).view(b, H, L, L)
+    return torch.matmul(weight, xd.transpose(1, 2)).transpose(1, 2)  # (b, L, H, P)
+
+
 def ssd_exportable(
     x: torch.Tensor,
     dt: torch.Tensor,
@@ -55,30 +87,25 @@ def ssd_exportable(
     ct = compute_dtype(x)
     delta = discretize_dt(dt, dt_bias, dt_softplus, dt_limit, ct)  # (b, L, H)
     xc = x.to(ct)
-    xd = (xc * delta[..., None]).view(b, L, G, R, P)  # Δ x
+    xd = xc * delta[..., None]  # Δ x, (b, L, H, P)
     Bc, Cc = B.to(ct), C.to(ct)  # (b, L, G, N)
-    cs = (delta.to(torch.float64) * A.to(torch.float64)).cumsum(dim=1).view(b, L, G, R)  # float64
-    cs_h = cs.permute(0, 2, 3, 1)  # (b, G, R, L)
-    causal = torch.ones(L, L, dtype=torch.bool, device=x.device).tril()
-    zero = torch.zeros((), dtype=cs.dtype, device=x.device)
-    # exp(cs_i - cs_j) below the diagonal, 0 above it: the difference is selected before the exp, as
-    # it is positive (and may overflow) above the diagonal.
-    mask = torch.exp(torch.where(causal, cs_h[..., :, None] - cs_h[..., None, :], zero))
-    mask = torch.where(causal, mask, zero).to(ct)  # (b, G, R, L, L)
-    cb = torch.matmul(Cc.transpose(1, 2), Bc.permute(0, 2, 3, 1))  # C Bᵀ once per group, (b, G, L, L)
-    rhs = xd.permute(0, 2, 3, 1, 4)  # (b, G, R, L, P)
-    y = torch.matmul(mask * cb[:, :, None], rhs)  # (b, G, R, L, P)
+    cs = (delta.to(torch.float64) * A.to(torch.float64)).cumsum(dim=1).transpose(1, 2)  # (b, H, L) float64
+    y = masked_quadratic(xd, cs, Bc, Cc)
     h0 = None
     if initial_state is not None:
         h0 = initial_state.to(ct).view(b, G, R, P, N)
-        from_start = torch.exp(cs_h).to(ct)[..., None]  # exp(cs_i), (b, G, R, L, 1)
-        y = y + from_start * torch.matmul(Cc.transpose(1, 2)[:, :, None], h0.transpose(-1, -2))
-    y = apply_skip(y.permute(0, 3, 1, 2, 4).reshape(b, L, H, P), xc, D).to(x.dtype)
+        from_start = torch.exp(cs).to(ct).view(b, G, R, L, 1)  # exp(cs_i)
+        y_h0 = from_start * torch.matmul(
+            Cc.transpose(1, 2)[:, :, None], h0.transpose(-1, -2)
+        )  # (b, G, R, L, P)
+        y = y + y_h0.permute(0, 3, 1, 2, 4).reshape(b, L, H, P)
+    y = apply_skip(y, xc, D).to(x.dtype)
     if not return_final_state:
         return y
-    last = cs_h[..., -1:]  # cs_{L-1}, (b, G, R, 1)
-    to_end = torch.exp(last - cs_h).to(ct)  # (b, G, R, L)
-    final = torch.matmul((rhs * to_end[..., None]).transpose(-1, -2), Bc.transpose(1, 2)[:, :, None])
+    last = cs[..., -1:]  # cs_{L-1}, (b, H, 1)
+    to_end = torch.exp(last - cs).to(ct).view(b, G, R, L, 1)  # (b, G, R, L, 1)
+    rhs = xd.view(b, L, G, R, P).permute(0, 2, 3, 1, 4)  # (b, G, R, L, P)
+    final = torch.matmul((rhs * to_end).transpose(-1, -2), Bc.transpose(1, 2)[:, :, None])  # (b, G, R, P, N)
     if h0 is not None:
-        final = final + torch.exp(last).to(ct)[..., None] * h0
+        final = final + torch.exp(last).to(ct).view(b, G, R, 1, 1) * h0
     return y, final.reshape(b, H, P, N)

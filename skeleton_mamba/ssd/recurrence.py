@@ -3,15 +3,52 @@
 h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t.
 
 One Python step per time step, so only for tests and tiny inputs. fp64 inputs are computed in fp64.
+:func:`recurrence_step` is the one step, also taken by :meth:`~skeleton_mamba.mixer.Mamba2Mixer.step` for
+a stream's next token.
 """
 
 from __future__ import annotations
 
 import torch
-from einops import repeat
 
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, apply_skip, check_inputs, compute_dtype, discretize_dt
 from skeleton_mamba.ssd.precision import full_precision
+
+
+def recurrence_step(
+    h: torch.Tensor,
+    decay: torch.Tensor,
+    xd: torch.Tensor,
+    B: torch.Tensor,
+    C: torch.Tensor,
+    out: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """One step: h' = exp(Δ A) h + (Δ x) ⊗ B and y = h' C, one product per (sequence, B/C group).
+
+    Args:
+        h: (b, H, P, N) the state before the step.
+        decay: (b, H) exp(Δ A).
+        xd: (b, H, P) Δ x.
+        B, C: (b, G, N) the projections; head h reads group h // (H // G).
+        out: optional (b, H, P, N) contiguous tensor for h' (may be ``h`` itself, then updated in place).
+
+    Returns:
+        h' (b, H, P, N) and y (b, H, P) (without the skip D ⊙ x).
+
+    Examples:
+        >>> import torch
+        >>> h, B, C = torch.zeros(1, 2, 3, 4), torch.ones(1, 1, 4), torch.ones(1, 1, 4)
+        >>> h, y = recurrence_step(h, torch.full((1, 2), 0.5), torch.ones(1, 2, 3), B, C)
+        >>> y[0, 0].tolist()  # h' = 0.5 * 0 + 1 ⊗ 1, y = Σ_n h'
+        [4.0, 4.0, 4.0]
+    """
+    b, H, P, N = h.shape
+    G = B.shape[1]
+    decayed = (h * decay[:, :, None, None]).view(b * G, H // G * P, N)
+    target = None if out is None else out.view(b * G, H // G * P, N)
+    new = torch.baddbmm(decayed, xd.reshape(b * G, -1, 1), B.reshape(b * G, 1, N), out=target)
+    y = torch.bmm(new, C.reshape(b * G, N, 1))
+    return new.view(b, H, P, N), y.view(b, H, P)
 
 
 @full_precision
@@ -50,19 +87,17 @@ def ssd_recurrence(
     """
     check_inputs(x, dt, A, B, C, D, dt_bias, initial_state)
     b, L, H, P = x.shape
-    G, N = B.shape[2], B.shape[3]
+    N = B.shape[3]
     ct = compute_dtype(x)
     delta = discretize_dt(dt, dt_bias, dt_softplus, dt_limit, ct)  # (b, L, H)
     decay = torch.exp(delta * A.to(ct))  # (b, L, H)
     xd = x.to(ct) * delta[..., None]  # (b, L, H, P)
-    Bh = repeat(B.to(ct), "b l g n -> b l (g r) n", r=H // G)
-    Ch = repeat(C.to(ct), "b l g n -> b l (g r) n", r=H // G)
+    Bc, Cc = B.to(ct), C.to(ct)
     h = x.new_zeros((b, H, P, N), dtype=ct) if initial_state is None else initial_state.to(ct)
     ys = []
     for t in range(L):
-        # h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t ;  y_t = h_t C_t
-        h = torch.addcmul(h * decay[:, t, :, None, None], xd[:, t, :, :, None], Bh[:, t, :, None, :])
-        ys.append(torch.matmul(h, Ch[:, t, :, :, None]).squeeze(-1))
+        h, y_t = recurrence_step(h, decay[:, t], xd[:, t], Bc[:, t], Cc[:, t])
+        ys.append(y_t)
     y = torch.stack(ys, dim=1) if ys else x.new_zeros((b, 0, H, P), dtype=ct)
     y = apply_skip(y, x, D).to(x.dtype)
     return (y, h) if return_final_state else y
