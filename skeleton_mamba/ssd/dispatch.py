@@ -58,7 +58,14 @@ def choose_impl(
         small_heads = (
             x.device.type == "cpu" and state_size is not None and x.shape[-1] * state_size <= SMALL_STATE
         )
-        chunks_pay = small_heads and chunk_size < length and chunk_size <= QUADRATIC_BLOCK_SIZE // 2
+        # Measured eagerly; compiled code takes the quadratic form, which inductor traces (the chunked
+        # form's ChunkScan runs eagerly, a graph break that compile_for_inference's fullgraph refuses).
+        chunks_pay = (
+            small_heads
+            and chunk_size < length
+            and chunk_size <= QUADRATIC_BLOCK_SIZE // 2
+            and not torch.compiler.is_compiling()
+        )
         return "quadratic" if short and not stateful and not chunks_pay else "chunked"
     return impl
 
