@@ -74,7 +74,16 @@ def type_hints(obj: Any) -> dict[str, Any]:
 
 def encode_value(value: Any, where: str) -> Any:
     """``value`` as JSON data: dataclasses as ``{"_type": name, field: ...}``, tuples as lists, non-finite
-    floats as strings. Raises :class:`PretrainedError` (naming ``where``) for anything else."""
+    floats as strings. Raises :class:`PretrainedError` (naming ``where``) for anything else.
+
+    Examples:
+        >>> import math
+        >>> from skeleton_mamba import SkeletonMambaConfig
+        >>> encode_value({"window": (150, 75), "clip": math.inf}, "init")
+        {'window': [150, 75], 'clip': 'inf'}
+        >>> encode_value(SkeletonMambaConfig(dim=32, depth=1), "init.config")["_type"]
+        'SkeletonMambaConfig'
+    """
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         fields = {
             f.name: encode_value(getattr(value, f.name), f"{where}.{f.name}")
@@ -101,6 +110,20 @@ def decode_value(value: Any, hint: Any, where: str) -> Any:
 
     Raises:
         PretrainedError: ``value`` does not fit ``hint`` (naming ``where``).
+
+    Examples:
+        >>> decode_value([150, 75], tuple[int, int], "init.window")
+        (150, 75)
+        >>> decode_value("inf", float, "init.clip")
+        inf
+        >>> from skeleton_mamba import SkeletonMambaConfig
+        >>> config = SkeletonMambaConfig(dim=32, depth=1)
+        >>> decode_value(encode_value(config, "config"), SkeletonMambaConfig, "config") == config
+        True
+        >>> decode_value("8", int, "init.depth")
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.pretrained_codec.PretrainedError: init.depth: expected int, got '8'
     """
     origin = typing.get_origin(hint)
     if origin in (typing.Union, types.UnionType):

@@ -18,7 +18,7 @@ import skeleton_mamba
 import skeleton_mamba.tasks.motion.metrics as toolkit_metrics
 
 API = skeleton_mamba._API  # public name -> the module that defines it
-MODULES = sorted(set(API.values()) | {"skeleton_mamba.allocator"})
+MODULES = sorted(set(API.values()) | {"skeleton_mamba.allocator", "skeleton_mamba.pretrained_codec"})
 
 
 @pytest.mark.parametrize("module_name", MODULES)
