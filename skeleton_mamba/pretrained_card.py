@@ -85,6 +85,13 @@ def model_card(model: torch.nn.Module, info: Mapping[str, Any] | None = None) ->
     ``info`` (all optional): ``task``, ``recipe``, ``module`` (class path), ``hparams`` (the module's),
     ``data`` (class path), ``data_hparams``, ``metrics`` ({name: value} of a test run), ``trained``
     ({"epoch": .., "global_step": ..}).
+
+    Examples:
+        >>> from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+        >>> model = SkeletonMamba(SkeletonMambaConfig(dim=32, depth=1, mlp_dim=16))
+        >>> card = model_card(model, {"metrics": {"MPJPE": 0.07}})
+        >>> card.splitlines()[:3], "| MPJPE | 0.07 |" in card, "[Mamba-2]" in card
+        (['---', 'library_name: skeleton-mamba', 'license: apache-2.0'], True, True)
     """
     info = dict(info or {})
     cls = type(model)

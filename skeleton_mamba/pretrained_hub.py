@@ -2,7 +2,8 @@
 Face cache, and a folder uploaded as a Hub model repository.
 
 Only the three files of a folder (:data:`~skeleton_mamba.pretrained_codec.FOLDER_FILES`) are downloaded or
-uploaded.
+uploaded. The client's functions are looked up on the ``huggingface_hub`` module at each call, so a test can
+replace them (``huggingface_hub.HfApi`` by a recorder of the calls).
 """
 
 from __future__ import annotations
@@ -41,6 +42,16 @@ def resolve_pretrained(
 
     Raises:
         PretrainedError: neither a folder nor a Hub id, or the Hub id cannot be resolved.
+
+    Examples:
+        >>> import tempfile
+        >>> folder = tempfile.mkdtemp()
+        >>> resolve_pretrained(folder) == Path(folder)  # a local folder, as given
+        True
+        >>> resolve_pretrained("no/such/folder")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.pretrained_codec.PretrainedError: no/such/folder: no such folder, and not a Hub id...
     """
     text = os.fspath(source)
     path = Path(text).expanduser()

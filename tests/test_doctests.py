@@ -18,11 +18,20 @@ import skeleton_mamba
 import skeleton_mamba.tasks.motion.metrics as toolkit_metrics
 
 API = skeleton_mamba._API  # public name -> the module that defines it
-MODULES = sorted(set(API.values()) | {"skeleton_mamba.allocator", "skeleton_mamba.pretrained_codec"})
+MODULES = sorted(
+    set(API.values())
+    | {
+        "skeleton_mamba.allocator",
+        "skeleton_mamba.pretrained_card",
+        "skeleton_mamba.pretrained_codec",
+        "skeleton_mamba.pretrained_hub",
+    }
+)
 
 
 @pytest.mark.parametrize("module_name", MODULES)
-def test_the_examples_of_each_backbone_module_run(module_name):
+def test_the_examples_of_each_backbone_module_run(module_name, tmp_path, monkeypatch):
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # the examples' folders land in the test's folder
     module = importlib.import_module(module_name)
     if module_name == "skeleton_mamba.ssd":  # the package re-exports; its examples live in dispatch
         module = importlib.import_module("skeleton_mamba.ssd.dispatch")
