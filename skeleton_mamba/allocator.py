@@ -4,15 +4,14 @@ A CPU training step allocates and frees hundreds of MB of tensors of 0.1 to 30 M
 serves blocks above its *mmap threshold* by a fresh ``mmap`` and returns the top of the heap to the system
 once more than its *trim threshold* lies free there; both thresholds adapt to the sizes freed, but only up
 to 32 MiB and 64 MiB. Every step then writes to new pages, which the kernel hands out zero-filled, one
-page fault each. On the EgoMusic demo's step (``benchmarks/bench_demo_step.py``, one thread, a 2-core AMD
-EPYC) that was 23,000 minor page faults and 40 ms of system time per step, 8 % of it; with the mmap
-threshold fixed at 32 MiB (the most glibc's own adaptation reaches) and the trim threshold at 1 GiB, 41
-faults and no system time, and the step 11 % faster. The results are bit-identical: only where the
-memory comes from changes.
+page fault each: thousands of minor page faults per training step, and a share of the step spent in the
+kernel. With the mmap threshold fixed at 32 MiB (the most glibc's own adaptation reaches) and the trim
+threshold at 1 GiB the faults and the kernel time are gone (the figures: ``benchmarks/README.md``, "Faster
+demo step"). The results are bit-identical: only where the memory comes from changes.
 
 A streamed frame (:func:`skeleton_mamba.streaming.step`) allocates and frees the same few hundred kB
-buffers every frame; with the adaptive defaults a frame could start with thousands of minor page faults
-(about 4,000 per paper-width frame, 16 MB of zero-filled pages), none with these settings.
+buffers every frame; with the adaptive defaults a frame could start with thousands of minor page faults,
+none with these settings (``benchmarks/README.md``, "Streaming").
 
 The cost: a process that went through a peak keeps that memory resident (it is reused, not returned),
 which a training run does anyway from its first step on. So ``sm fit|validate|test|predict`` and the
@@ -62,5 +61,5 @@ def keep_freed_memory(environ: Mapping[str, str] | None = None) -> bool:
         return False
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
     # The mmap threshold first: setting the trim threshold alone freezes the mmap threshold at its
-    # 128 kB start, and then every block above that is a fresh mapping (the demo's step took twice as long).
+    # 128 kB start, and then every block above that is a fresh mapping.
     return mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1 and mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1

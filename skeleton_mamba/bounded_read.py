@@ -79,6 +79,18 @@ def read_bytes(
     Raises:
         error: not a regular file, or larger than ``max_bytes`` (the message names ``path`` and ``what``).
         OSError: the file is missing or unreadable (its own ``path: reason``).
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "run.json"
+        >>> _ = path.write_text('{"epoch": 3, "scores": [0.5, 1.5]}')
+        >>> read_bytes(path, max_bytes=1024)
+        b'{"epoch": 3, "scores": [0.5, 1.5]}'
+        >>> read_bytes(path, max_bytes=10, what="run record")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.bounded_read.BoundedReadError: ...run.json: 34 bytes, more than a run record's 10
     """
     name = os.fspath(path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -110,7 +122,16 @@ def read_text(
     what: str = "file",
     error: type[Exception] = BoundedReadError,
 ) -> str:
-    """:func:`read_bytes` decoded as UTF-8 (a leading byte-order mark dropped)."""
+    """:func:`read_bytes` decoded as UTF-8 (a leading byte-order mark dropped).
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "run.json"
+        >>> _ = path.write_text('{"epoch": 3, "scores": [0.5, 1.5]}')
+        >>> read_text(path, max_bytes=1024)[:10]
+        '{"epoch": '
+    """
     data = read_bytes(path, max_bytes=max_bytes, what=what, error=error)
     try:
         return data.decode("utf-8-sig")
@@ -140,7 +161,15 @@ def _first_non_finite(text: str) -> str:
 def check_json_depth(
     text: str, source: str, max_depth: int, error: type[Exception] = BoundedReadError
 ) -> None:
-    """Refuse ``text`` nesting more than ``max_depth`` arrays / objects (brackets in strings do not count)."""
+    """Refuse ``text`` nesting more than ``max_depth`` arrays / objects (brackets in strings do not count).
+
+    Examples:
+        >>> check_json_depth('[[1], "[[["]', "ok.json", max_depth=2)  # brackets in strings do not count
+        >>> check_json_depth("[[[1]]]", "deep.json", max_depth=2)
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.bounded_read.BoundedReadError: deep.json:1:3: nested more than 2 levels deep
+    """
     depth = 0
     for match in _BRACKETS_OR_STRINGS.finditer(text):
         token = match.group()
@@ -165,6 +194,16 @@ def parse_json(
 
     ``non_finite``: ``"refuse"`` (default) or ``"null"`` (``NaN``, ``Infinity`` and overflowing numbers
     read as ``None``).
+
+    Examples:
+        >>> parse_json('{"fps": 30, "joints": [1, 2]}', "inline")
+        {'fps': 30, 'joints': [1, 2]}
+        >>> parse_json('[1.0, NaN]', "inline", non_finite="null")
+        [1.0, None]
+        >>> parse_json('[1.0, NaN]', "inline")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.bounded_read.BoundedReadError: inline...NaN...
     """
     if non_finite not in ("refuse", "null"):
         raise ValueError(f"non_finite must be 'refuse' or 'null', got {non_finite!r}")
@@ -210,6 +249,15 @@ def read_json(
     what: str = "JSON file",
     error: type[Exception] = BoundedReadError,
 ) -> Any:
-    """The JSON file ``path``, read with :func:`read_bytes` and parsed with :func:`parse_json`."""
+    """The JSON file ``path``, read with :func:`read_bytes` and parsed with :func:`parse_json`.
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "run.json"
+        >>> _ = path.write_text('{"epoch": 3, "scores": [0.5, 1.5]}')
+        >>> read_json(path)
+        {'epoch': 3, 'scores': [0.5, 1.5]}
+    """
     data = read_bytes(path, max_bytes=max_bytes, what=what, error=error)
     return parse_json(data, os.fspath(path), max_depth=max_depth, non_finite=non_finite, error=error)

@@ -24,7 +24,7 @@ projections for oneDNN and fuses the element-wise operators into C++ loops.
   unchanged, updated in place: the compiled graph writes the new convolution and SSD states back
   into the state's tensors).
 - Compiling happens on the first call. It needs a C++ compiler (inductor's CPU backend) and takes
-  about a minute at the paper width on 2 cores, much longer on a loaded machine; inductor keeps the
+  minutes of CPU at the paper width (``benchmarks/README.md``, "Compiled EMM sampling"); inductor keeps the
   compiled graph and kernels on disk (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_$USER``),
   so the next time is faster.
 - The graph is specialised to the input signature: batch size, dtype, device, the context's shape,

@@ -2,46 +2,38 @@
 
 A folder (local, or a Hub repository) holds three files:
 
-- ``config.json``: the format name and version, the network's class and its ``__init__`` arguments; config
-  dataclasses (:class:`~skeleton_mamba.SkeletonMambaConfig`, nested :class:`~skeleton_mamba.MixerConfig`,
-  a task's own) are stored as objects with a ``_type`` field naming the class, tuples as lists, non-finite
-  floats as the strings ``"inf"``, ``"-inf"``, ``"nan"`` (strict JSON). Loading rebuilds every argument
-  from the type annotations of the class's ``__init__`` and of the dataclasses' fields, so the file names
-  no code to import: ``_type`` is only compared with the annotated class.
+- ``config.json``: the format name and version, the network's class and its ``__init__`` arguments, as
+  :mod:`skeleton_mamba.pretrained_codec` encodes them (strict JSON; nothing in it names code to import).
 - ``model.safetensors``: the ``state_dict`` (parameters and persistent buffers, such as data statistics).
   It is read with ``safetensors``, which holds tensors and a JSON header only: nothing is unpickled.
-- ``README.md``: a model card (Hub YAML front matter; task, skeleton, sizes, the training recipe and data
-  and test metrics when given, citations).
+- ``README.md``: a model card (:mod:`skeleton_mamba.pretrained_card`).
 
-The mixin records the arguments a network was built with (in ``__new__``, before ``__init__`` runs), so a
-network only inherits from :class:`PretrainedMixin`. ``huggingface_hub`` and ``safetensors`` are imported
-inside the methods that use them: the backbone itself needs torch and einops only.
+This module holds :class:`PretrainedMixin`, which writes and reads the three files; the Hub client (a Hub id
+to a local folder, uploads) is :mod:`skeleton_mamba.pretrained_hub`, and the checks made before anything is
+allocated are :mod:`skeleton_mamba.pretrained_checks`. The mixin records the arguments a network was built
+with (in ``__new__``, before ``__init__`` runs), so a network only inherits from :class:`PretrainedMixin`.
+The public names of the codec, card and Hub modules are importable from here too.
 """
 
 from __future__ import annotations
 
 import copy
-import dataclasses
 import inspect
 import json
-import math
 import os
-import re
 import tempfile
-import types
-import typing
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
+from safetensors.torch import load_file, save
 
 from skeleton_mamba.atomic import atomic_path
-from skeleton_mamba.bounded_read import read_json
-from skeleton_mamba.config import SkeletonMambaConfig
+from skeleton_mamba.pretrained_card import CITATIONS, model_card
 from skeleton_mamba.pretrained_checks import (
-    MAX_CONFIG_BYTES,
     MAX_PARAMETERS,
     check_finite_weights,
     check_header_fits,
@@ -50,6 +42,20 @@ from skeleton_mamba.pretrained_checks import (
     read_safetensors_header,
     total_values,
 )
+from skeleton_mamba.pretrained_codec import (
+    CARD_NAME,
+    CONFIG_NAME,
+    FORMAT,
+    FORMAT_VERSION,
+    WEIGHTS_NAME,
+    PretrainedError,
+    class_name,
+    decode_value,
+    encode_value,
+    read_pretrained_config,
+    type_hints,
+)
+from skeleton_mamba.pretrained_hub import push_folder_to_hub, resolve_pretrained
 
 __all__ = [
     "CARD_NAME",
@@ -68,385 +74,11 @@ __all__ = [
     "resolve_pretrained",
 ]
 
-FORMAT = "skeleton-mamba-pretrained"
-FORMAT_VERSION = 1
-CONFIG_NAME = "config.json"
-WEIGHTS_NAME = "model.safetensors"
-CARD_NAME = "README.md"
-_HUB_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")
-_NON_FINITE = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}
-
-# BibTeX of the papers a card cites, by the keys of the project's docs/references.md.
-CITATIONS: dict[str, str] = {
-    "EgoMusic": """@inproceedings{nguyen2025egomusic,
-  title = {EgoMusic-driven Human Dance Motion Estimation with Skeleton Mamba},
-  author = {Nguyen, Q. and Le, N. and Huang, B. and others},
-  booktitle = {ICCV},
-  year = {2025},
-  eprint = {2508.10522},
-  archivePrefix = {arXiv}
-}""",
-    "Mamba-2": """@inproceedings{dao2024transformers,
-  title = {Transformers are {SSMs}: Generalized Models and Efficient Algorithms Through Structured State
-           Space Duality},
-  author = {Dao, Tri and Gu, Albert},
-  booktitle = {ICML},
-  year = {2024},
-  eprint = {2405.21060},
-  archivePrefix = {arXiv}
-}""",
-    "QEAN": """@article{zhou2024qean,
-  title = {{QEAN}: Quaternion-Enhanced Attention Network for Visual Dance Generation},
-  author = {Zhou, Z. and Huo, Y. and Huang, G. and others},
-  journal = {arXiv preprint arXiv:2403.11626},
-  year = {2024}
-}""",
-    "EDGE": """@inproceedings{tseng2023edge,
-  title = {{EDGE}: Editable Dance Generation From Music},
-  author = {Tseng, Jonathan and Castellon, Rodrigo and Liu, C. Karen},
-  booktitle = {CVPR},
-  year = {2023},
-  eprint = {2211.10658},
-  archivePrefix = {arXiv}
-}""",
-    "MDM": """@inproceedings{tevet2023mdm,
-  title = {Human Motion Diffusion Model},
-  author = {Tevet, G. and Raab, S. and Gordon, B. and others},
-  booktitle = {ICLR},
-  year = {2023},
-  eprint = {2209.14916},
-  archivePrefix = {arXiv}
-}""",
-    "PYSKL": """@inproceedings{duan2022pyskl,
-  title = {{PYSKL}: Towards Good Practices for Skeleton Action Recognition},
-  author = {Duan, Haodong and Wang, Jiaqi and Chen, Kai and Lin, Dahua},
-  booktitle = {ACM Multimedia},
-  year = {2022},
-  eprint = {2205.09443},
-  archivePrefix = {arXiv}
-}""",
-}
-
-
-class PretrainedError(ValueError):
-    """A folder or Hub id that is not a usable pretrained network (the message names the file and fault)."""
-
-
-def class_name(cls: type) -> str:
-    """The name a ``config.json`` stores for ``cls``: ``module.QualName``."""
-    return f"{cls.__module__}.{cls.__qualname__}"
-
-
-# ---------------------------------------------------------------------------------------------- values
-
-
-def encode_value(value: Any, where: str) -> Any:
-    """``value`` as JSON data: dataclasses as ``{"_type": name, field: ...}``, tuples as lists, non-finite
-    floats as strings. Raises :class:`PretrainedError` (naming ``where``) for anything else."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        fields = {
-            f.name: encode_value(getattr(value, f.name), f"{where}.{f.name}")
-            for f in dataclasses.fields(value)
-        }
-        return {"_type": type(value).__name__, **fields}
-    if isinstance(value, bool) or value is None or isinstance(value, (int, str)):
-        return value
-    if isinstance(value, float):
-        return (
-            value
-            if math.isfinite(value)
-            else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
-        )
-    if isinstance(value, (list, tuple)):
-        return [encode_value(v, f"{where}[{i}]") for i, v in enumerate(value)]
-    if isinstance(value, Mapping) and all(isinstance(k, str) for k in value):
-        return {k: encode_value(v, f"{where}.{k}") for k, v in value.items()}
-    raise PretrainedError(f"{where}: a {type(value).__name__} cannot be stored in {CONFIG_NAME}")
-
-
-def _hints(obj: Any) -> dict[str, Any]:
-    try:
-        return typing.get_type_hints(obj)
-    except (NameError, TypeError):  # an annotation that does not resolve: values pass through as stored
-        return {}
-
-
-def decode_value(value: Any, hint: Any, where: str) -> Any:
-    """Rebuild a value :func:`encode_value` wrote, guided by the annotation ``hint`` (``Any``: as stored).
-
-    Raises:
-        PretrainedError: ``value`` does not fit ``hint`` (naming ``where``).
-    """
-    origin = typing.get_origin(hint)
-    if origin in (typing.Union, types.UnionType):
-        options = typing.get_args(hint)
-        if value is None and type(None) in options:
-            return None
-        errors = []
-        for option in (o for o in options if o is not type(None)):
-            try:
-                return decode_value(value, option, where)
-            except PretrainedError as err:
-                errors.append(str(err))
-        raise PretrainedError(errors[0] if errors else f"{where}: {value!r} does not fit {hint}")
-    if inspect.isclass(hint) and dataclasses.is_dataclass(hint):
-        if not isinstance(value, dict):
-            raise PretrainedError(f"{where}: expected a {hint.__name__} object, got {value!r}")
-        stored = value.get("_type", hint.__name__)
-        if stored != hint.__name__:
-            raise PretrainedError(f"{where}: stores a {stored!r}, the class expects a {hint.__name__}")
-        fields = {f.name: f for f in dataclasses.fields(hint)}
-        unknown = sorted(set(value) - set(fields) - {"_type"})
-        if unknown:
-            raise PretrainedError(f"{where}: {hint.__name__} has no field {unknown[0]!r}")
-        hints = _hints(hint)
-        kwargs = {
-            name: decode_value(item, hints.get(name, Any), f"{where}.{name}")
-            for name, item in value.items()
-            if name != "_type"
-        }
-        return hint(**kwargs)
-    if origin in (list, tuple):
-        if not isinstance(value, list):
-            raise PretrainedError(f"{where}: expected a list, got {value!r}")
-        args = typing.get_args(hint)
-        if origin is tuple and args and args[-1] is not Ellipsis:
-            if len(args) != len(value):
-                raise PretrainedError(f"{where}: expected {len(args)} values, got {len(value)}")
-            return tuple(decode_value(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
-        item = args[0] if args else Any
-        items = [decode_value(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
-        return tuple(items) if origin is tuple else items
-    if hint is float:
-        if isinstance(value, str) and value in _NON_FINITE:
-            return _NON_FINITE[value]
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        raise PretrainedError(f"{where}: expected a number, got {value!r}")
-    if hint in (int, str, bool):
-        if type(value) is not hint:
-            raise PretrainedError(f"{where}: expected {hint.__name__}, got {value!r}")
-        return value
-    return value  # dict, Any, an unresolved annotation: JSON data as stored
-
-
-# ---------------------------------------------------------------------------------------------- folders
-
-
-def resolve_pretrained(
-    source: str | os.PathLike[str],
-    *,
-    revision: str | None = None,
-    cache_dir: str | os.PathLike[str] | None = None,
-    local_files_only: bool = False,
-    token: str | bool | None = None,
-) -> Path:
-    """The local folder of ``source``: a folder as given, or a Hub id (``org/name``) through the Hugging Face
-    cache (downloaded once; ``HF_HUB_OFFLINE=1`` or ``local_files_only`` reads the cache only).
-
-    Raises:
-        PretrainedError: neither a folder nor a Hub id, or the Hub id cannot be resolved.
-    """
-    text = os.fspath(source)
-    path = Path(text).expanduser()
-    if path.is_dir():
-        return path
-    if path.exists():
-        raise PretrainedError(
-            f"{text}: is a file; a from_pretrained folder ({CONFIG_NAME} + {WEIGHTS_NAME}) "
-            "or a Hub id is expected"
-        )
-    if not _HUB_ID.match(text) or text.startswith((".", "~")):
-        raise PretrainedError(f"{text}: no such folder, and not a Hub id (org/name)")
-    from huggingface_hub import snapshot_download  # lazy: optional dependency (Hub folders only)
-    from huggingface_hub.utils import (  # lazy: optional dependency
-        HfHubHTTPError,
-        HFValidationError,
-        LocalEntryNotFoundError,
-    )
-
-    try:
-        folder = snapshot_download(
-            text,
-            revision=revision,
-            cache_dir=cache_dir,
-            local_files_only=local_files_only,
-            token=token,
-            allow_patterns=[CONFIG_NAME, WEIGHTS_NAME, CARD_NAME],
-            library_name="skeleton-mamba",
-        )
-    except (LocalEntryNotFoundError, HFValidationError, HfHubHTTPError, OSError) as err:
-        first = str(err).strip().splitlines()
-        raise PretrainedError(
-            f"{text}: no such folder, and the Hub id does not resolve ({type(err).__name__}: "
-            f"{first[0] if first else ''})"
-        ) from err
-    return Path(folder)
-
-
-def read_pretrained_config(folder: str | os.PathLike[str]) -> dict:
-    """``folder``'s ``config.json``, checked for the format name and version.
-
-    Raises:
-        PretrainedError: missing, not JSON, another format or a newer version.
-    """
-    path = Path(folder) / CONFIG_NAME
-    try:
-        config = read_json(path, max_bytes=MAX_CONFIG_BYTES, what=CONFIG_NAME, error=PretrainedError)
-    except FileNotFoundError:
-        raise PretrainedError(f"{path}: missing (not a from_pretrained folder)") from None
-    if not isinstance(config, dict) or config.get("format") != FORMAT:
-        raise PretrainedError(
-            f"{path}: not a {FORMAT} config (its 'format' is "
-            f"{config.get('format') if isinstance(config, dict) else None!r})"
-        )
-    version = config.get("format_version")
-    if not isinstance(version, int) or version > FORMAT_VERSION:
-        raise PretrainedError(
-            f"{path}: format_version {version!r}, this version reads {FORMAT_VERSION} and older"
-        )
-    if not isinstance(config.get("class"), str) or not isinstance(config.get("init", {}), dict):
-        raise PretrainedError(f"{path}: needs a 'class' name and an 'init' object")
-    return config
-
 
 def _write_atomic(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file beside it (:mod:`skeleton_mamba.atomic`)."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
-
-
-def push_folder_to_hub(
-    folder: str | os.PathLike[str],
-    repo_id: str,
-    *,
-    private: bool | None = None,
-    token: str | None = None,
-    revision: str | None = None,
-    commit_message: str = "Upload Skeleton Mamba network",
-) -> Any:
-    """Create the Hub model repository ``repo_id`` (when missing) and upload ``folder``'s three files."""
-    read_pretrained_config(folder)
-    from huggingface_hub import HfApi  # lazy: optional dependency (Hub uploads only)
-
-    api = HfApi(token=token)
-    api.create_repo(repo_id, private=private, exist_ok=True, repo_type="model")
-    return api.upload_folder(
-        repo_id=repo_id,
-        folder_path=os.fspath(folder),
-        revision=revision,
-        commit_message=commit_message,
-        allow_patterns=[CONFIG_NAME, WEIGHTS_NAME, CARD_NAME],
-        repo_type="model",
-    )
-
-
-# ---------------------------------------------------------------------------------------------- card
-
-
-def _backbone_config(model: torch.nn.Module) -> SkeletonMambaConfig | None:
-    for module in model.modules():
-        config = getattr(module, "config", None)
-        if isinstance(config, SkeletonMambaConfig):
-            return config
-    return None
-
-
-def _table(rows: Mapping[str, Any]) -> list[str]:
-    return ["| | |", "| --- | --- |", *(f"| {k} | {v} |" for k, v in rows.items())]
-
-
-def model_card(model: torch.nn.Module, info: Mapping[str, Any] | None = None) -> str:
-    """The README.md of a folder: Hub front matter, task, skeleton and sizes, recipe, data, metrics, citation.
-
-    ``info`` (all optional): ``task``, ``recipe``, ``module`` (class path), ``hparams`` (the module's),
-    ``data`` (class path), ``data_hparams``, ``metrics`` ({name: value} of a test run), ``trained``
-    ({"epoch": .., "global_step": ..}).
-    """
-    info = dict(info or {})
-    cls = type(model)
-    keys = list(dict.fromkeys([*info.get("citations", ()), *getattr(cls, "pretrained_citations", ())]))
-    backbone = _backbone_config(model)
-    params = sum(p.numel() for p in model.parameters())
-    task = info.get("task") or getattr(cls, "pretrained_task", "")
-    tags = ["skeleton-mamba", "mamba2", "human-motion", "pytorch"]
-    lines = ["---", "library_name: skeleton-mamba", "license: apache-2.0", "tags:", *(f"- {t}" for t in tags)]
-    lines += ["---", "", f"# {cls.__name__}", ""]
-    if task:
-        lines += [f"{task}", ""]
-    sizes: dict[str, Any] = {"class": f"`{class_name(cls)}`", "parameters": f"{params:,}"}
-    if backbone is not None:
-        mixer = backbone.mixer
-        sizes.update(
-            skeleton=f"`{backbone.skeleton}`",
-            **{"width D": backbone.dim, "blocks N": backbone.depth, "MLP width": backbone.mlp_dim},
-            **{"temporal scan": "causal (streams frame by frame)" if backbone.causal else "bidirectional"},
-            **{
-                "cross-attention context": backbone.context_dim
-                if backbone.context_dim is not None
-                else "none"
-            },
-        )
-        if mixer is not None:
-            sizes.update({"SSD state N / head width": f"{mixer.d_state} / {mixer.headdim}"})
-    lines += ["## Network", "", *_table(sizes), ""]
-    if info.get("recipe") or info.get("module") or info.get("hparams"):
-        lines += ["## Training", ""]
-        if info.get("recipe"):
-            lines += [f"Recipe: `{info['recipe']}`.", ""]
-        if info.get("module"):
-            lines += [f"Lightning module: `{info['module']}`.", ""]
-        if info.get("trained"):
-            lines += [", ".join(f"{k} {v}" for k, v in info["trained"].items()) + ".", ""]
-        if info.get("hparams"):
-            lines += [
-                "Hyper-parameters:",
-                "",
-                "```json",
-                json.dumps(encode_value(info["hparams"], "hparams"), indent=2),
-                "```",
-                "",
-            ]
-    if info.get("data") or info.get("data_hparams"):
-        lines += ["## Data", ""]
-        if info.get("data"):
-            lines += [f"Data module: `{info['data']}`.", ""]
-        if info.get("data_hparams"):
-            lines += [
-                "```json",
-                json.dumps(encode_value(info["data_hparams"], "data_hparams"), indent=2),
-                "```",
-                "",
-            ]
-    lines += ["## Metrics", ""]
-    metrics = info.get("metrics")
-    if metrics:
-        lines += ["| metric | value |", "| --- | --- |", *(f"| {k} | {v} |" for k, v in metrics.items()), ""]
-    else:
-        lines += ["No test was run for this folder.", ""]
-    lines += [
-        "## Use",
-        "",
-        "```python",
-        f"from {cls.__module__} import {cls.__name__}",
-        "",
-        f'model = {cls.__name__}.from_pretrained("path/or/org-name")  # safetensors only, eval mode',
-        "```",
-        "",
-    ]
-    if keys:
-        cited = ", ".join(f"[{k}]" for k in keys)
-        lines += [
-            "## Citation",
-            "",
-            f"Papers, by the keys of the project's `docs/references.md`: {cited}.",
-            "",
-        ]
-        lines += ["```bibtex", *(CITATIONS[k] for k in keys if k in CITATIONS), "```", ""]
-    return "\n".join(lines)
-
-
-# ---------------------------------------------------------------------------------------------- mixin
 
 
 class PretrainedMixin:
@@ -508,8 +140,6 @@ class PretrainedMixin:
         more JSON entries of ``config.json`` (an exported folder's Lightning module). Each file is written
         to a temporary file beside it and renamed, ``config.json`` last.
         """
-        from safetensors.torch import save  # lazy: optional dependency (pretrained folders only)
-
         folder = Path(save_directory)
         folder.mkdir(parents=True, exist_ok=True)
         config = self.pretrained_config()
@@ -552,7 +182,7 @@ class PretrainedMixin:
         stored = config.get("class")
         if stored != class_name(cls):
             raise PretrainedError(f"{source}: holds a {stored!r}, not a {class_name(cls)}")
-        hints = _hints(cls.__init__)
+        hints = type_hints(cls.__init__)
         parameters = inspect.signature(cls.__init__).parameters
         takes_kwargs = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values())
         kwargs = {}
@@ -613,9 +243,6 @@ class PretrainedMixin:
             PretrainedError: an unreadable file, a missing or unexpected tensor, a shape or type that
                 differs, a NaN or Inf.
         """
-        from safetensors import SafetensorError  # lazy: optional dependency (pretrained folders only)
-        from safetensors.torch import load_file  # lazy: optional dependency (pretrained folders only)
-
         name = type(self).__name__
         try:
             header = read_safetensors_header(path, PretrainedError)

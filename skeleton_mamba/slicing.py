@@ -4,8 +4,8 @@ The per-frame scans (Group Scan, Joint Scan), the per-token sublayers and the pe
 Scan treat frames (or joint sequences) independently, so ``f(x)`` equals ``cat([f(s) for s in
 x.split(n, dim)], dim)``. On a CPU, one call over a long sequence creates intermediates of hundreds
 of MB: each is a fresh ``mmap`` that the kernel zero-fills page by page (glibc serves every block
-above its 32 MB threshold that way), which made the backbone grow faster than linearly in T and
-spend most of a short sequence's time in page faults. Slices of a few MB stay in cache and are
+above its 32 MB threshold that way), so unsliced the backbone grows faster than linearly in T and
+spends most of a short sequence's time in page faults. Slices of a few MB stay in cache and are
 served again and again from the heap. On CUDA the whole input goes through in one call, and so it
 does under ``torch.compile``: the slices would be traced one by one (a graph many times the size of
 one call's, compiling for many minutes), and the compiled code fuses most intermediates away.

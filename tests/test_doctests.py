@@ -1,7 +1,10 @@
-"""Every public name of the backbone has a short example in its docstring, and every example runs.
+"""Every public name of the backbone, and every reader and metric of the toolkit, has a short example in
+its docstring, and every example runs.
 
 The examples are doctests (``>>>``); this module runs them with :mod:`doctest` so the README's test command
-checks them (``python -m pytest --doctest-modules skeleton_mamba`` runs the same examples).
+(and CI) checks them (``python -m pytest --doctest-modules skeleton_mamba`` runs the backbone's examples,
+``python -m pytest --doctest-modules tasks/motion`` the toolkit's). The examples that need a file write it
+under :func:`tempfile.mkdtemp`, pointed here at the test's temporary folder.
 """
 
 from __future__ import annotations
@@ -12,13 +15,23 @@ import importlib
 import pytest
 
 import skeleton_mamba
+import skeleton_mamba.tasks.motion.metrics as toolkit_metrics
 
 API = skeleton_mamba._API  # public name -> the module that defines it
-MODULES = sorted(set(API.values()) | {"skeleton_mamba.allocator"})
+MODULES = sorted(
+    set(API.values())
+    | {
+        "skeleton_mamba.allocator",
+        "skeleton_mamba.pretrained_card",
+        "skeleton_mamba.pretrained_codec",
+        "skeleton_mamba.pretrained_hub",
+    }
+)
 
 
 @pytest.mark.parametrize("module_name", MODULES)
-def test_the_examples_of_each_backbone_module_run(module_name):
+def test_the_examples_of_each_backbone_module_run(module_name, tmp_path, monkeypatch):
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # the examples' folders land in the test's folder
     module = importlib.import_module(module_name)
     if module_name == "skeleton_mamba.ssd":  # the package re-exports; its examples live in dispatch
         module = importlib.import_module("skeleton_mamba.ssd.dispatch")
@@ -36,3 +49,96 @@ def test_every_public_name_has_an_example(name):
     assert any(name in example.source for t in examples for example in t.examples), (
         f"{name}: no example in {module.__name__} uses it"
     )
+
+
+# The toolkit's readers and metrics (and the backbone's bounded reader they use): module -> the names whose
+# examples run here.
+MOTION = "skeleton_mamba.tasks.motion"
+READERS = {
+    "skeleton_mamba.bounded_read": ("check_json_depth", "parse_json", "read_bytes", "read_json", "read_text"),
+    f"{MOTION}.aistpp": ("load_aistpp_motion", "load_split"),
+    f"{MOTION}.audio_io": ("open_audio", "open_wav_stream", "probe_audio", "read_audio"),
+    f"{MOTION}.bvh": ("load_bvh", "save_bvh"),
+    f"{MOTION}.gltf_read": ("read_glb",),
+    f"{MOTION}.humanml3d_features": ("read_feature_vector", "read_features", "read_statistics"),
+    f"{MOTION}.motion_file": ("load_motion", "save_motion"),
+    f"{MOTION}.motion_reader": ("load_joints", "load_skeleton_motion"),
+    f"{MOTION}.ntu": ("parse_ntu_name", "read_skeleton_file"),
+    f"{MOTION}.safe_pickle": ("safe_load_pickle", "safe_loads_pickle"),
+    f"{MOTION}.value_checks": ("load_npy", "load_npz"),
+}
+METRICS = {
+    f"{MOTION}.metrics.beat_align": (
+        "BeatAlign",
+        "alignment_score",
+        "kinematic_beats",
+        "sequence_beat_align",
+    ),
+    f"{MOTION}.metrics.dynamics": (
+        "dynamics_checks",
+        "dynamics_ratios",
+        "high_frequency_energy",
+        "motion_amplitude",
+        "motion_jitter",
+    ),
+    f"{MOTION}.metrics.evaluation": ("DanceEvaluation",),
+    f"{MOTION}.metrics.fid": (
+        "FrechetMotionDistance",
+        "MotionDiversity",
+        "average_pairwise_distance",
+        "frechet_distance",
+        "motion_features",
+        "normalise_by_reference",
+    ),
+    f"{MOTION}.metrics.geometric": ("geometric_features",),
+    f"{MOTION}.metrics.ground": ("foot_skating_ratio", "ground_penetration"),
+    f"{MOTION}.metrics.held_out_dynamics": (
+        "format_dynamics",
+        "held_out_dynamics",
+        "held_out_dynamics_checks",
+    ),
+    f"{MOTION}.metrics.kinetic": ("kinetic_features",),
+    f"{MOTION}.metrics.mmv": ("MMV", "flow_magnitudes", "load_video_frames", "visual_beats"),
+    f"{MOTION}.metrics.pfc": ("PFC", "pfc_sequence_score"),
+    f"{MOTION}.metrics.pose_distance": (
+        "canonical_poses",
+        "mpjpe",
+        "nearest_pose_distance",
+        "pose_set_distance",
+    ),
+    f"{MOTION}.metrics.protocols": ("get_protocol",),
+}
+TOOLKIT = {**READERS, **METRICS}
+
+
+@pytest.mark.parametrize("module_name", sorted(TOOLKIT))
+def test_the_examples_of_each_toolkit_reader_and_metric_module_run(module_name, tmp_path, monkeypatch):
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # the examples' files land in the test's folder
+    module = importlib.import_module(module_name)
+    result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE, verbose=False)
+    assert result.attempted > 0, f"{module_name} has no example"
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {module_name} failed"
+
+
+@pytest.mark.parametrize(
+    ("module_name", "name"), sorted((module, name) for module, names in TOOLKIT.items() for name in names)
+)
+def test_every_toolkit_reader_and_metric_has_an_example(module_name, name):
+    module = importlib.import_module(module_name)
+    owner = getattr(module, name)
+    tests = doctest.DocTestFinder(recurse=False).find(owner, name, module=module)
+    examples = [example for test in tests for example in test.examples]
+    assert any(name in example.source for example in examples), (
+        f"{module_name}.{name}: its docstring has no example that uses it"
+    )
+
+
+def test_every_public_metric_is_listed():
+    """Each class and function the metrics package exports is in :data:`METRICS` (so it has an example)."""
+    listed = {name for names in METRICS.values() for name in names}
+    exported = {
+        name
+        for name in toolkit_metrics.__all__
+        if callable(getattr(toolkit_metrics, name)) and not name.isupper()
+    }
+    assert exported - listed == set()

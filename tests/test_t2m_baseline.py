@@ -38,3 +38,24 @@ def test_width_for_parameters_is_the_nearest_multiple():
     error = abs(count(width) - target)
     assert error <= abs(count(width - 8) - target) and error <= abs(count(width + 8) - target)
     assert error / target < 0.05
+
+
+def test_the_baseline_positions_are_mdms_positional_encoding_bit_for_bit():
+    """The shared embedding's ``"interleaved"`` order is MDM's ``PositionalEncoding`` (written out here as
+    MDM computes it), equal bit for bit, so a transformer baseline's outputs do not change with it."""
+    import math
+
+    from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
+
+    for width in (16, 30, 384, 512):
+        frames = 200
+        position = torch.arange(frames, dtype=torch.float32)[:, None]
+        div = torch.exp(torch.arange(0, width, 2, dtype=torch.float32) * (-math.log(10000.0) / width))
+        mdm = torch.zeros(frames, width)
+        mdm[:, 0::2] = torch.sin(position * div)
+        mdm[:, 1::2] = torch.cos(position * div)
+        assert torch.equal(sinusoidal_embedding(torch.arange(frames), width, order="interleaved"), mdm)
+        # the same frequencies as the [sin, cos] order, channels interleaved
+        halves = sinusoidal_embedding(torch.arange(frames), width)
+        interleaved = torch.stack((halves[:, : width // 2], halves[:, width // 2 :]), dim=-1).flatten(-2)
+        torch.testing.assert_close(interleaved, mdm, atol=1e-5, rtol=0)

@@ -42,8 +42,9 @@ class CompiledDenoiser:
     """A denoiser's call ``(x_t, t, context) -> x0`` (an EMM's) compiled for inference, weights frozen.
 
     A :class:`~skeleton_mamba.tasks.training.diffusion.samplers.NullConditioned` denoiser like the model, so
-    classifier-free guidance stays one call on the doubled batch. The first call compiles (about 2 minutes
-    of CPU at the seed size); every denoising step after it reuses the compiled code.
+    classifier-free guidance stays one call on the doubled batch. The first call compiles (its cost:
+    ``benchmarks/README.md``, "Compiled EMM sampling"); every denoising step after it reuses the compiled
+    code.
     """
 
     def __init__(self, model: torch.nn.Module):

@@ -56,6 +56,20 @@ def load_aistpp_motion(path: str | PathLike[str]) -> MotionData:
             sizes beyond the unpickler's bounds.
         MotionFileError: keys, shapes or dtypes are wrong (complex, datetime, object arrays are refused,
             not cast), or values are implausible (the message names the file and the key).
+
+    Examples:
+        An AIST++ annotation pickle: SMPL poses (T, 72), root translation (T, 3) in centimetres, the scale.
+
+        >>> import pickle, tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> data = {"smpl_poses": np.zeros((3, 72)), "smpl_trans": np.zeros((3, 3))}
+        >>> data["smpl_scaling"] = np.array([93.0])
+        >>> path = Path(tempfile.mkdtemp()) / "gBR_sBM_cAll_d04_mBR0_ch01.pkl"
+        >>> _ = path.write_bytes(pickle.dumps(data))
+        >>> motion = load_aistpp_motion(path)
+        >>> motion.fps, motion.skeleton, motion.poses.shape, motion.scaling
+        (60.0, 'smpl24', (3, 24, 3), 93.0)
     """
     path = Path(path)
     data = safe_load_pickle(path)
@@ -84,7 +98,13 @@ def load_aistpp_motion(path: str | PathLike[str]) -> MotionData:
 
 
 def load_split(split: str) -> list[str]:
-    """Sequence names of a split: ``"train"``, ``"test"`` or ``"ignore"`` (or the file stems)."""
+    """Sequence names of a split: ``"train"``, ``"test"`` or ``"ignore"`` (or the file stems).
+
+    Examples:
+        >>> test = load_split("test")
+        >>> len(test), all(name.startswith("g") for name in test)
+        (20, True)
+    """
     stem = SPLIT_NAMES.get(split, split)
     if stem in ("val", "crossmodal_val"):
         raise FileNotFoundError(

@@ -388,6 +388,23 @@ def open_wav_stream(stream: BinaryIO, name: str = "standard input") -> AudioRead
     Any channel count up to :data:`MAX_CHANNELS`, PCM 8/16/24/32-bit or float 32/64-bit. A claimed data
     size above :data:`MAX_DURATION_S` (``arecord`` writes a huge one for an open-ended recording) counts as
     unknown: the stream is read to its end, at most :data:`MAX_DURATION_S`.
+
+    Examples:
+        >>> import tempfile, wave
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
+        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
+        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
+        ...     f.setnchannels(1)
+        ...     f.setsampwidth(2)
+        ...     f.setframerate(16000)
+        ...     f.writeframes(tone.tobytes())
+        >>> import io
+        >>> with open_wav_stream(io.BytesIO(path.read_bytes()), name="pipe") as reader:
+        ...     samples = np.concatenate(list(reader.blocks()))
+        >>> reader.info.name, samples.shape
+        ('pipe', (8000, 1))
     """
     layout = _parse_wav_header(stream, name, "stream")
     if isinstance(layout, int):
@@ -463,6 +480,22 @@ def open_audio(path: str | os.PathLike) -> AudioReader:
     Raises:
         FileNotFoundError: ``path`` is not a file.
         AudioFileError: the header is malformed or out of bounds, or the format is not one libsndfile reads.
+
+    Examples:
+        >>> import tempfile, wave
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
+        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
+        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
+        ...     f.setnchannels(1)
+        ...     f.setsampwidth(2)
+        ...     f.setframerate(16000)
+        ...     f.writeframes(tone.tobytes())
+        >>> with open_audio(path) as reader:
+        ...     blocks = list(reader.blocks(block_frames=3000))
+        >>> reader.info.sample_rate, [block.shape for block in blocks]
+        (16000, [(3000, 1), (3000, 1), (2000, 1)])
     """
     path = Path(path)
     if not path.is_file():
@@ -489,7 +522,23 @@ def open_audio(path: str | os.PathLike) -> AudioReader:
 
 
 def probe_audio(path: str | os.PathLike) -> AudioInfo:
-    """The checked header of ``path`` (:func:`open_audio` without decoding a sample)."""
+    """The checked header of ``path`` (:func:`open_audio` without decoding a sample).
+
+    Examples:
+        >>> import tempfile, wave
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
+        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
+        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
+        ...     f.setnchannels(1)
+        ...     f.setsampwidth(2)
+        ...     f.setframerate(16000)
+        ...     f.writeframes(tone.tobytes())
+        >>> info = probe_audio(path)
+        >>> info.sample_rate, info.channels, info.frames, info.encoding, info.duration_s
+        (16000, 1, 8000, 'PCM 16-bit', 0.5)
+    """
     with open_audio(path) as reader:
         return reader.info
 
@@ -506,6 +555,21 @@ def read_audio(
     Raises:
         FileNotFoundError: no such file.
         AudioFileError: a refused header, a decode error, bad samples, or no samples at all.
+
+    Examples:
+        >>> import tempfile, wave
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
+        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
+        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
+        ...     f.setnchannels(1)
+        ...     f.setsampwidth(2)
+        ...     f.setframerate(16000)
+        ...     f.writeframes(tone.tobytes())
+        >>> samples, rate = read_audio(path, offset_s=0.25)
+        >>> samples.shape, samples.dtype, rate, round(float(abs(samples).max()), 2)
+        ((4000,), dtype('float32'), 16000, 0.5)
     """
     with open_audio(path) as reader:
         info = reader.info

@@ -266,7 +266,26 @@ def _parse(text: str, source: str) -> BvhMotion:
 
 
 def load_bvh(path: str | PathLike[str]) -> BvhMotion:
-    """Parse a BVH file; raises :class:`BvhError` naming the file and line on malformed input."""
+    """Parse a BVH file; raises :class:`BvhError` naming the file and line on malformed input.
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> lines = [
+        ...     "HIERARCHY", "ROOT hips", "{", "OFFSET 0 0 0",
+        ...     "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+        ...     "JOINT spine", "{", "OFFSET 0 10 0", "CHANNELS 3 Zrotation Xrotation Yrotation",
+        ...     "End Site", "{", "OFFSET 0 5 0", "}", "}", "}",
+        ...     "MOTION", "Frames: 2", "Frame Time: 0.0333333", "0 90 0 0 0 0 0 0 0", "1 90 0 0 0 0 0 45 0",
+        ... ]
+        >>> path = Path(tempfile.mkdtemp()) / "two_joints.bvh"
+        >>> _ = path.write_text("\\n".join(lines) + "\\n")
+        >>> motion = load_bvh(path)
+        >>> motion.names, motion.parents, motion.num_frames, motion.fps
+        (['hips', 'spine'], [-1, 0], 2, 30.0)
+        >>> motion.values.shape, float(motion.values[1, -2])  # spine's Xrotation, frame 1
+        ((2, 9), 45.0)
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such BVH file")
@@ -282,6 +301,23 @@ def save_bvh(path: str | PathLike[str], motion: BvhMotion) -> Path:
 
     Joints are written depth-first, so reading the file back gives the joints in depth-first order
     (the index order of ``motion`` when it already is, as for files read with :func:`load_bvh`).
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> lines = [
+        ...     "HIERARCHY", "ROOT hips", "{", "OFFSET 0 0 0",
+        ...     "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+        ...     "JOINT spine", "{", "OFFSET 0 10 0", "CHANNELS 3 Zrotation Xrotation Yrotation",
+        ...     "End Site", "{", "OFFSET 0 5 0", "}", "}", "}",
+        ...     "MOTION", "Frames: 2", "Frame Time: 0.0333333", "0 90 0 0 0 0 0 0 0", "1 90 0 0 0 0 0 45 0",
+        ... ]
+        >>> path = Path(tempfile.mkdtemp()) / "two_joints.bvh"
+        >>> _ = path.write_text("\\n".join(lines) + "\\n")
+        >>> motion = load_bvh(path)
+        >>> copy = load_bvh(save_bvh(path.with_name("copy.bvh"), motion))
+        >>> copy.names == motion.names and bool((copy.values == motion.values).all())
+        True
     """
     path = Path(path)
     children: dict[int, list[int]] = {j: [] for j in range(len(motion.names))}

@@ -91,7 +91,20 @@ def _load(path: Path) -> tuple[pygltflib.GLTF2, bytes]:
 
 
 def read_glb(path: str | PathLike[str]) -> SkeletonMotion:
-    """The :class:`SkeletonMotion` of a ``.glb`` (module docstring); raises :class:`GltfError`."""
+    """The :class:`SkeletonMotion` of a ``.glb`` (module docstring); raises :class:`GltfError`.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
+        >>> joints = np.zeros((3, 24, 3))
+        >>> joints[:, :, 1] = np.linspace(0.0, 1.7, 24)
+        >>> path = write_glb(from_joints(joints, "smpl24", 30.0), Path(tempfile.mkdtemp()) / "clip.glb")
+        >>> motion = read_glb(path)
+        >>> len(motion.names), motion.fps, motion.translations.shape
+        (24, 30.0, (3, 24, 3))
+    """
     path = Path(path)
     gltf, blob = _load(path)
     r = _Reader(path, gltf, blob)

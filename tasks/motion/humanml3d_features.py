@@ -279,6 +279,16 @@ def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
     Raises:
         DatasetNotFoundError: no such file.
         DataFileError: not a real (263,) array, a NaN / Inf, or a value beyond the magnitude limit.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "Mean.npy"
+        >>> np.save(path, np.zeros(263))
+        >>> vector = read_feature_vector(path, "Mean")
+        >>> vector.shape, vector.dtype
+        ((263,), dtype('float32'))
     """
     path = Path(path)
     if not path.is_file():
@@ -290,7 +300,24 @@ def read_feature_vector(path: str | PathLike[str], what: str) -> np.ndarray:
 
 
 def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; finite, Std positive."""
+    """``(Mean, Std)`` (263,) float32 from ``ROOT/Mean.npy`` and ``ROOT/Std.npy``; finite, Std positive.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> root = Path(tempfile.mkdtemp())
+        >>> np.save(root / "Mean.npy", np.zeros(263))
+        >>> np.save(root / "Std.npy", np.ones(263))
+        >>> mean, std = read_statistics(root)
+        >>> mean.shape, float(std.min())
+        ((263,), 1.0)
+        >>> np.save(root / "Std.npy", np.zeros(263))
+        >>> read_statistics(root)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.tasks.motion.errors.DataFileError: ...Std.npy: Std must be positive, column 0 is 0.0
+    """
     root = Path(root)
     mean = read_feature_vector(root / "Mean.npy", "Mean")
     std = read_feature_vector(root / "Std.npy", "Std")
@@ -318,5 +345,22 @@ def read_features(path: str | PathLike[str]) -> np.ndarray:
 
     Raises:
         FileNotFoundError: no such file; and the errors of :func:`check_features`.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "000001.npy"
+        >>> np.save(path, np.zeros((40, 263)))
+        >>> features = read_features(path)
+        >>> features.shape, features.dtype
+        ((40, 263), dtype('float32'))
+        >>> bad = np.zeros((40, 263))
+        >>> bad[3, 7] = np.nan
+        >>> np.save(path, bad)
+        >>> read_features(path)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.tasks.motion.humanml3d_features.NonFiniteFeaturesError: ...000001.npy: ...
     """
     return check_features(load_npy(path), path)

@@ -5,9 +5,9 @@ code (``cache=True``). Two processes compiling at once (pytest-xdist workers, Da
 several ``sm`` runs on a fresh install) can read each other's half-written cache and crash with a
 segmentation fault (reproduced here with two processes on a fresh virtual environment). Which kernels
 a call compiles depends on its path (the tempo estimate runs only without a tempo prior), so every
-analysis runs under an exclusive file lock: analyses of different processes are serialized (about
-1 s per 30 s of music; results are cached on disk by :mod:`.cache`). Where ``fcntl`` is missing
-(Windows) the lock is a no-op.
+analysis runs under an exclusive file lock: analyses of different processes are serialized (an
+analysis' time: ``benchmarks/README.md``, "Toolkit"; results are cached on disk by :mod:`.cache`). Where
+``fcntl`` is missing (Windows) the lock is a no-op.
 """
 
 from __future__ import annotations

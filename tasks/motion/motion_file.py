@@ -153,7 +153,17 @@ class MotionData:
 
 
 def save_motion(path: str | PathLike[str], motion: MotionData) -> Path:
-    """Validate and write ``motion`` as a compressed ``.npz`` (module docstring for keys), atomically."""
+    """Validate and write ``motion`` as a compressed ``.npz`` (module docstring for keys), atomically.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> motion = MotionData(fps=30.0, skeleton="smpl24", joints=np.zeros((4, 24, 3), np.float32))
+        >>> path = save_motion(Path(tempfile.mkdtemp()) / "still.npz", motion)
+        >>> path.name, load_motion(path).joints.shape
+        ('still.npz', (4, 24, 3))
+    """
     path = Path(path)
     motion.validate(str(path))
     arrays: dict[str, np.ndarray] = {
@@ -172,7 +182,18 @@ def save_motion(path: str | PathLike[str], motion: MotionData) -> Path:
 
 
 def load_motion(path: str | PathLike[str]) -> MotionData:
-    """Read and validate a motion ``.npz``; raises :class:`MotionFileError` naming the file."""
+    """Read and validate a motion ``.npz``; raises :class:`MotionFileError` naming the file.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "clip.npz"
+        >>> np.savez(path, fps=30.0, skeleton="smpl24", joints=np.zeros((5, 24, 3), np.float32))
+        >>> motion = load_motion(path)
+        >>> motion.fps, motion.skeleton, motion.joints.shape
+        (30.0, 'smpl24', (5, 24, 3))
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such motion file")

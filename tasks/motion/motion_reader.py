@@ -139,6 +139,19 @@ def load_skeleton_motion(
         motion_fps: the input's frame rate (replaces the file's).
         units: the input's length unit (:func:`~.units.choose_scale`).
         scale: the input's metres per unit, instead of ``units`` (:func:`~.units.choose_scale`).
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+        >>> joints = np.zeros((4, 24, 3), np.float32)
+        >>> joints[:, :, 1] = np.linspace(0.0, 1.7, 24)  # a standing column of joints, y up
+        >>> path = Path(tempfile.mkdtemp()) / "clip.npz"
+        >>> path = save_motion(path, MotionData(30.0, "smpl24", joints=joints))
+        >>> motion = load_skeleton_motion(path)
+        >>> motion.translations.shape, motion.rotations is None, motion.fps
+        ((4, 24, 3), True, 30.0)
     """
     path = _existing(path)
     suffix = path.suffix.lower()
@@ -185,7 +198,21 @@ def load_joints(
     scale: float | None = None,
 ) -> JointsClip:
     """Any motion file (module docstring) as joint positions in metres; arguments as
-    :func:`load_skeleton_motion`."""
+    :func:`load_skeleton_motion`.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+        >>> joints = np.zeros((4, 24, 3), np.float32)
+        >>> joints[:, :, 1] = np.linspace(0.0, 1.7, 24)  # a standing column of joints, y up
+        >>> path = Path(tempfile.mkdtemp()) / "clip.npz"
+        >>> path = save_motion(path, MotionData(30.0, "smpl24", joints=joints))
+        >>> clip = load_joints(path)
+        >>> clip.joints.shape, clip.fps, len(clip.parents), clip.names[0]
+        ((4, 24, 3), 30.0, 24, 'pelvis')
+    """
     path = _existing(path)
     if path.suffix.lower() in (".bvh", ".glb"):
         motion = load_skeleton_motion(path, skeleton, motion_fps, units, scale)

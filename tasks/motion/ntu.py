@@ -226,6 +226,10 @@ def parse_ntu_name(name: str | PathLike[str]) -> dict[str, int]:
 
     Raises:
         ValueError: the name does not follow the NTU pattern.
+
+    Examples:
+        >>> parse_ntu_name("/data/S001C002P003R002A013.skeleton")
+        {'setup': 1, 'camera': 2, 'performer': 3, 'replication': 2, 'action': 13}
     """
     stem = Path(name).name.split(".")[0]
     match = _NAME_RE.fullmatch(stem)
@@ -339,6 +343,20 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
         SkeletonFileError: the file is truncated or malformed (message: file, 1-based line, what was
             expected), has non-blank content after the last frame, declares more frames than it has
             lines, or holds a NaN / Inf (or an x, y, z beyond float32) on a body or joint line.
+
+    Examples:
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> body = "72057594037931101 0 1 1 1 1 0 0.1 0.2 2"  # bodyID and BODY_FIELDS[1:]
+        >>> joint = "0.1 0.2 3.0 250 200 1000 500 1 0 0 0 2"  # JOINT_FIELDS
+        >>> frame = ["1", body, "25", *[joint] * 25]  # one body of 25 joints
+        >>> path = Path(tempfile.mkdtemp()) / "S001C002P003R002A013.skeleton"
+        >>> _ = path.write_text("\\n".join(["2", *frame, *frame]) + "\\n")  # two frames
+        >>> sequence = read_skeleton_file(path)
+        >>> sequence.num_frames, len(sequence.bodies), sequence.bodies[0].xyz.shape
+        (2, 1, (2, 25, 3))
+        >>> sequence.bodies[0].xyz[0, 0].tolist()
+        [0.10000000149011612, 0.20000000298023224, 3.0]
     """
     path_str = str(path)
     try:

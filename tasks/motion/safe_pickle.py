@@ -390,6 +390,21 @@ def safe_load_pickle(path: str | PathLike[str], encoding: str = "ASCII") -> Any:
         FileNotFoundError: the file does not exist.
         UnsafePickleError: the pickle names a global outside :data:`ALLOWED_GLOBALS` (nothing from the
             file is run) or is truncated / not a pickle. The message names the file.
+
+    Examples:
+        >>> import pickle, tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "data.pkl"
+        >>> _ = path.write_bytes(pickle.dumps({"poses": np.zeros((2, 3)), "name": "clip"}))
+        >>> data = safe_load_pickle(path)
+        >>> data["poses"].shape, data["name"]
+        ((2, 3), 'clip')
+        >>> _ = path.write_bytes(pickle.dumps(Path("x")))  # a class outside ALLOWED_GLOBALS
+        >>> safe_load_pickle(path)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.tasks.motion.safe_pickle.UnsafePickleError: ...data.pkl: ...
     """
     path = Path(path)
     if not path.is_file():
@@ -399,6 +414,17 @@ def safe_load_pickle(path: str | PathLike[str], encoding: str = "ASCII") -> Any:
 
 
 def safe_loads_pickle(data: bytes, source: str = "<bytes>", encoding: str = "ASCII") -> Any:
-    """:func:`safe_load_pickle` for an in-memory pickle; ``source`` names it in error messages."""
+    """:func:`safe_load_pickle` for an in-memory pickle; ``source`` names it in error messages.
+
+    Examples:
+        >>> import pickle
+        >>> safe_loads_pickle(pickle.dumps({"fps": 30.0, "frames": [1, 2, 3]}))
+        {'fps': 30.0, 'frames': [1, 2, 3]}
+        >>> import os
+        >>> safe_loads_pickle(pickle.dumps(os.system), source="payload")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.tasks.motion.safe_pickle.UnsafePickleError: payload: ...
+    """
 
     return _load(io.BytesIO(data), len(data), source, encoding)

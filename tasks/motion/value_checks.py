@@ -129,6 +129,20 @@ def load_npy(path: str | Path) -> np.ndarray:
     Raises:
         FileNotFoundError: no such file.
         DataFileError: a damaged header, pickled objects, or fewer / more data bytes than the header says.
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "joints.npy"
+        >>> np.save(path, np.zeros((5, 24, 3), np.float32))
+        >>> load_npy(path).shape
+        (5, 24, 3)
+        >>> _ = path.write_bytes(path.read_bytes()[:-4])  # truncated: fewer data bytes than its header says
+        >>> load_npy(path)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        skeleton_mamba.tasks.motion.errors.DataFileError: ...joints.npy: ...
     """
     path = Path(path)
     if not path.is_file():
@@ -205,6 +219,16 @@ def load_npz(
         FileNotFoundError: no such file.
         error: not a zip of ``.npy`` members, a refused dtype or size, a truncated or damaged member (the
             message names the file and the key).
+
+    Examples:
+        >>> import tempfile
+        >>> import numpy as np
+        >>> from pathlib import Path
+        >>> path = Path(tempfile.mkdtemp()) / "clip.npz"
+        >>> np.savez_compressed(path, fps=30.0, skeleton="smpl24", joints=np.zeros((5, 24, 3)))
+        >>> arrays = load_npz(path, text_keys=("skeleton",))
+        >>> sorted(arrays), str(arrays["skeleton"]), arrays["joints"].shape
+        (['fps', 'joints', 'skeleton'], 'smpl24', (5, 24, 3))
     """
     path = Path(path)
     if not path.is_file():

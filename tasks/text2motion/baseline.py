@@ -2,7 +2,8 @@
 
 As MDM's default ``trans_enc`` (``GuyTevet/motion-diffusion-model model/mdm.py``): each frame's 263-d
 features -> Linear -> ``latent`` width; the timestep (sinusoidal -> MLP) plus the projected pooled caption
-embedding form one token prepended to the frames; sinusoidal positions; a post-norm
+embedding form one token prepended to the frames; sinusoidal positions (MDM's interleaved ones:
+:func:`~skeleton_mamba.tasks.training.diffusion.embedding.sinusoidal_embedding`); a post-norm
 ``nn.TransformerEncoder`` (GELU, dropout 0.1, feed-forward ``ff_ratio * latent``); the frame outputs ->
 Linear -> x0 (263). MDM pools CLIP's sentence embedding; here the caption tokens (B, S, D) of our text
 encoder are mean-pooled over the mask. The unconditional prediction zeroes the caption embedding (MDM
@@ -15,27 +16,14 @@ so the shared diffusion samplers run either.
 
 from __future__ import annotations
 
-import math
-
 import torch
 from torch import nn
 
 from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.model import TextCondition, timestep_embedding
+from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 
 __all__ = ["TransformerDenoiser", "width_for_parameters"]
-
-
-def _positions(frames: int, width: int, device: torch.device) -> torch.Tensor:
-    """Sinusoidal positional encoding (frames, width) as ``PositionalEncoding`` of MDM (sin even, cos odd)."""
-    position = torch.arange(frames, device=device, dtype=torch.float32)[:, None]
-    div = torch.exp(
-        torch.arange(0, width, 2, device=device, dtype=torch.float32) * (-math.log(10000.0) / width)
-    )
-    encoding = torch.zeros(frames, width, device=device)
-    encoding[:, 0::2] = torch.sin(position * div)
-    encoding[:, 1::2] = torch.cos(position * div)
-    return encoding
 
 
 class TransformerDenoiser(nn.Module):
@@ -87,7 +75,10 @@ class TransformerDenoiser(nn.Module):
             token = token + self.embed_text(pooled)  # an all-masked caption pools to zero
         else:
             token = token + self.embed_text(x_t.new_zeros(b, self.embed_text.in_features))
-        frames_in = self.input_process(x_t) + _positions(frames, self.latent, x_t.device)
+        # MDM's PositionalEncoding (sines in the even channels, cosines in the odd ones), bit for bit
+        steps = torch.arange(frames, device=x_t.device)
+        positions = sinusoidal_embedding(steps, self.latent, order="interleaved")
+        frames_in = self.input_process(x_t) + positions
         sequence = torch.cat([token[:, None], frames_in], dim=1)  # (B, 1 + T, L)
         padding = None
         if mask is not None:

@@ -176,8 +176,9 @@ class SkeletonMambaCLI(LightningCLI):
         super().__init__(*args, parser_class=parser_class, **kwargs)
 
     def subcommands(self) -> dict[str, set[str]]:
-        """Lightning's subcommands, or only ``only_subcommand``: ``sm`` runs one per process, and building the
-        parsers of the other three (the trainer's, model's and data's options each) took 0.2 to 0.5 s."""
+        """Lightning's subcommands, or only ``only_subcommand``: ``sm`` runs one per process, so the parsers
+        of the other three (the trainer's, model's and data's options each) are not built (start-up time:
+        ``benchmarks/README.md``)."""
         every = LightningCLI.subcommands()
         return every if self.only_subcommand is None else {self.only_subcommand: every[self.only_subcommand]}
 

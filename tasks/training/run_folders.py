@@ -10,8 +10,8 @@
 - A run that fails before writing anything but logger bookkeeping (``config.yaml``, ``hparams.yaml``,
   an event file, ``metrics.csv``) leaves no ``version_N`` folder behind (:func:`remove_if_empty`).
 - The CSV loggers open their folder first (:func:`open_csv_logs`): Lightning's CSV logger warns "Experiment
-  logs directory ... exists and is not empty ... will be deleted" whenever the folder holds any file, which
-  in a fresh run was the TensorBoard logger's event file in the same folder; it now warns only when there
+  logs directory ... exists and is not empty ... will be deleted" whenever the folder holds any file (in a
+  fresh run, the TensorBoard logger's event file in the same folder); opened first, it warns only when there
   is a ``metrics.csv`` it would really delete.
 """
 

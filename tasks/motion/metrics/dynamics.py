@@ -49,7 +49,15 @@ DYNAMICS_METRICS = {  # key -> printed name
 
 
 def motion_amplitude(joints: torch.Tensor, root: int = 0) -> torch.Tensor:
-    """Mean per-joint root-relative spread (metres, scalar) of joints (T, J, 3) (population variance)."""
+    """Mean per-joint root-relative spread (metres, scalar) of joints (T, J, 3) (population variance).
+
+    Examples:
+        >>> import torch
+        >>> joints = torch.zeros(4, 2, 3)
+        >>> joints[:, 1, 0] = torch.tensor([0.1, -0.1, 0.1, -0.1])  # joint 1 swings 10 cm about the root
+        >>> round(float(motion_amplitude(joints)), 4)
+        0.1
+    """
     if joints.ndim != 3 or joints.shape[-1] != 3 or joints.shape[1] < 2:
         raise ValueError(f"joints must be (T, J >= 2, 3), got {tuple(joints.shape)}")
     relative = joints - joints[:, root : root + 1]
@@ -60,7 +68,16 @@ def motion_amplitude(joints: torch.Tensor, root: int = 0) -> torch.Tensor:
 
 
 def motion_jitter(joints: torch.Tensor, fps: float) -> torch.Tensor:
-    """Mean joint acceleration magnitude (m/s^2, scalar) of joints (T >= 3, J, 3) at ``fps``."""
+    """Mean joint acceleration magnitude (m/s^2, scalar) of joints (T >= 3, J, 3) at ``fps``.
+
+    Examples:
+        >>> import torch
+        >>> t = torch.arange(6.0)
+        >>> joints = torch.zeros(6, 2, 3)
+        >>> joints[..., 0] = (0.01 * t**2)[:, None]  # 0.02 m per frame^2 at 10 fps: 2 m/s^2
+        >>> round(float(motion_jitter(joints, fps=10.0)), 4)
+        2.0
+    """
     if joints.ndim != 3 or joints.shape[-1] != 3 or joints.shape[0] < 3:
         raise ValueError(f"joints must be (T >= 3, J, 3), got {tuple(joints.shape)}")
     accel = (joints[2:] - 2 * joints[1:-1] + joints[:-2]) * fps**2
@@ -77,6 +94,17 @@ def high_frequency_energy(
     ``sum_{f_k > cutoff} w_k |V_k|^2 / N^2`` (``w_k`` = 2 for the bins that stand for two of the full
     spectrum, 1 for the Nyquist bin), is the mean square of the velocity's part above the cutoff. Summed
     over the axes, mean over the joints.
+
+    Examples:
+        >>> import torch
+        >>> t = torch.arange(60.0) / 30  # 2 s at 30 fps
+        >>> slow, fast = torch.zeros(60, 2, 3), torch.zeros(60, 2, 3)
+        >>> slow[..., 0] = torch.sin(2 * torch.pi * 1 * t)[:, None]  # 1 Hz
+        >>> fast[..., 0] = torch.sin(2 * torch.pi * 10 * t)[:, None]  # 10 Hz
+        >>> round(float(high_frequency_energy(slow, fps=30.0)), 3)
+        0.0
+        >>> bool(high_frequency_energy(fast, fps=30.0) > 1)
+        True
     """
     if joints.ndim != 3 or joints.shape[-1] != 3 or joints.shape[0] < 3:
         raise ValueError(f"joints must be (T >= 3, J, 3), got {tuple(joints.shape)}")
@@ -103,7 +131,15 @@ def _ratio(value: torch.Tensor, reference: torch.Tensor) -> float:
 
 def dynamics_ratios(joints: torch.Tensor, reference: torch.Tensor, fps: float) -> dict[str, float]:
     """``amplitude_ratio``, ``jitter_ratio`` and ``high_frequency_ratio`` of joints (T, J, 3) to a reference
-    motion (T', J, 3)."""
+    motion (T', J, 3).
+
+    Examples:
+        >>> import torch
+        >>> _ = torch.manual_seed(0)
+        >>> truth = torch.randn(30, 22, 3)
+        >>> {k: round(v, 4) for k, v in dynamics_ratios(2 * truth, truth, fps=30.0).items()}
+        {'amplitude_ratio': 2.0, 'jitter_ratio': 2.0, 'high_frequency_ratio': 4.0}
+    """
     joints, reference = joints.double(), reference.double()
     return {
         "amplitude_ratio": _ratio(motion_amplitude(joints), motion_amplitude(reference)),
@@ -115,7 +151,15 @@ def dynamics_ratios(joints: torch.Tensor, reference: torch.Tensor, fps: float) -
 
 
 def dynamics_checks(ratios: dict[str, float]) -> dict[str, bool]:
-    """Whether :func:`dynamics_ratios` reach the targets (a NaN ratio reaches none)."""
+    """Whether :func:`dynamics_ratios` reach the targets (a NaN ratio reaches none).
+
+    Examples:
+        >>> as_truth = {"amplitude_ratio": 1.0, "jitter_ratio": 1.0, "high_frequency_ratio": 1.0}
+        >>> all(dynamics_checks(as_truth).values())
+        True
+        >>> all(dynamics_checks({**as_truth, "amplitude_ratio": 0.2}).values())  # a timid dance
+        False
+    """
     low, high = HIGH_FREQUENCY_RATIO_RANGE
     return {
         f"amplitude ratio >= {AMPLITUDE_RATIO_TARGET}": ratios["amplitude_ratio"] >= AMPLITUDE_RATIO_TARGET,

@@ -111,6 +111,12 @@ def geometric_features(positions: torch.Tensor) -> torch.Tensor:
     Returns:
         ``(..., 32)`` float64 fractions of frames ``1 .. T-1`` on which each predicate holds
         (names in :data:`GEOMETRIC_FEATURE_NAMES`).
+
+    Examples:
+        >>> import torch
+        >>> _ = torch.manual_seed(0)
+        >>> geometric_features(torch.randn(2, 10, 24, 3)).shape
+        torch.Size([2, 32])
     """
     if positions.ndim < 3 or positions.shape[-2:] != (24, 3):
         raise ValueError(f"positions must be (..., T, 24, 3) SMPL-24 joints, got {tuple(positions.shape)}")

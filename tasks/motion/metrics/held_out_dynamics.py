@@ -39,6 +39,16 @@ def held_out_dynamics(
         truths: their ground truth (T'_i, J, 3) (the lengths may differ: the ratios compare whole motions).
         train: the training motions' joints (T_k, J, 3), the baselines' material.
         fps: frame rate of every motion.
+
+    Examples:
+        >>> import torch
+        >>> _ = torch.manual_seed(0)
+        >>> truth, train = torch.randn(30, 22, 3), [torch.randn(30, 22, 3)]
+        >>> scores = held_out_dynamics([0.5 * truth], [truth], train, fps=30.0)
+        >>> round(scores["dance"]["amplitude_ratio"], 3), round(scores["ground_truth"]["jitter_ratio"], 3)
+        (0.5, 1.0)
+        >>> scores["mean_pose"]["amplitude_ratio"]  # a still pose
+        0.0
     """
     if len(dances) != len(truths) or not dances or not train:
         raise ValueError("need as many dances as truths (at least one) and at least one training motion")
@@ -54,12 +64,24 @@ def held_out_dynamics(
 
 
 def held_out_dynamics_checks(scores: dict[str, dict[str, float]]) -> dict[str, bool]:
-    """Whether the ``dance`` column reaches the amplitude and jitter targets."""
+    """Whether the ``dance`` column reaches the amplitude and jitter targets.
+
+    Examples:
+        >>> scores = {"dance": {"amplitude_ratio": 0.5, "jitter_ratio": 1.0, "high_frequency_ratio": 1.0}}
+        >>> held_out_dynamics_checks(scores)["amplitude ratio >= 0.7"]
+        False
+    """
     return dynamics_checks(scores["dance"])
 
 
 def format_dynamics(scores: dict[str, dict[str, float]], checks: dict[str, bool] | None = None) -> str:
-    """A plain-text table of :func:`held_out_dynamics`' result (and the target checks)."""
+    """A plain-text table of :func:`held_out_dynamics`' result (and the target checks).
+
+    Examples:
+        >>> row = {"amplitude_ratio": 1.0, "jitter_ratio": 1.0, "high_frequency_ratio": 1.0}
+        >>> print(format_dynamics({c: row for c in DYNAMICS_COLUMNS}).splitlines()[1])
+        motion amplitude / ground truth's         1.000         1.000         1.000         1.000
+    """
     width = max(len(n) for n in DYNAMICS_METRICS.values())
     lines = [" " * width + "".join(f"{c:>14}" for c in DYNAMICS_COLUMNS)]
     for key, name in DYNAMICS_METRICS.items():

@@ -58,6 +58,16 @@ def kinetic_features(
 
     Returns:
         ``(..., 3 J)`` float64 tensor ``[KE_h, KE_v, EE]`` per joint, joint-major.
+
+    Examples:
+        >>> import torch
+        >>> kinetic_features(torch.zeros(10, 24, 3)).abs().sum().item()  # a still body: no kinetic energy
+        0.0
+        >>> walk = torch.zeros(10, 24, 3)
+        >>> walk[..., 0] = torch.arange(10.0)[:, None] / 60  # 1 m/s along x at 60 fps
+        >>> features = kinetic_features(walk)
+        >>> features.shape, round(float(features[0]), 3)  # joint 0: horizontal kinetic energy first
+        (torch.Size([72]), 1.0)
     """
     if positions.ndim < 3 or positions.shape[-1] != 3:
         raise ValueError(f"positions must be (..., T, J, 3), got {tuple(positions.shape)}")

@@ -29,7 +29,16 @@ FOOT_JOINTS = (7, 10, 8, 11)  # lankle, ltoes, rankle, rtoes (SMPL-24)
 
 
 def pfc_sequence_score(positions: torch.Tensor, fps: float = 30.0, up_axis: int = 2) -> torch.Tensor:
-    """Un-scaled PFC of one ``(S, 24, 3)`` sequence, ``S >= 3`` (multiply by 10000 for the paper's unit)."""
+    """Un-scaled PFC of one ``(S, 24, 3)`` sequence, ``S >= 3`` (multiply by 10000 for the paper's unit).
+
+    Examples:
+        >>> import torch
+        >>> float(pfc_sequence_score(torch.zeros(30, 24, 3)))  # a still body
+        0.0
+        >>> _ = torch.manual_seed(0)
+        >>> round(float(pfc_sequence_score(torch.randn(30, 24, 3))), 3)
+        0.588
+    """
     p = positions.to(torch.float64)
     dt = 1.0 / fps
     root_v = (p[1:, 0] - p[:-1, 0]) / dt  # (S-1, 3)
@@ -56,6 +65,14 @@ class PFC(Metric):
         up_axis: vertical axis of the positions (EDGE: 2, z-up).
 
     ``update(positions)`` takes ``(B, S, 24, 3)`` FK joints or a list of ``(S_i, 24, 3)``.
+
+    Examples:
+        >>> import torch
+        >>> _ = torch.manual_seed(0)
+        >>> pfc = PFC(fps=30.0, up_axis=2)
+        >>> pfc.update(torch.randn(2, 30, 24, 3))
+        >>> round(float(pfc.compute()))
+        5131
     """
 
     is_differentiable = False

@@ -235,7 +235,17 @@ PROTOCOLS: dict[str, type[DanceProtocol]] = {
 
 
 def get_protocol(name: str) -> DanceProtocol:
-    """The protocol called ``name`` (``fact``, ``bailando`` or ``edge``) with its published settings."""
+    """The protocol called ``name`` (``fact``, ``bailando`` or ``edge``) with its published settings.
+
+    Examples:
+        >>> import torch
+        >>> edge = get_protocol("edge")
+        >>> edge.fps, edge.variant, edge.has_pfc
+        (30, 'bailando', True)
+        >>> clips = edge.score(torch.zeros(300, 24, 3), fps=30.0)  # 10 s: 5 s clips every 2.5 s
+        >>> len(clips), tuple(clips[0].joints.shape)
+        (3, (150, 24, 3))
+    """
     if name not in PROTOCOLS:
         raise ValueError(f"unknown dance protocol {name!r}: choose one of {', '.join(PROTOCOLS)}")
     return PROTOCOLS[name]()

@@ -26,10 +26,10 @@ from skeleton_mamba.tasks.training.diffusion.solvers import SOLVERS, solver_samp
 __all__ = ["FAST_SOLVER_STEPS", "SAMPLERS", "SamplingOptions", "sample"]
 
 FAST_SOLVER_STEPS = 20
-"""The step count a solver (``dpmpp``, ``unipc``) takes when it is chosen without one: on the EgoMusic demo
-model its dances are 5 mm from deterministic DDIM over all steps and score as DDIM 50 does (MPJPE,
-BeatAlign, amplitude, jitter), in 0.54 s a window against 1.38 s; on the text-to-motion demo model UniPC's
-are 7 mm from it (DDIM 50: 8 mm) in 0.41 of DDIM 50's time (``benchmarks/README.md``)."""
+"""The step count a solver (``dpmpp``, ``unipc``) takes when it is chosen without one: on both demo models its
+motions are as close to deterministic DDIM over all steps as DDIM 50's, and score as DDIM 50 does (MPJPE,
+BeatAlign, amplitude, jitter), in less than half its time (the tables: ``benchmarks/README.md``, "Few-step
+samplers")."""
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ def make_scheduler(name: str, diffusion: GaussianDiffusion, solver_steps: int):
     """The `diffusers` scheduler of solver ``name`` on ``diffusion``'s betas, set to ``solver_steps`` steps
     from t = T - 1 down to the noise of t = 0 (``final_sigmas_type="sigma_min"``), their timesteps spread
     evenly over [0, T - 1] (``timestep_spacing="linspace"``, as our DDIM)."""
-    import diffusers  # lazy: 1.6 s to import, for the solvers only (DDPM / DDIM sampling never loads it)
+    import diffusers  # lazy: a slow import (benchmarks/README.md), for the solvers only (not DDPM / DDIM)
 
     if name not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {name!r}")
