@@ -105,3 +105,42 @@ def test_data_set_frames_are_contiguous(tmp_path):
     frames = data.datasets["train"][0]["frames"]
     assert frames.shape == (150, 3, 8, 8) and frames.is_contiguous()
     assert 0.0 <= float(frames.min()) and float(frames.max()) <= 1.0
+
+
+def test_frozen_vision_encoder_runs_channels_last_and_bf16_as_a_kept_copy():
+    """Inference: channels-last activations give the NCHW features (to fp32 rounding); under bf16 autocast
+    (``--precision bf16``) a bfloat16 copy of the frozen ResNet runs, close to fp32, outside the state
+    dict, and rebuilt when the weights are loaded again."""
+    from transformers import ResNetConfig
+
+    from skeleton_mamba.tasks.egodance.encoders import VisionEncoder
+
+    torch.manual_seed(0)
+    config = ResNetConfig(embedding_size=8, hidden_sizes=[8, 16], depths=[1, 1], layer_type="basic")
+    with pytest.warns(UserWarning, match="randomly initialised"):
+        encoder = VisionEncoder(16, resnet_config=config, image_size=32).eval()
+    layouts = []
+    encoder.resnet.register_forward_pre_hook(
+        lambda m, a, k: layouts.append(k["pixel_values"].is_contiguous(memory_format=torch.channels_last)),
+        with_kwargs=True,
+    )
+    frames = torch.rand(1, 5, 3, 32, 32)
+    with torch.no_grad():
+        features = encoder(frames)
+        flat = encoder.normalize(frames.flatten(0, 1)).contiguous()  # NCHW, computed independently
+        expected = encoder.mlp(encoder.resnet(pixel_values=flat).pooler_output.flatten(1)).reshape(1, 5, 16)
+        torch.testing.assert_close(features, expected, rtol=1e-5, atol=1e-6)
+        assert layouts[0] is True
+        keys = set(encoder.state_dict())
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            low = encoder(frames).float()
+        copy = encoder.__dict__["_bf16_resnet"][1]
+        assert set(encoder.state_dict()) == keys and next(copy.parameters()).dtype == torch.bfloat16
+        assert layouts == [True, False, True]  # the copy (its hook copied along) ran, channels-last
+        cos = torch.nn.functional.cosine_similarity(low.flatten(), expected.flatten(), dim=0)
+        assert cos > 0.999 and not torch.equal(low, expected)
+        first = copy
+        encoder.resnet.load_state_dict({k: v + 0.01 for k, v in encoder.resnet.state_dict().items()})
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            encoder(frames)
+        assert encoder.__dict__["_bf16_resnet"][1] is not first

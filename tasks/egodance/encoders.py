@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import copy
 import warnings
 from pathlib import Path
 
@@ -172,13 +173,39 @@ class VisionEncoder(nn.Module):
             raise ValueError(f"expected frames (B, T, 3, H, W), got {tuple(frames.shape)}")
         b, t = frames.shape[:2]
         flat = frames.flatten(0, 1).float()
+        resnet, dtype = self._inference_resnet()
+        grad = torch.is_grad_enabled() and not self.freeze
+        # Without a backward, channels-last activations: oneDNN's fastest convolution layout on a CPU (the
+        # same sums, reordered). With one, contiguous NCHW: oneDNN's convolution backward corrupted the
+        # heap on channels-last input (torch 2.13, CPU).
+        layout = torch.contiguous_format if grad else torch.channels_last
         feats = []
         for i in range(0, flat.shape[0], self.chunk):
-            x = self.normalize(resize_frames(flat[i : i + self.chunk], self.image_size))  # contiguous NCHW
-            with torch.set_grad_enabled(torch.is_grad_enabled() and not self.freeze):
-                pooled = self.resnet(pixel_values=x).pooler_output.flatten(1)
+            x = self.normalize(resize_frames(flat[i : i + self.chunk], self.image_size))
+            x = x.to(dtype).contiguous(memory_format=layout)
+            with torch.set_grad_enabled(grad):
+                if resnet is self.resnet:
+                    pooled = resnet(pixel_values=x).pooler_output.flatten(1)
+                else:
+                    with torch.autocast("cpu", enabled=False):
+                        pooled = resnet(pixel_values=x).pooler_output.flatten(1).float()
             feats.append(pooled)
         return self.mlp(torch.cat(feats).reshape(b, t, -1))
+
+    def _inference_resnet(self) -> tuple[nn.Module, torch.dtype]:
+        """The ResNet to run and its input dtype: under CPU bf16 autocast (``--precision bf16``), a frozen
+        ResNet in eval mode runs as a bfloat16 copy of itself (kept, not saved: autocast would cast every
+        convolution's weights again at every call, slower than fp32 on a CPU); else the ResNet in fp32."""
+        bf16 = torch.is_autocast_enabled("cpu") and torch.get_autocast_dtype("cpu") == torch.bfloat16
+        if not (bf16 and self.freeze and not self.training and not self.mlp[0].weight.is_cuda):
+            return self.resnet, torch.float32
+        # the weights' identity and versions (a load_state_dict bumps them) key the copy
+        key = (id(self.resnet), sum(p._version for p in self.resnet.parameters()))
+        cached = self.__dict__.get("_bf16_resnet")
+        if cached is None or cached[0] != key:  # a plain attribute: not a submodule, not saved
+            cached = (key, copy.deepcopy(self.resnet).to(torch.bfloat16).eval())
+            self.__dict__["_bf16_resnet"] = cached
+        return cached[1], torch.bfloat16
 
 
 class FusionModule(nn.Module):
