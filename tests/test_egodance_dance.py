@@ -1,5 +1,6 @@
 """``sm dance``: a 12 s track as 4 overlapping windows -> npz + BVH + mp4 with music, continuous at seams."""
 
+import re
 import subprocess
 
 import numpy as np
@@ -76,7 +77,13 @@ def test_sm_dance_writes_npz_bvh_and_mp4_with_music(inputs, capsys):
     np.testing.assert_allclose(bvh.joint_positions()[:, order], motion.joints, atol=1e-3)  # BVH FK = ours
     assert len(iio.imread(tmp / "out/dance.mp4")) == 360
     assert _audio_streams(tmp / "out/dance.mp4") == 1
-    assert "dance.mp4" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "dance.mp4" in out
+    stages = re.search(r"seconds per stage: (.*)", out).group(1)  # every stage timed, in the order run
+    assert [part.rsplit(" ", 1)[0] for part in stages.split(", ")] == [
+        "music features", "video", "sampling", "writing"
+    ]  # fmt: skip
+    assert all(float(part.rsplit(" ", 1)[1]) >= 0 for part in stages.split(", "))
 
 
 def test_sm_dance_says_when_the_video_is_shorter_than_the_music(inputs, capsys):

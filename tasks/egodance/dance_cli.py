@@ -28,6 +28,7 @@ windows are turned back and joined (:mod:`.window_frames`).
 from __future__ import annotations
 
 import dataclasses
+import time
 from pathlib import Path
 
 import torch
@@ -192,8 +193,12 @@ def main(argv: list[str] | None = None) -> int:
         inputs = _inputs(args, module, long_form)
     except ValueError as err:  # the music, video or sample files (their readers name the file)
         raise InputError(str(err)) from err
+    seconds = dict(inputs.seconds)
+    start = time.perf_counter()
     with inference_precision(args.precision):
         tokens, head_source = _dance(args, module, inputs, long_form)
+    seconds["sampling"] = time.perf_counter() - start
+    start = time.perf_counter()
     out = Path(args.out)
     out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
     width, height = args.render_size
@@ -211,7 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         progress=args.progress,
         fps=fps,
     )
-    seconds = tokens.shape[0] / fps
+    seconds["writing"] = time.perf_counter() - start
+    duration = tokens.shape[0] / fps
     guidance = {
         "estimate": "head guidance from the head trajectory estimated from the video",
         "oracle": "head guidance from the ORACLE (ground-truth) camera path",
@@ -223,8 +229,9 @@ def main(argv: list[str] | None = None) -> int:
         turned = ", each facing its first frame's head heading" if long_form.canonical else ""
         print(f"sm dance: {len(starts)} windows of {long_form.window} frames every {long_form.hop}{turned}, "
               "joined into one dance")  # fmt: skip
-    print(f"sm dance: {tokens.shape[0]} frames ({seconds:.1f} s at {fps:g} fps) written to", out_dir)
+    print(f"sm dance: {tokens.shape[0]} frames ({duration:.1f} s at {fps:g} fps) written to", out_dir)
     print("\n".join(files.lines()))
     if inputs.truth is not None:
         print("\n".join(_score_against_truth(tokens, inputs, fps)))
+    print("sm dance: seconds per stage: " + ", ".join(f"{k} {v:.1f}" for k, v in seconds.items()))
     return 0

@@ -14,7 +14,8 @@ The head targets are then chosen by :func:`.long_form.head_targets`.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,8 @@ class DanceInputs:
     truth: (T, 24, 10) a sample's ground-truth motion tokens in its canonical frame, or None.
     head: (T, 3) a sample's ground-truth head positions in that frame, or None.
     music_path, music_start_s: the audio the dance is sampled for (muxed into the mp4).
+    seconds: wall seconds of each stage that made them (``music features``, ``video``), for ``sm dance``'s
+    timing line.
     """
 
     music: torch.Tensor
@@ -47,6 +50,7 @@ class DanceInputs:
     head: torch.Tensor | None = None
     music_path: str | None = None
     music_start_s: float = 0.0
+    seconds: dict[str, float] = field(default_factory=dict)
 
 
 def _encode(video: Path, module, model, frames: int, long_form: LongForm, estimate: bool, progress: bool):
@@ -72,9 +76,11 @@ def track_inputs(
     the video's part, and a warning says so before the decoding starts.
     """
     fps = float(module.hparams.fps)
+    start = time.perf_counter()
     features = torch.from_numpy(extract_music_features(music, fps=fps).features.astype(np.float32))
+    seconds = {"music features": time.perf_counter() - start}
     if model.vision_encoder is None:
-        return DanceInputs(features, None, music_path=music)
+        return DanceInputs(features, None, music_path=music, seconds=seconds)
     if not video:
         raise InputError(f"the model conditions on egocentric video: pass --video with --music {music}")
     header = video_header(video)
@@ -89,12 +95,14 @@ def track_inputs(
             f"{covered / fps:.1f} s, where both are (pass a video as long as the music for the whole track)",
             file=sys.stderr,
         )
+    start = time.perf_counter()
     encoded = _encode(Path(video), module, model, len(features), long_form, estimate, progress)
+    seconds["video"] = time.perf_counter() - start  # decoding, the vision encoder, the head estimator
     n = encoded.num_frames  # at most len(music); the header can be off by a frame or two
     if covered is None and len(features) - n > 1:
         print(f"sm dance: warning: the video has {n} frames, the music {len(features)}; the dance covers the "
               f"first {n / fps:.1f} s, where both are", file=sys.stderr)  # fmt: skip
-    return DanceInputs(features[:n], encoded, music_path=music)
+    return DanceInputs(features[:n], encoded, music_path=music, seconds=seconds)
 
 
 def sample_inputs(
