@@ -8,7 +8,7 @@ task's loaders need beyond that (a ``collate_fn``, ``drop_last``, pinned memory)
 What follows from the data is handed to the model in one typed place, :class:`DataContract`: the sizes and
 rates fixed when the data module is built (``music_dim``, ``fps``, ``skeleton``, ...; LightningCLI links each
 to the model's argument of that name,
-:data:`~skeleton_mamba.tasks.training.lightning_cli.DATA_TO_MODEL_LINKS`)
+:func:`~skeleton_mamba.tasks.training.lightning_cli.data_to_model_links`)
 and the per-channel statistics of the training split (:meth:`SplitDataModule.training_statistics`, set once
 the split is read). :meth:`~skeleton_mamba.tasks.training.base_module.BackboneModule.setup` hands the contract
 to the model at every stage (``module.contract``: e.g. the music cache of the test loop's beats) and its

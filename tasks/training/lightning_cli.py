@@ -11,8 +11,9 @@ A recipe composes a task's LightningModule and LightningDataModule through ``cla
 
 ``--recipe`` is an alias of ``-c/--config`` (:mod:`skeleton_mamba.tasks.training.recipe_resolution`);
 config files and dotted overrides merge left to right. Values that follow from the data set are
-linked from the instantiated data module to the model (:data:`DATA_TO_MODEL_LINKS`), never typed
-twice; a link applies when both the data module has the attribute and the model the argument.
+linked from the instantiated data module to the model (:func:`data_to_model_links`: the links each task's
+registration declares), never typed twice; a link applies when both the data module has the attribute and
+the model the argument.
 
 Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGuard` and
 :class:`~skeleton_mamba.tasks.training.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
@@ -22,7 +23,6 @@ Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGu
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import re
 import sys
 from collections.abc import Sequence
@@ -56,6 +56,7 @@ from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
     install_bounded_yaml_loader,
 )
+from skeleton_mamba.tasks.training.registry import registered_tasks
 from skeleton_mamba.tasks.training.run_folders import (
     find_last_checkpoint,
     open_csv_logs,
@@ -69,49 +70,26 @@ from skeleton_mamba.tasks.training.run_guards import (
     silence_interrupt_notice,
 )
 
-__all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "quiet_as_trainer_option", "run"]
-
-# Task packages whose ``module`` and ``data`` modules are imported before parsing, so recipes may
-# use short class names (``class_path: ActionRecognitionModule``).
-TASK_PACKAGES = ("recognition", "egodance", "qean", "text2motion", "stream")
-
-# data-module attribute -> model init argument (or a field of one: ``network.seed_frames``), applied once the
-# data module is instantiated. Linked arguments are not user-settable (jsonargparse overwrites them); set them
-# on the data module.
-DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
-    ("num_classes", "num_classes"),
-    ("skeleton", "skeleton"),
-    ("in_channels", "in_channels"),
-    ("batch_size", "batch_size"),
-    ("image_size", "image_size"),
-    ("fps", "fps"),
-    ("music_dim", "network.music_dim"),  # EMM's and QEAN's music width
-    ("music_dim", "music_dim"),  # the streaming dancer's
-    ("seed_frames", "network.seed_frames"),  # QEAN's window lengths
-    ("music_frames", "network.music_frames"),
-    ("predict_frames", "network.predict_frames"),
-    ("generate_frames", "generate_frames"),
-    ("window", "window"),  # EMM's training window and its frame (long-form test and predict)
-    ("canonicalize_init_head", "canonicalize_init_head"),
-)
+__all__ = ["SkeletonMambaCLI", "data_to_model_links", "import_task_modules", "quiet_as_trainer_option", "run"]
 
 
-def _module_exists(name: str) -> bool:
-    try:
-        return importlib.util.find_spec(name) is not None
-    except ModuleNotFoundError:
-        return False
+def data_to_model_links() -> tuple[tuple[str, str], ...]:
+    """data-module attribute -> model init argument (or a field of one: ``network.seed_frames``): every
+    registered task's :attr:`~skeleton_mamba.tasks.training.registry.TaskSpec.links`, each once. Applied
+    once the data module is instantiated. Linked arguments are not user-settable (jsonargparse overwrites
+    them); set them on the data module."""
+    return tuple(dict.fromkeys(link for spec in registered_tasks() for link in spec.links))
 
 
 def import_task_modules() -> list[str]:
-    """Import every installed task's ``module`` and ``data`` modules; returns their names."""
+    """Import every registered task's module and data-module modules (:attr:`.registry.TaskSpec.modules`),
+    so that recipes may use short class names (``class_path: ActionRecognitionModule``); returns their
+    names."""
     imported = []
-    for task in TASK_PACKAGES:
-        for part in ("module", "data"):
-            name = f"skeleton_mamba.tasks.{task}.{part}"
-            if _module_exists(name):
-                importlib.import_module(name)
-                imported.append(name)
+    for spec in registered_tasks():
+        for name in spec.modules:
+            importlib.import_module(name)
+            imported.append(name)
     return imported
 
 
@@ -162,7 +140,7 @@ class OneLineErrorParser(LightningArgumentParser):
 
 
 class SkeletonMambaCLI(LightningCLI):
-    """LightningCLI with ``--recipe``, the data-to-model links of :data:`DATA_TO_MODEL_LINKS` and one-line
+    """LightningCLI with ``--recipe``, the data-to-model links of :func:`data_to_model_links` and one-line
     parse errors (``parser_class`` defaults to :class:`OneLineErrorParser`)."""
 
     def __init__(
@@ -202,7 +180,7 @@ class SkeletonMambaCLI(LightningCLI):
         return parser
 
     def add_arguments_to_parser(self, parser: LightningArgumentParser) -> None:
-        for source, target in DATA_TO_MODEL_LINKS:
+        for source, target in data_to_model_links():
             parser.link_arguments(f"data.{source}", f"model.init_args.{target}", apply_on="instantiate")
 
     def parse_arguments(self, parser: LightningArgumentParser, args: ArgsType) -> None:
