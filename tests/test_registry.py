@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from skeleton_mamba.tasks.training import cli, registry
-from skeleton_mamba.tasks.training.lightning_cli import data_to_model_links, import_task_modules
+from skeleton_mamba.tasks.training.contract_links import contract_class_of, contract_links
+from skeleton_mamba.tasks.training.lightning_cli import import_task_modules, registered_links
 from skeleton_mamba.tasks.training.registry import Command, RegistryError, TaskSpec, registered_tasks
 
 tomllib = pytest.importorskip("tomllib", reason="tomllib is in the standard library from Python 3.11")
@@ -79,19 +80,46 @@ def test_sm_takes_its_task_commands_and_variants_from_the_registrations():
     assert cli.TASK_VARIANTS["stream"]["recognition"].run == "skeleton_mamba.tasks.recognition.online:main"
 
 
-def test_the_links_of_the_tasks_are_those_the_machinery_listed_before():
-    """The data-to-model links, now declared by each task, hold the 14 of the former single list."""
-    assert set(data_to_model_links()) >= set(
-        [
-            ("num_classes", "num_classes"), ("skeleton", "skeleton"), ("in_channels", "in_channels"),
-            ("batch_size", "batch_size"), ("image_size", "image_size"), ("fps", "fps"),
-            ("music_dim", "network.music_dim"), ("music_dim", "music_dim"),
-            ("seed_frames", "network.seed_frames"), ("music_frames", "network.music_frames"),
-            ("predict_frames", "network.predict_frames"), ("generate_frames", "generate_frames"),
-            ("window", "window"), ("canonicalize_init_head", "canonicalize_init_head"),
-        ]
-    )  # fmt: skip
-    assert len(data_to_model_links()) == len(set(data_to_model_links()))  # each once
+PAIRS = [  # (data module, module) of the recipes
+    ("recognition.data.RecognitionDataModule", "recognition.module.ActionRecognitionModule"),
+    ("recognition.data.SyntheticRecognitionDataModule", "recognition.module.ActionRecognitionModule"),
+    ("egodance.data.EgoDanceDataModule", "egodance.module.EgoDanceModule"),
+    ("egodance.data.SyntheticEgoDanceDataModule", "egodance.module.EgoDanceModule"),
+    ("qean.data.AISTPPDanceDataModule", "qean.module.QEANModule"),
+    ("stream.data.StreamDanceDataModule", "stream.module.StreamDanceModule"),
+    ("text2motion.data.HumanML3DDataModule", "text2motion.module.TextToMotionModule"),
+    ("text2motion.data.SyntheticTextMotionDataModule", "text2motion.module.TextToMotionModule"),
+    ("text2motion.evaluator_data.T2MEvaluatorDataModule", "text2motion.evaluator_module.T2MEvaluatorModule"),
+]
+
+
+def _class(path: str) -> type:
+    module, _, name = f"skeleton_mamba.tasks.{path}".rpartition(".")
+    return getattr(importlib.import_module(module), name)
+
+
+def test_the_links_derived_from_the_contracts_are_those_the_machinery_listed_before():
+    """The data-to-model links, now read off each data module's contract and its model's arguments, are the
+    14 of the former single list (all but ``batch_size`` on the modules without that argument)."""
+    links = {
+        link
+        for data, module in PAIRS
+        for link in contract_links(contract_class_of(_class(data)), _class(module))
+    }
+    assert links == {
+        ("num_classes", "num_classes"), ("skeleton", "skeleton"), ("in_channels", "in_channels"),
+        ("batch_size", "batch_size"), ("image_size", "image_size"), ("fps", "fps"),
+        ("music_dim", "network.music_dim"), ("music_dim", "music_dim"),
+        ("seed_frames", "network.seed_frames"), ("music_frames", "network.music_frames"),
+        ("predict_frames", "network.predict_frames"), ("generate_frames", "generate_frames"),
+        ("window", "window"), ("canonicalize_init_head", "canonicalize_init_head"),
+    }  # fmt: skip
+    assert set(registered_links()) == links  # what sm fit links: every registered pair's, each once
+    qean = contract_links(contract_class_of(_class(PAIRS[4][0])), _class(PAIRS[4][1]))
+    assert ("seed_frames", "network.seed_frames") in qean and (
+        "music_cache_dir",
+        "music_cache_dir",
+    ) not in qean
 
 
 def test_reading_the_registry_imports_no_torch():

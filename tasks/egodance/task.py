@@ -20,12 +20,5 @@ TASK = TaskSpec(
             f"{_PKG}.dance_args:build_parser",
         ),
     },
-    links=(
-        ("image_size", "image_size"),
-        ("fps", "fps"),
-        ("music_dim", "network.music_dim"),
-        ("window", "window"),
-        ("canonicalize_init_head", "canonicalize_init_head"),
-    ),
     networks={"EMM": f"{_PKG}.onnx_graphs:emm_specs"},
 )

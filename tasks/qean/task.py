@@ -10,11 +10,4 @@ TASK = TaskSpec(
     title="QEAN",
     package=_PKG,
     modules=(f"{_PKG}.module", f"{_PKG}.data"),
-    links=(
-        ("music_dim", "network.music_dim"),
-        ("seed_frames", "network.seed_frames"),
-        ("music_frames", "network.music_frames"),
-        ("predict_frames", "network.predict_frames"),
-        ("generate_frames", "generate_frames"),
-    ),
 )

@@ -20,11 +20,5 @@ TASK = TaskSpec(
             ),
         },
     },
-    links=(
-        ("num_classes", "num_classes"),
-        ("skeleton", "skeleton"),
-        ("in_channels", "in_channels"),
-        ("batch_size", "batch_size"),
-    ),
     networks={"ActionRecognizer": f"{_PKG}.onnx_graphs:recognizer_specs"},
 )

@@ -13,6 +13,5 @@ TASK = TaskSpec(
             f"{_PKG}.cli:main", "live music-to-dance / online recognition", f"{_PKG}.cli_args:build_parser"
         ),
     },
-    links=(("music_dim", "music_dim"),),
     networks={"StreamDancer": f"{_PKG}.onnx_graphs:dancer_specs"},
 )

@@ -2,9 +2,9 @@
 
 A task is a package (``tasks/<name>/`` here, or any installed distribution) with a torch-free module, by
 convention ``task.py``, that holds one :class:`TaskSpec`: its name as the docs write it, the modules of its
-LightningModule and LightningDataModule classes, its ``sm`` commands and its variants of shared commands, its
-exportable networks and the typed contract of its data. The package's ``pyproject.toml`` names that object in
-the entry-point group :data:`ENTRY_POINT_GROUP`::
+LightningModule and LightningDataModule classes (a data module names its typed contract itself:
+``contract_class``), its ``sm`` commands and its variants of shared commands, and its exportable networks. The
+package's ``pyproject.toml`` names that object in the entry-point group :data:`ENTRY_POINT_GROUP`::
 
     [project.entry-points."skeleton_mamba.tasks"]
     gesture = "gesture_task.task:TASK"
@@ -70,9 +70,6 @@ class TaskSpec:
         commands: ``sm`` command name -> :class:`Command`, the task's own commands.
         variants: shared command -> {value of its ``--task`` option -> :class:`Command`}: the task's
             variant of a command another task (or the machinery) owns (``sm stream --task recognition``).
-        links: (data-module attribute, model init argument or a field of one: ``network.seed_frames``): what
-            LightningCLI hands from the instantiated data module to the model (a link applies when the data
-            module has the attribute and the model the argument).
         networks: task network class name -> ``"module:function"`` returning its ONNX graphs
             (``function(network, frames=...) -> {graph name: ExportSpec}``, see
             :mod:`~skeleton_mamba.tasks.training.onnx_graphs`); a network not named exports its backbone.
@@ -84,7 +81,6 @@ class TaskSpec:
     modules: tuple[str, ...] = ()
     commands: Mapping[str, Command] = field(default_factory=dict)
     variants: Mapping[str, Mapping[str, Command]] = field(default_factory=dict)
-    links: tuple[tuple[str, str], ...] = ()
     networks: Mapping[str, str] = field(default_factory=dict)
 
 

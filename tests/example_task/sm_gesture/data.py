@@ -2,18 +2,31 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import torch
 from torch.utils.data import TensorDataset
 
 from skeleton_mamba import get_skeleton
-from skeleton_mamba.tasks.training.base_data import SplitDataModule
+from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GestureContract(DataContract):
+    """What the keypoints fix for the model: linked to its arguments of the same names."""
+
+    num_classes: int
+    skeleton: str
 
 
 class GestureDataModule(SplitDataModule):
     """Keypoints (T, J, 2) of ``num_classes`` generated gestures, ``per_class`` samples each per split.
 
-    ``num_classes`` and ``skeleton`` follow from the data: LightningCLI links them to the module.
+    ``num_classes`` and ``skeleton`` follow from the data (:class:`GestureContract`): LightningCLI links
+    them to the module's arguments of those names.
     """
+
+    contract_class = GestureContract
 
     def __init__(
         self,
@@ -29,6 +42,10 @@ class GestureDataModule(SplitDataModule):
         self.num_classes = num_classes
         self.skeleton = skeleton
         self.per_class, self.frames, self.seed = per_class, frames, seed
+
+    @property
+    def contract(self) -> GestureContract:
+        return GestureContract(num_classes=self.num_classes, skeleton=self.skeleton)
 
     def _split(self, generator: torch.Generator) -> TensorDataset:
         joints = get_skeleton(self.skeleton).num_joints

@@ -7,6 +7,5 @@ TASK = TaskSpec(
     title="gesture",
     package="sm_gesture",
     modules=("sm_gesture.module", "sm_gesture.data"),
-    links=(("num_classes", "num_classes"), ("skeleton", "skeleton")),
     networks={"GestureClassifier": "sm_gesture.onnx_graphs:gesture_specs"},
 )
