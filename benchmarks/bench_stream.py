@@ -185,10 +185,11 @@ def onnx_and_eager(model, frames: int, threads: int) -> dict:
     import onnxruntime
     import torch
 
+    from skeleton_mamba.tasks.stream.onnx_graphs import dancer_specs
     from skeleton_mamba.tasks.training import onnx_export
     from skeleton_mamba.tasks.training.frame_timing import latency_summary
 
-    spec = onnx_export.dancer_specs(model)["step"]  # a size-1 example would fix the batch; runs at 1
+    spec = dancer_specs(model)["step"]  # a size-1 example would fix the batch; runs at 1
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         path = onnx_export.export_onnx(spec, Path(folder) / "step.onnx")

@@ -15,13 +15,15 @@ import pytest
 import torch
 from lightning.pytorch import LightningDataModule, LightningModule
 
+from skeleton_mamba.tasks.motion.errors import InputError, expected_failure, one_line_message
+from skeleton_mamba.tasks.qean.data import QEANContract
 from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule
 from skeleton_mamba.tasks.recognition.data import SyntheticRecognitionDataModule
-from skeleton_mamba.tasks.stream.data import StreamDanceDataModule
+from skeleton_mamba.tasks.stream.data import StreamContract, StreamDanceDataModule
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.text2motion.data import SyntheticTextMotionDataModule
-from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, data_contract
+from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, data_contract, unlinked
 from skeleton_mamba.tasks.training.base_module import BackboneModule
 from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
@@ -47,9 +49,9 @@ def test_every_task_data_module_exposes_the_typed_contract(tmp_path):
     contract = recognition.contract
     assert isinstance(contract, DataContract)
     assert (contract.num_classes, contract.skeleton) == (3, recognition.skeleton)
-    assert contract.statistics == {}  # recognition has no data-dependent normalisation
+    assert contract.statistics is None  # recognition has no data-dependent normalisation
     stream = StreamDanceDataModule(root=str(tmp_path), synthetic=True, synthetic_count=2, window_frames=30)
-    assert data_contract(stream).music_dim == 34 and data_contract(stream).statistics == {}  # before setup
+    assert data_contract(stream).music_dim == 34 and data_contract(stream).statistics is None  # before setup
     with pytest.raises(dataclasses.FrozenInstanceError):
         contract.music_dim = 3  # type: ignore[misc]
 
@@ -57,13 +59,13 @@ def test_every_task_data_module_exposes_the_typed_contract(tmp_path):
 def test_text_statistics_are_the_normalised_training_features():
     data = SyntheticTextMotionDataModule(train_clips=4, val_clips=2, batch_size=2)
     data.setup("fit")
-    statistics = data.contract.statistics
+    statistics = data_contract(data).statistics
     mean, std = data.statistics()
     clips = data.evaluation_clips("train")
     truth = torch.cat([torch.as_tensor(c.features, dtype=torch.float64) for c in clips])
     truth = (truth - mean.double()) / std.double()
-    torch.testing.assert_close(statistics["features"].double(), truth, rtol=1e-6, atol=1e-6)
-    assert torch.equal(statistics["feature_mean"], mean) and torch.equal(statistics["feature_std"], std)
+    torch.testing.assert_close(statistics.features.double(), truth, rtol=1e-6, atol=1e-6)
+    assert torch.equal(statistics.feature_mean, mean) and torch.equal(statistics.feature_std, std)
 
 
 def _cli(tmp_path, *args: str) -> SkeletonMambaCLI:
@@ -110,9 +112,17 @@ def test_training_statistics_reach_the_model_once_at_fit(tmp_path):
 class _Windows(LightningDataModule):
     """A data module fixing QEAN's window lengths, and nothing else."""
 
+    contract_class = QEANContract
+
     def __init__(self, seed_frames: int) -> None:
         super().__init__()
         self.seed_frames, self.music_frames, self.predict_frames = seed_frames, 24, 4
+
+    @property
+    def contract(self) -> QEANContract:
+        return QEANContract(
+            music_dim=35, seed_frames=self.seed_frames, music_frames=24, predict_frames=4, generate_frames=20
+        )
 
     def train_dataloader(self):
         return [{}]
@@ -128,12 +138,26 @@ def test_qean_checks_its_window_lengths_against_the_data_contract():
         trainer.fit(module, _Windows(seed_frames=16))
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _CacheContract(DataContract):
+    """A contract of a music-feature cache and a frame rate, read at run time (not linked)."""
+
+    music_cache_dir: str = unlinked()
+    fps: int = unlinked()
+
+
 class _CachedMusic(SplitDataModule):
     """Test windows from a data module whose music features are cached in ``music_cache_dir``."""
+
+    contract_class = _CacheContract
 
     def __init__(self, music_cache_dir: str) -> None:
         super().__init__(batch_size=1, num_workers=0)
         self.music_cache_dir, self.fps = music_cache_dir, 25
+
+    @property
+    def contract(self) -> _CacheContract:
+        return _CacheContract(music_cache_dir=self.music_cache_dir, fps=self.fps)
 
     def setup(self, stage: str) -> None:
         self.datasets["test"] = [torch.zeros(1)]
@@ -161,4 +185,64 @@ def test_the_test_loop_reads_the_music_cache_from_the_contract_not_the_data_hpar
     trainer.test(module, _CachedMusic(str(tmp_path / "cache")))
     (contract,) = module.seen
     assert contract.music_cache_dir == str(tmp_path / "cache") and contract.fps == 25
-    assert contract.statistics == {}
+    assert contract.statistics is None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _MisspeltContract(DataContract):
+    """The streaming contract with its music width misspelt: the dancer takes no ``music_dims``."""
+
+    music_dims: int
+
+
+class _MisspeltMusic(StreamDanceDataModule):
+    contract_class = _MisspeltContract
+
+    @property
+    def contract(self) -> _MisspeltContract:
+        return _MisspeltContract(music_dims=self.music_dim)
+
+
+class _WrongKeyword(StreamDanceDataModule):
+    """A contract built with a field name its class does not have."""
+
+    @property
+    def contract(self):
+        return self.contract_class(music_dims=self.music_dim)
+
+
+def test_a_contract_field_the_model_takes_nowhere_fails_at_start_in_one_line(tmp_path):
+    with pytest.raises(InputError) as caught:
+        _cli(tmp_path, f"--data.class_path={__name__}._MisspeltMusic")
+    message = str(caught.value)
+    assert "\n" not in message
+    assert message.startswith(
+        "_MisspeltContract.music_dims (the data's) is no argument of StreamDanceModule nor a field of its "
+        "config arguments"
+    )
+    assert not (tmp_path / "stream_dance_demo").exists()  # refused before any data was written
+
+
+def test_a_contract_built_with_a_misspelt_field_fails_in_one_line(tmp_path):
+    """The dataclass refuses the keyword when the link reads the contract; ``sm`` prints the cause's line."""
+    with pytest.raises(ValueError) as caught:  # jsonargparse's link error, caused by ours
+        _cli(tmp_path, f"--data.class_path={__name__}._WrongKeyword")
+    line = one_line_message(expected_failure(caught.value))
+    assert line == (
+        "_WrongKeyword.contract: StreamContract.__init__() got an unexpected keyword argument 'music_dims'"
+    )
+
+
+class _ContractWidth(StreamDanceDataModule):
+    """An attribute saying 34 music features and a contract saying 20."""
+
+    @property
+    def contract(self) -> StreamContract:
+        return StreamContract(music_dim=20)
+
+
+def test_the_links_come_from_the_contract_not_the_data_modules_attributes(tmp_path):
+    cli = _cli(tmp_path, f"--data.class_path={__name__}._ContractWidth")
+    assert cli.datamodule.music_dim == 34
+    assert cli.link_data_contract() == [("music_dim", "music_dim")]
+    assert cli.model.hparams.music_dim == 20 and cli.model.model.music_dim == 20

@@ -21,7 +21,10 @@ import pytest
 tomllib = pytest.importorskip("tomllib", reason="tomllib is in the standard library from Python 3.11")
 
 REPO = Path(__file__).resolve().parents[1]
-TASKS = ("egodance", "qean", "recognition", "stream", "text2motion")
+# the tasks, as pyproject.toml registers them (entry points of skeleton_mamba.tasks)
+TASKS = tuple(
+    tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["entry-points"]["skeleton_mamba.tasks"]
+)
 
 
 @pytest.fixture(scope="module")

@@ -19,9 +19,13 @@ import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
+from skeleton_mamba.tasks.egodance.onnx_graphs import emm_specs
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
+from skeleton_mamba.tasks.recognition.onnx_graphs import recognizer_specs
 from skeleton_mamba.tasks.stream.model import StreamDancer
+from skeleton_mamba.tasks.stream.onnx_graphs import dancer_specs
 from skeleton_mamba.tasks.text2motion.model import TextCondition, TextToMotionDenoiser
+from skeleton_mamba.tasks.text2motion.onnx_graphs import text_denoiser_specs
 from skeleton_mamba.tasks.training import onnx_export
 from skeleton_mamba.tasks.training.cli import main as sm
 
@@ -61,7 +65,7 @@ def dancer(smoothing_stages: int = 0) -> StreamDancer:
 @pytest.mark.slow
 def test_dancer_sequence_graph_matches_eager(tmp_path):
     model = dancer()
-    spec = onnx_export.dancer_specs(model, frames=12)["sequence"]
+    spec = dancer_specs(model, frames=12)["sequence"]
     program, path = exported(spec, tmp_path / "sequence.onnx")
     for batch, frames in ((2, 12), (3, 37)):
         inputs = (torch.randn(batch, frames, 24, 12), torch.randn(batch, frames, 6) * 5)
@@ -71,7 +75,7 @@ def test_dancer_sequence_graph_matches_eager(tmp_path):
 @pytest.mark.parametrize("smoothing_stages", [0, 3])
 def test_dancer_step_graph_stepped_equals_the_teacher_forced_forward(tmp_path, smoothing_stages):
     model = dancer(smoothing_stages)
-    spec = onnx_export.dancer_specs(model)["step"]
+    spec = dancer_specs(model)["step"]
     assert spec.input_names[:2] == ["prev", "music"] and spec.output_names[0] == "pose"
     program, path = exported(spec, tmp_path / "step.onnx")
     batch, frames = 3, 60
@@ -106,7 +110,7 @@ def test_recognition_graph_matches_eager_with_absent_bodies(tmp_path):
         skeleton="ntu25", in_channels=3, dim=16, depth=1, heads=2, mlp_dim=32, mixer=MIXER
     )
     model = ActionRecognizer(ntu, num_classes=5).eval()
-    spec = onnx_export.recognizer_specs(model, frames=12)["sequence"]
+    spec = recognizer_specs(model, frames=12)["sequence"]
     program, path = exported(spec, tmp_path / "sequence.onnx")
     for batch, bodies, frames in ((2, 2, 12), (3, 1, 41), (3, 2, 30)):
         x = torch.randn(batch, bodies, frames, 25, 3)
@@ -121,7 +125,7 @@ def test_emm_denoiser_graph_matches_eager_with_padding(tmp_path):
         TINY, EMMConfig(context_dim=16, use_vision=False, heads=2, transformer_ff=32), diffusion_steps=20
     )
     model.set_data_statistics(torch.randn(2, 8, 24, 10) * 3 + 1)
-    spec = onnx_export.emm_specs(model.eval(), frames=12)["denoiser"]
+    spec = emm_specs(model.eval(), frames=12)["denoiser"]
     program, path = exported(spec, tmp_path / "denoiser.onnx")
     for batch, frames, tokens in ((2, 12, 7), (3, 33, 33)):
         inputs = (torch.randn(batch, frames, 24, 10), torch.randint(0, 20, (batch,)),
@@ -138,7 +142,7 @@ def test_text_denoiser_graph_matches_eager_with_padding(tmp_path, temporal_prior
         temporal_prior=temporal_prior,
     )  # fmt: skip
     model.set_data_statistics(torch.randn(200, 263) * 2, torch.tensor([120, 80]))
-    spec = onnx_export.text_denoiser_specs(model.eval(), frames=12)["denoiser"]
+    spec = text_denoiser_specs(model.eval(), frames=12)["denoiser"]
     program, path = exported(spec, tmp_path / "denoiser.onnx")
 
     def eager(x_t, t, text, text_mask, frame_mask):  # the denoiser as the samplers call it

@@ -27,6 +27,7 @@ instead (:meth:`SyntheticEgoDanceDataModule.assign_splits`).
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import json
 import math
@@ -54,10 +55,12 @@ from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_t
 from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
 from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npz
-from skeleton_mamba.tasks.training.base_data import SplitDataModule
+from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, unlinked
 
 __all__ = [
+    "EgoDanceContract",
     "EgoDanceDataset",
+    "EgoDanceStatistics",
     "EgoDanceDataModule",
     "SyntheticEgoDanceDataModule",
     "assign_splits",
@@ -202,6 +205,30 @@ class EgoDanceDataset(Dataset):
         return item
 
 
+@dataclasses.dataclass(frozen=True)
+class EgoDanceStatistics:
+    """The training windows: ``motion`` (N, T, 24, 10) and ``music`` (N, T, 35), from which the EMM takes its
+    preconditioning and music-normalisation statistics (:meth:`.model.EMM.set_data_statistics`)."""
+
+    motion: torch.Tensor
+    music: torch.Tensor
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class EgoDanceContract(DataContract):
+    """What EgoAIST++ windows fix for the module: the frame size, rate, music width (``network.music_dim``),
+    window and its heading; the music-feature cache (read by the test loop, not linked) and the training
+    windows (:class:`EgoDanceStatistics`)."""
+
+    image_size: int
+    fps: float
+    music_dim: int
+    window: int
+    canonicalize_init_head: bool
+    music_cache_dir: str | None = unlinked(None)
+    statistics: EgoDanceStatistics | None = unlinked(None)
+
+
 class EgoDanceDataModule(SplitDataModule):
     """EgoAIST++ windows from ``root`` (built by ``sm make-ego``).
 
@@ -303,16 +330,29 @@ class EgoDanceDataModule(SplitDataModule):
         """Whole sequences (``full_sequences``) differ in length: one a batch."""
         return {"batch_size": 1} if split == "test" and self.hparams.full_sequences else {}
 
-    def training_statistics(self) -> dict[str, torch.Tensor]:
-        """The training windows' ``motion`` (N, T, 24, 10) and ``music`` (N, T, 35), from which the EMM takes
-        its preconditioning and music-normalisation statistics (:meth:`.model.EMM.set_data_statistics`)."""
+    contract_class = EgoDanceContract
+
+    @property
+    def contract(self) -> EgoDanceContract:
+        """What the data fixes for the model (:class:`EgoDanceContract`)."""
+        return EgoDanceContract(
+            image_size=self.image_size,
+            fps=self.fps,
+            music_dim=self.music_dim,
+            window=self.window,
+            canonicalize_init_head=self.canonicalize_init_head,
+            music_cache_dir=self.music_cache_dir,
+        )
+
+    def training_statistics(self) -> EgoDanceStatistics | None:
+        """The training windows (:class:`EgoDanceStatistics`); None before the training split is set up."""
         train = self.datasets.get("train")
         if train is None or len(train) == 0:
-            return {}
-        return {
-            "motion": torch.stack([item["motion"] for item in train.items]),
-            "music": torch.stack([item["music"] for item in train.items]),
-        }
+            return None
+        return EgoDanceStatistics(
+            motion=torch.stack([item["motion"] for item in train.items]),
+            music=torch.stack([item["music"] for item in train.items]),
+        )
 
 
 class SyntheticEgoDanceDataModule(EgoDanceDataModule):

@@ -34,6 +34,7 @@ from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.motion.temporal_filter import smooth_over_time
+from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
 
@@ -94,7 +95,8 @@ class EMM(PretrainedMixin, nn.Module):
     """The EgoMusic Motion network.
 
     Args:
-        backbone: the SkeletonMamba settings (skeleton, channels and ``context_dim`` are set here).
+        backbone: the SkeletonMamba settings; its skeleton, channels and ``context_dim`` are EMM's (the last
+            ``config.context_dim``): a backbone that sets them otherwise is refused, not overwritten.
         config: the condition encoders' settings (None: :class:`EMMConfig` defaults).
         resnet_path: the pretrained ``transformers`` ResNet: a Hugging Face model id (``microsoft/resnet-50``,
             downloaded once and cached) or a local ``save_pretrained`` folder; None: random init of
@@ -123,8 +125,9 @@ class EMM(PretrainedMixin, nn.Module):
         super().__init__()
         self.config = c = config or EMMConfig()
         context_dim = c.context_dim
-        cfg = dataclasses.replace(
-            backbone or SkeletonMambaConfig(),
+        cfg = derived_backbone(  # context_dim: network.context_dim, the one place it is set
+            backbone,
+            "EMM",
             skeleton="smpl24",
             in_channels=None,
             out_channels=NUM_CHANNELS,

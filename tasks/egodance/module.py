@@ -247,9 +247,9 @@ class EgoDanceModule(BackboneModule):
     # ------------------------------------------------------------------ training
     def set_data_statistics(self, statistics) -> None:
         """The denoiser's preconditioning statistics from the training windows' ``motion``, and the music
-        encoder's from their ``music`` (:meth:`.data.EgoDanceDataModule.training_statistics`)."""
+        encoder's from their ``music`` (:class:`.data.EgoDanceStatistics`)."""
         for model in (self.model, self.ema.module):
-            model.set_data_statistics(statistics["motion"], statistics["music"])
+            model.set_data_statistics(statistics.motion, statistics.music)
 
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]
@@ -447,7 +447,7 @@ class EgoDanceModule(BackboneModule):
                 self.log("test/head_estimator/position_mm", self.test_head_position, batch_size=b)
                 self.log("test/head_estimator/rotation_deg", self.test_head_rotation, batch_size=b)
         protocol = next(iter(self.test_evaluations.values())).protocol
-        cache = None if self.contract is None else self.contract.music_cache_dir  # the data's feature cache
+        cache = getattr(self.contract, "music_cache_dir", None)  # the data's feature cache
         fps = self.hparams.fps
         duration = true.shape[1] / fps
         music_beats = [

@@ -41,11 +41,11 @@ The 219-d motion vector is :mod:`.representation`'s; music features are the tool
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from pathlib import Path
 
 import torch
-from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
@@ -57,8 +57,9 @@ from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.qean.generate import pad_music
+from skeleton_mamba.tasks.training.base_data import ContractDataModule, DataContract, unlinked
 
-__all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "SequenceDataset"]
+__all__ = ["AISTPPDanceDataModule", "DanceWindowDataset", "QEANContract", "SequenceDataset"]
 
 MUSIC_SUFFIXES = (".wav", ".mp3")
 
@@ -124,7 +125,20 @@ class SequenceDataset(Dataset):
         return self.items[i]
 
 
-class AISTPPDanceDataModule(LightningDataModule):
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class QEANContract(DataContract):
+    """What the AIST++ windows fix for QEAN: the music width and the window lengths (``network.*`` but
+    ``generate_frames``), and the music-feature cache (read by the test loop, not linked)."""
+
+    music_dim: int
+    seed_frames: int
+    music_frames: int
+    predict_frames: int
+    generate_frames: int
+    music_cache_dir: str | None = unlinked(None)
+
+
+class AISTPPDanceDataModule(ContractDataModule):
     """AIST++ motions and music for QEAN.
 
     Args:
@@ -211,6 +225,20 @@ class AISTPPDanceDataModule(LightningDataModule):
         self.datasets: dict[str, Dataset] = {}
         if predict_seed is None and not synthetic:  # fail before the model is built; `sm predict` needs
             self.check_layout()  # no AIST++ copy, a synthetic set is written by prepare_data
+
+    contract_class = QEANContract
+
+    @property
+    def contract(self) -> QEANContract:
+        """What the data fixes for the model (:class:`QEANContract`)."""
+        return QEANContract(
+            music_dim=self.music_dim,
+            seed_frames=self.seed_frames,
+            music_frames=self.music_frames,
+            predict_frames=self.predict_frames,
+            generate_frames=self.generate_frames,
+            music_cache_dir=self.music_cache_dir,
+        )
 
     def prepare_data(self) -> None:
         """Write the SYNTHETIC demo set under ``root`` if ``synthetic`` asks for it and it has no motions."""

@@ -39,6 +39,7 @@ from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
+from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.causal_smoothing import CausalSmoothing
 
 __all__ = [
@@ -178,7 +179,7 @@ class SkeletonMambaMotionEncoder(nn.Module):
             raise ValueError(
                 f"the SkeletonMamba encoder reads the 219-d SMPL-24 vector, got {config.motion_dim}"
             )
-        backbone = dataclasses.replace(backbone, skeleton="smpl24", in_channels=12, out_channels=None)
+        backbone = derived_backbone(backbone, "QEAN", skeleton="smpl24", in_channels=12, out_channels=None)
         self.backbone = SkeletonMamba(backbone)
         self.project = nn.Linear(24 * backbone.dim, config.hidden)
         self.norm = nn.LayerNorm(config.hidden)

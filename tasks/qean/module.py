@@ -141,15 +141,15 @@ class QEANModule(BackboneModule):
         return self.model(motion, music)
 
     def setup(self, stage: str) -> None:
-        """The window lengths must be the data's (:class:`DataContract`; ``sm`` links them, a module built
-        by hand may differ)."""
+        """The window lengths must be the data's (:class:`~.data.QEANContract`; ``sm`` links them, a module
+        built by hand may differ)."""
         super().setup(stage)
         contract = self.contract
         lengths = ("seed_frames", "music_frames", "predict_frames")
         ours = {key: getattr(self.model.config, key) for key in lengths}
         ours["generate_frames"] = self.hparams.generate_frames
         for key, value in ours.items():
-            data = None if contract is None else getattr(contract, key)
+            data = getattr(contract, key, None)  # None: built by hand, or data without these lengths
             if data is not None and data != value:
                 raise ValueError(
                     f"the model's {key} = {value} but data.{key} = {data}: set both to the same "
@@ -222,7 +222,7 @@ class QEANModule(BackboneModule):
         joints (B, 120 + G, 24, 3)."""
         joints = features_to_joints(full.double())  # (B, 120 + G, 24, 3)
         protocol = self.test_evaluation.protocol
-        cache = None if self.contract is None else self.contract.music_cache_dir  # the data's feature cache
+        cache = getattr(self.contract, "music_cache_dir", None)  # the data's feature cache
         for i in range(full.shape[0]):
             if protocol.name == "fact":  # the data module's features are FACT's: beats of the whole window
                 beats = np.flatnonzero(batch["music"][i, :, BEAT].cpu().numpy() > 0.5)

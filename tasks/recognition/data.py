@@ -10,13 +10,15 @@ holds every sample and the named splits; the data module picks ``train_split`` /
 
 A batch is ``(keypoint (B, N, M, T, V, C) float32, label (B,) int64)`` with N clips and M bodies.
 
-``num_classes``, ``skeleton``, ``in_channels`` and ``batch_size`` are attributes that ``sm`` links to the
-model (``in_channels`` is read off the pipeline output: x y z for 3D, x y score for 2D). ``batch_size``
-is the per-device batch; the model scales its learning rate by the global batch.
+``num_classes``, ``skeleton``, ``in_channels`` and ``batch_size`` are its :class:`RecognitionContract`, which
+``sm`` links to the model's arguments of those names (``in_channels`` is read off the pipeline output: x y z
+for 3D, x y score for 2D). ``batch_size`` is the per-device batch; the model scales its learning rate by the
+global batch.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +30,7 @@ from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundErr
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline
-from skeleton_mamba.tasks.training.base_data import SplitDataModule
+from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule
 
 __all__ = ["RecognitionDataModule", "SkeletonClipDataset", "SyntheticRecognitionDataModule"]
 
@@ -51,6 +53,17 @@ class SkeletonClipDataset(Dataset):
         annotation = self.annotations[index]
         rng = None if self.pipeline.test_mode else np.random.default_rng(int(torch.randint(2**62, ()).item()))
         return torch.from_numpy(self.pipeline(annotation, rng)), annotation["label"]
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RecognitionContract(DataContract):
+    """What the clips fix for the recognizer: K classes, the skeleton, channels per joint and the per-device
+    batch (the learning rate's scaling)."""
+
+    num_classes: int
+    skeleton: str
+    in_channels: int
+    batch_size: int
 
 
 class RecognitionDataModule(SplitDataModule):
@@ -164,6 +177,18 @@ class RecognitionDataModule(SplitDataModule):
             )
         num_clips = self.num_clips["validate" if stage == "validate" else "test"]
         return SkeletonPipeline(self.clip_len, num_clips, True, self.num_person)
+
+    contract_class = RecognitionContract
+
+    @property
+    def contract(self) -> RecognitionContract:
+        """What the data fixes for the model (:class:`RecognitionContract`)."""
+        return RecognitionContract(
+            num_classes=self.num_classes,
+            skeleton=self.skeleton,
+            in_channels=self.in_channels,
+            batch_size=self.batch_size,
+        )
 
     @property
     def in_channels(self) -> int:

@@ -22,7 +22,6 @@ saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir. ``sm pre
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import torch
@@ -41,6 +40,7 @@ from skeleton_mamba.tasks.recognition.early import (
 )
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 from skeleton_mamba.tasks.recognition.prediction_writer import PredictionCSVWriter
+from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
 
 __all__ = ["ActionRecognitionModule"]
@@ -84,7 +84,7 @@ class ActionRecognitionModule(BackboneModule):
     ) -> None:
         super().__init__()
         config = self.save_backbone_hyperparameters(backbone)
-        config = dataclasses.replace(config, skeleton=skeleton, in_channels=in_channels)
+        config = derived_backbone(config, "the data", skeleton=skeleton, in_channels=in_channels)
         self.model = ActionRecognizer(config, num_classes=num_classes, dropout=dropout)
         top_k = {"top1": MulticlassAccuracy(num_classes, top_k=1, average="micro")}
         if num_classes > 5:

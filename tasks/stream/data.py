@@ -16,10 +16,10 @@ the two; a training item is a window ``{motion (W, 24, 12), music (W, 34)}`` tak
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import torch
-from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
@@ -29,8 +29,9 @@ from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
+from skeleton_mamba.tasks.training.base_data import ContractDataModule, DataContract, unlinked
 
-__all__ = ["StreamDanceDataModule"]
+__all__ = ["StreamContract", "StreamDanceDataModule", "StreamStatistics"]
 
 
 def audio_rate(path: Path) -> int:
@@ -64,7 +65,23 @@ class WindowDataset(Dataset):
         return {"motion": motion[s : s + self.window], "music": music[s : s + self.window]}
 
 
-class StreamDanceDataModule(LightningDataModule):
+@dataclasses.dataclass(frozen=True)
+class StreamStatistics:
+    """``music``: every training music frame (N, 34), for the dancer's feature normalisation."""
+
+    music: torch.Tensor
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StreamContract(DataContract):
+    """What the windows fix for the streaming dancer: its music width, and the training music
+    (:class:`StreamStatistics`)."""
+
+    music_dim: int
+    statistics: StreamStatistics | None = unlinked(None)
+
+
+class StreamDanceDataModule(ContractDataModule):
     """AIST++-layout dances for the causal dance model (see the module docstring).
 
     Args:
@@ -166,10 +183,16 @@ class StreamDanceDataModule(LightningDataModule):
         """Every training music frame (N, 34), for the model's feature normalisation."""
         return torch.cat([music for _, music in self.datasets["train"].sequences.values()])
 
-    def training_statistics(self) -> dict[str, torch.Tensor]:
-        """``music``: every training music frame (N, 34) once the split is set up (the contract's statistics,
-        :class:`~skeleton_mamba.tasks.training.base_data.DataContract`)."""
-        return {"music": self.train_music()} if "train" in self.datasets else {}
+    contract_class = StreamContract
+
+    @property
+    def contract(self) -> StreamContract:
+        """What the data fixes for the model (:class:`StreamContract`)."""
+        return StreamContract(music_dim=self.music_dim)
+
+    def training_statistics(self) -> StreamStatistics | None:
+        """Every training music frame (:class:`StreamStatistics`); None before the split is set up."""
+        return StreamStatistics(music=self.train_music()) if "train" in self.datasets else None
 
     def train_dataloader(self) -> DataLoader:
         data = self.datasets["train"]

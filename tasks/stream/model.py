@@ -18,7 +18,6 @@ values part of the stream's :class:`DancerState`.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -34,6 +33,7 @@ from skeleton_mamba.tasks.motion.fact_features import features_to_joints, featur
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
+from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.causal_smoothing import CausalSmoothing
 
 __all__ = [
@@ -126,8 +126,9 @@ class StreamDancer(PretrainedMixin, nn.Module):
         smoothing_decay: float = 0.6,
     ) -> None:
         super().__init__()
-        cfg = dataclasses.replace(
-            backbone or SkeletonMambaConfig(),
+        cfg = derived_backbone(
+            backbone,
+            "the streaming dancer",
             skeleton="smpl24",
             in_channels=POSE_CHANNELS + music_dim,
             out_channels=POSE_CHANNELS,

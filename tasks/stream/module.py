@@ -49,8 +49,8 @@ class StreamDanceModule(BackboneModule):
 
     def set_data_statistics(self, statistics) -> None:
         """The music normalisation from every training music frame (``music`` (N, 34),
-        :meth:`.data.StreamDanceDataModule.training_statistics`)."""
-        self.model.set_music_statistics(statistics["music"].to(self.device))
+        :class:`.data.StreamStatistics`)."""
+        self.model.set_music_statistics(statistics.music.to(self.device))
 
     def _loss(self, batch: dict[str, torch.Tensor], noise: float) -> torch.Tensor:
         motion = batch["motion"]

@@ -12,6 +12,7 @@ Both expose ``statistics()`` (Mean, Std), which the task module stores to de-nor
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -22,10 +23,12 @@ from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics, read_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import UNIT_LENGTH, MotionClip, crop_length, load_clips
 from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clips
-from skeleton_mamba.tasks.training.base_data import SplitDataModule
+from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, unlinked
 
 __all__ = [
+    "TextMotionContract",
     "TextMotionDataset",
+    "TextMotionStatistics",
     "collate_text_motion",
     "HumanML3DDataModule",
     "SyntheticTextMotionDataModule",
@@ -77,7 +80,35 @@ def collate_text_motion(items: list[dict]) -> dict:
     }
 
 
+@dataclasses.dataclass(frozen=True)
+class TextMotionStatistics:
+    """``feature_mean`` and ``feature_std`` (263,) of the normalisation and, once the training split is set
+    up, ``features`` (N, 263): its first :data:`STATISTICS_FRAMES` frames, normalised, and
+    ``feature_lengths`` (K,) the frames each clip gives them (the denoiser's preconditioning statistics; its
+    temporal prior's spectrum is measured within clips)."""
+
+    feature_mean: torch.Tensor
+    feature_std: torch.Tensor
+    features: torch.Tensor | None = None
+    feature_lengths: torch.Tensor | None = None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TextMotionContract(DataContract):
+    """What the clips fix for the text-to-motion module: no size (the 263-d representation is the model's
+    own), only the normalisation and training features (:class:`TextMotionStatistics`)."""
+
+    statistics: TextMotionStatistics | None = unlinked(None)
+
+
 class _TextMotionDataModule(SplitDataModule):
+    contract_class = TextMotionContract
+
+    @property
+    def contract(self) -> TextMotionContract:
+        """What the data fixes for the model (:class:`TextMotionContract`)."""
+        return TextMotionContract()
+
     def statistics(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(Mean, Std) (263,) float32 used for normalisation."""
         mean, std = self._statistics()
@@ -86,22 +117,20 @@ class _TextMotionDataModule(SplitDataModule):
     def _statistics(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
 
-    def training_statistics(self) -> dict[str, torch.Tensor]:
-        """``feature_mean`` and ``feature_std`` (263,) of the normalisation and, once the training split is
-        set up, ``features`` (N, 263): its first :data:`STATISTICS_FRAMES` frames, normalised, and
-        ``feature_lengths`` (K,) the frames each clip gives them (the denoiser's preconditioning
-        statistics; its temporal prior's spectrum is measured within clips)."""
+    def training_statistics(self) -> TextMotionStatistics:
+        """The normalisation and, once the training split is set up, its features
+        (:class:`TextMotionStatistics`)."""
         mean, std = self.statistics()
-        statistics = {"feature_mean": mean, "feature_std": std}
         train = self.datasets.get("train")
-        if train is not None and len(train) > 0:
-            frames = np.concatenate([clip.features for clip in train.clips])[:STATISTICS_FRAMES]
-            statistics["features"] = (
-                torch.from_numpy(frames.astype(np.float32)) - mean.float()
-            ) / std.float()
-            ends = np.cumsum([clip.length for clip in train.clips]).clip(max=len(frames))
-            statistics["feature_lengths"] = torch.from_numpy(np.diff(ends, prepend=0)).long()
-        return statistics
+        if train is None or len(train) == 0:
+            return TextMotionStatistics(feature_mean=mean, feature_std=std)
+        frames = np.concatenate([clip.features for clip in train.clips])[:STATISTICS_FRAMES]
+        features = (torch.from_numpy(frames.astype(np.float32)) - mean.float()) / std.float()
+        ends = np.cumsum([clip.length for clip in train.clips]).clip(max=len(frames))
+        lengths = torch.from_numpy(np.diff(ends, prepend=0)).long()
+        return TextMotionStatistics(
+            feature_mean=mean, feature_std=std, features=features, feature_lengths=lengths
+        )
 
     def evaluation_clips(self, split: str = "test") -> list[MotionClip]:
         """The clips of a set-up split (the T2M evaluation draws its own captions and crops)."""

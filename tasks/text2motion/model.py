@@ -25,7 +25,6 @@ with the backbone's output F: :mod:`skeleton_mamba.tasks.training.diffusion.para
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -35,6 +34,7 @@ from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, NUM_JOINTS
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
+from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
 from skeleton_mamba.tasks.training.diffusion.temporal_prior import (
@@ -165,8 +165,9 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         temporal_prior: bool = False,
     ) -> None:
         super().__init__()
-        config = dataclasses.replace(
+        config = derived_backbone(
             backbone,
+            "the text-to-motion denoiser",
             skeleton="humanml3d22",
             in_channels=JOINT_CHANNELS + time_channels,
             out_channels=JOINT_CHANNELS,

@@ -135,11 +135,11 @@ class TextToMotionModule(BackboneModule):
     def set_data_statistics(self, statistics) -> None:
         """The data's normalisation (``feature_mean``, ``feature_std``) into the module's buffers and the
         denoiser's preconditioning from the normalised training ``features``
-        (:meth:`.data._TextMotionDataModule.training_statistics`)."""
-        self.feature_mean.copy_(statistics["feature_mean"])
-        self.feature_std.copy_(statistics["feature_std"])
-        if "features" in statistics:
-            self.denoiser.set_data_statistics(statistics["features"], statistics.get("feature_lengths"))
+        (:class:`.data.TextMotionStatistics`)."""
+        self.feature_mean.copy_(statistics.feature_mean)
+        self.feature_std.copy_(statistics.feature_std)
+        if statistics.features is not None:
+            self.denoiser.set_data_statistics(statistics.features, statistics.feature_lengths)
 
     @property
     def text_encoder(self) -> TextEncoder:

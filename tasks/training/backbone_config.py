@@ -10,8 +10,36 @@ import dataclasses
 from collections.abc import Mapping
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.errors import InputError
 
-__all__ = ["backbone_config", "config_from", "plain_backbone_config"]
+__all__ = ["backbone_config", "config_from", "derived_backbone", "plain_backbone_config"]
+
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(SkeletonMambaConfig)}
+
+
+def derived_backbone(config: SkeletonMambaConfig | None, owner: str, **derived) -> SkeletonMambaConfig:
+    """``config`` (None: the defaults) with the fields that ``owner`` derives (from the data, its own settings
+    or its representation) set to ``derived``.
+
+    A backbone setting is given in one place: a field ``config`` sets to a value other than its default and
+    other than the derived one would be overwritten, so it is refused instead (the same value, or the default,
+    is accepted).
+
+    Raises:
+        InputError: one line naming each such field, both values and where the value comes from.
+    """
+    config = config or SkeletonMambaConfig()
+    clashes = [
+        f"backbone.{name} = {getattr(config, name)!r} but {owner} sets {value!r}"
+        for name, value in derived.items()
+        if getattr(config, name) not in (value, _DEFAULTS[name])
+    ]
+    if clashes:
+        raise InputError(
+            f"{'; '.join(clashes)}: a backbone setting is given in one place; remove it from the backbone "
+            f"({owner} derives {', '.join(derived)})"
+        )
+    return dataclasses.replace(config, **derived)
 
 
 def backbone_config(value: SkeletonMambaConfig | Mapping | None) -> SkeletonMambaConfig:

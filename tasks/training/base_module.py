@@ -15,10 +15,9 @@ restores the checkpoint's copy over them). A module never reads its data module'
 from __future__ import annotations
 
 import inspect
-from collections.abc import Mapping
+from typing import Any
 
 import lightning.pytorch as pl
-import torch
 from lightning.pytorch import LightningModule
 
 from skeleton_mamba import SkeletonMambaConfig
@@ -77,9 +76,9 @@ class BackboneModule(LightningModule):
         """The data module's contract to :attr:`contract`; at fit its training statistics to
         :meth:`set_data_statistics` (when it has any)."""
         self.contract = self.data_contract(include_statistics=stage == "fit")
-        if self.contract is not None and self.contract.statistics:
+        if self.contract is not None and self.contract.statistics is not None:
             self.set_data_statistics(self.contract.statistics)
 
-    def set_data_statistics(self, statistics: Mapping[str, torch.Tensor]) -> None:
-        """Take the training split's statistics (:attr:`DataContract.statistics`); a task with
-        data-dependent normalisation overrides this."""
+    def set_data_statistics(self, statistics: Any) -> None:
+        """Take the training split's statistics (:attr:`DataContract.statistics`: the task's own dataclass of
+        named tensors); a task with data-dependent normalisation overrides this."""

@@ -12,8 +12,8 @@ goes through :func:`load_checkpoint`:
    :data:`MAX_NESTING` levels, ``state_dict`` maps names to tensors, the hyper-parameters are a mapping;
 4. every class path stored in the hyper-parameters (``_class_path``, nested ``class_path`` entries,
    Lightning's ``_instantiator``) must name a module of the project (``skeleton_mamba.*``) or one of
-   the library classes recipes use (:data:`TRUSTED_CLASS_PREFIXES`), checked as text before anything
-   is imported.
+   the library classes recipes use (:data:`TRUSTED_CLASS_PREFIXES`), or of a registered task's package
+   (:func:`trusted_class_prefixes`), checked as text before anything is imported.
 
 :func:`load_module` builds a LightningModule from a checked checkpoint (``sm dance``, ``sm generate``,
 ``sm stream``, ``sm export-pretrained``, ``sm export-onnx``). Before any weight is copied it checks the
@@ -54,6 +54,7 @@ from lightning.pytorch.plugins.io import TorchCheckpointIO
 from skeleton_mamba.pretrained_checks import MAX_PARAMETERS, check_finite_weights, check_sizes, dtype_fits
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import CheckpointError, RandomWeightsWarning
+from skeleton_mamba.tasks.training.registry import task_of_class_path, task_packages
 
 __all__ = [
     "DATA_PATH_KEYS",
@@ -69,6 +70,7 @@ __all__ = [
     "check_settings_known",
     "check_state_fits",
     "checked_state_shapes",
+    "trusted_class_prefixes",
     "load_checkpoint",
     "load_module",
     "load_module_and_checkpoint",
@@ -96,6 +98,15 @@ TRUSTED_CLASS_PREFIXES: tuple[str, ...] = (
     "torch.nn.",
     "torchmetrics.",
 )
+
+
+def trusted_class_prefixes() -> tuple[str, ...]:
+    """:data:`TRUSTED_CLASS_PREFIXES` and the package of every registered task (:mod:`.registry`): a task in
+    another distribution is trusted like the project's own modules, since installing it registered it."""
+    extra = tuple(f"{package}." for package in task_packages())
+    return (*TRUSTED_CLASS_PREFIXES, *(p for p in extra if not p.startswith(TRUSTED_CLASS_PREFIXES)))
+
+
 _URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
 _DOTTED_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 _CLASS_KEYS = ("class_path", "_class_path", "_instantiator")
@@ -135,21 +146,22 @@ def _class_paths(value: Any, where: str = "hyper_parameters") -> Iterator[tuple[
 
 
 def check_class_paths(hparams: Any, source: str) -> None:
-    """Refuse a class path in ``hparams`` outside :data:`TRUSTED_CLASS_PREFIXES` (nothing is imported).
+    """Refuse a class path in ``hparams`` outside :func:`trusted_class_prefixes` (nothing is imported).
 
     Raises:
         CheckpointError: naming ``source``, the key and the refused class path.
     """
+    prefixes = trusted_class_prefixes()
     for where, value in _class_paths(hparams):
         trusted = (
             isinstance(value, str)
             and _DOTTED_NAME.match(value) is not None
-            and ("." not in value or value.startswith(TRUSTED_CLASS_PREFIXES))
+            and ("." not in value or value.startswith(prefixes))
         )
         if not trusted:
             raise CheckpointError(
                 f"{source}: {where} names {value!r}, outside the project's modules "
-                f"({', '.join(p.rstrip('.') for p in TRUSTED_CLASS_PREFIXES)}); refusing to import it"
+                f"({', '.join(p.rstrip('.') for p in prefixes)}); refusing to import it"
             )
 
 
@@ -287,9 +299,6 @@ def _checked(checkpoint: Any, source: str) -> dict:
     return checkpoint
 
 
-_TASK_NAMES = {"egodance": "EgoDance", "stream": "streaming", "text2motion": "text-to-motion", "qean": "QEAN"}
-
-
 def store_paths_relative(checkpoint: dict, path: str | PathLike[str]) -> dict:
     """``checkpoint`` with each relative data path (:data:`DATA_PATH_KEYS`, relative to the working folder,
     existing) rewritten relative to the folder of ``path`` (where it is being saved), the keys listed under
@@ -333,12 +342,10 @@ def resolve_stored_paths(checkpoint: dict, path: Path) -> dict:
 
 
 def _task_of(class_path: str) -> str:
-    """``"EgoDance"`` for ``skeleton_mamba.tasks.egodance.module.EgoDanceModule`` (the task's name as the
-    docs write it, else its folder's); the class name outside ``skeleton_mamba.tasks``."""
-    parts = class_path.split(".")
-    if len(parts) > 3 and parts[:2] == ["skeleton_mamba", "tasks"]:
-        return _TASK_NAMES.get(parts[2], parts[2])
-    return parts[-1]
+    """``"EgoDance"`` for ``skeleton_mamba.tasks.egodance.module.EgoDanceModule``: the title of the registered
+    task whose package holds the class (:mod:`.registry`); the class name outside every task."""
+    task = task_of_class_path(class_path)
+    return task.title if task is not None else class_path.split(".")[-1]
 
 
 def _a(word: str) -> str:

@@ -1,8 +1,10 @@
 """``sm``: the Skeleton Mamba command line, its command table and its error policy.
 
 ``sm fit|validate|test|predict --recipe NAME`` runs LightningCLI (:mod:`.lightning_cli`); the helper
-commands (``sm prepare``, ``sm analyze-music``, ``sm render``, ...) live beside the task or toolkit code
-that implements them and are named here as strings. A command is imported only when it runs, and its
+commands (``sm analyze-music``, ``sm render``, ...) live beside the toolkit or machinery code that
+implements them and are named here as strings; a task's commands (``sm prepare``, ``sm dance``, ...) and its
+variants of shared ones come from its registration (:mod:`.registry`: the task's ``TaskSpec``, found by its
+entry point), so this module names no task. A command is imported only when it runs, and its
 parser comes from a module that imports no torch (``*_args.py`` beside it, with the shared options of
 :mod:`~skeleton_mamba.tasks.motion.cli_options`): ``sm`` parses the command line with it first, so
 ``sm --help``, ``sm CMD --help``, a bad argument or a missing input file answer before torch, Lightning or
@@ -21,34 +23,17 @@ import importlib.util
 import os
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 from skeleton_mamba import __version__
 from skeleton_mamba.allocator import keep_freed_memory
 from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
 from skeleton_mamba.tasks.training.library_noise import silence_library_noise
+from skeleton_mamba.tasks.training.registry import Command, RegistryError, registered_tasks
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults
-
-
-@dataclass(frozen=True)
-class Command:
-    """One ``sm`` command.
-
-    ``run``: ``"module:function"``, imported only to run; the function takes the arguments after the command
-    name (the LightningCLI entry also receives the subcommand) and returns an exit code. ``help``: one line
-    for ``sm --help``. ``parser``: ``"module:function"`` returning the command's argparse parser from a
-    module that imports no torch (the same parser ``run`` parses with); None for the LightningCLI commands,
-    whose parser is Lightning's.
-    """
-
-    run: str
-    help: str
-    parser: str | None = None
-
 
 _PKG = "skeleton_mamba.tasks"
 _LIGHTNING = f"{_PKG}.training.lightning_cli:run"
-COMMANDS: dict[str, Command] = {
+MACHINERY_COMMANDS: dict[str, Command] = {
     "fit": Command(_LIGHTNING, "train a model from a recipe (LightningCLI)"),
     "validate": Command(_LIGHTNING, "run the validation loop of a recipe"),
     "test": Command(_LIGHTNING, "evaluate a checkpoint on the test split"),
@@ -57,11 +42,6 @@ COMMANDS: dict[str, Command] = {
         f"{_PKG}.training.recipes_cli:main",
         "list the packaged recipes",
         f"{_PKG}.training.recipes_cli:build_parser",
-    ),
-    "prepare": Command(
-        f"{_PKG}.recognition.prepare:main",
-        "build NTU / Kinetics annotation files",
-        f"{_PKG}.recognition.prepare:build_parser",
     ),
     "analyze-music": Command(
         f"{_PKG}.motion.analyze_music:main",
@@ -88,35 +68,10 @@ COMMANDS: dict[str, Command] = {
         "motions in one self-contained HTML viewer",
         f"{_PKG}.motion.view_args:build_parser",
     ),
-    "stream": Command(
-        f"{_PKG}.stream.cli:main",
-        "live music-to-dance / online recognition",
-        f"{_PKG}.stream.cli_args:build_parser",
-    ),
-    "make-ego": Command(
-        f"{_PKG}.egodance.builder.cli:main",
-        "build EgoAIST++-style egocentric data",
-        f"{_PKG}.egodance.builder.cli_args:build_parser",
-    ),
-    "dance": Command(
-        f"{_PKG}.egodance.dance_cli:main",
-        "estimate a dance from music and video",
-        f"{_PKG}.egodance.dance_args:build_parser",
-    ),
-    "generate": Command(
-        f"{_PKG}.text2motion.generate_cli:main",
-        "generate motion from text",
-        f"{_PKG}.text2motion.generate_args:build_parser",
-    ),
     "export-onnx": Command(
         f"{_PKG}.training.onnx_export:main",
         "a backbone or task network as ONNX (sequence forward, streaming step)",
         f"{_PKG}.training.onnx_export_args:build_parser",
-    ),
-    "convert": Command(
-        f"{_PKG}.text2motion.convert_cli:main",
-        "HumanML3D features to joints",
-        f"{_PKG}.text2motion.convert_args:build_parser",
     ),
     "export-pretrained": Command(
         f"{_PKG}.training.export_pretrained:main",
@@ -124,16 +79,26 @@ COMMANDS: dict[str, Command] = {
         f"{_PKG}.training.export_pretrained_args:build_parser",
     ),
 }
-# command -> {value of its --task option: Command}: a task's own variant of a shared command
-TASK_VARIANTS: dict[str, dict[str, Command]] = {
-    "stream": {
-        "recognition": Command(
-            f"{_PKG}.recognition.online:main",
-            "online action recognition",
-            f"{_PKG}.recognition.online_args:build_parser",
-        )
-    },
-}
+"""The commands of the machinery and the toolkit; the tasks' own come from their registrations."""
+
+
+def _task_commands() -> tuple[dict[str, Command], dict[str, dict[str, Command]]]:
+    """Every registered task's commands (after the machinery's), and its variants of shared commands."""
+    commands: dict[str, Command] = dict(MACHINERY_COMMANDS)
+    variants: dict[str, dict[str, Command]] = {}
+    for spec in registered_tasks():
+        for name, command in spec.commands.items():
+            if name in MACHINERY_COMMANDS:
+                raise RegistryError(f"task {spec.name!r}: command {name!r} is the machinery's")
+            commands[name] = command
+        for name, by_task in spec.variants.items():
+            variants.setdefault(name, {}).update(by_task)
+    return commands, variants
+
+
+COMMANDS, TASK_VARIANTS = _task_commands()
+"""``COMMANDS``: every ``sm`` command. ``TASK_VARIANTS``: command -> {value of its ``--task`` option:
+Command}, a task's own variant of a shared command (:attr:`~.registry.TaskSpec.variants`)."""
 LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
 # What ``pip install skeleton-mamba`` leaves out (pyproject.toml's extras): the import names ``sm`` checks
 # (without importing them) before any command, and those of the commands that need another extra.

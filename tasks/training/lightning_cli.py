@@ -11,8 +11,9 @@ A recipe composes a task's LightningModule and LightningDataModule through ``cla
 
 ``--recipe`` is an alias of ``-c/--config`` (:mod:`skeleton_mamba.tasks.training.recipe_resolution`);
 config files and dotted overrides merge left to right. Values that follow from the data set are
-linked from the instantiated data module to the model (:data:`DATA_TO_MODEL_LINKS`), never typed
-twice; a link applies when both the data module has the attribute and the model the argument.
+linked from the instantiated data module's contract to the model's arguments of the same names
+(:meth:`SkeletonMambaCLI.link_data_contract`, derived from the two classes: nothing lists them), never typed
+twice; a contract field the model takes nowhere is refused before anything is built.
 
 Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGuard` and
 :class:`~skeleton_mamba.tasks.training.run_guards.InterruptRecorder`; ``--ckpt_path`` is checked by
@@ -22,7 +23,6 @@ Every run gets :class:`~skeleton_mamba.tasks.training.run_guards.NonFiniteLossGu
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import re
 import sys
 from collections.abc import Sequence
@@ -34,12 +34,14 @@ from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCL
 
 from skeleton_mamba import __version__
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
+from skeleton_mamba.tasks.training.base_data import LINK_PREFIX
 from skeleton_mamba.tasks.training.checkpoints import (
     check_state_fits,
     checked_state_shapes,
     load_checkpoint,
     use_checked_checkpoint_io,
 )
+from skeleton_mamba.tasks.training.contract_links import contract_class_of, contract_links
 from skeleton_mamba.tasks.training.lightning_compat import import_policy, install_accepted_links
 from skeleton_mamba.tasks.training.model_summary import with_parameter_summary
 from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_checkpoint_source
@@ -56,6 +58,7 @@ from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
     install_bounded_yaml_loader,
 )
+from skeleton_mamba.tasks.training.registry import registered_tasks
 from skeleton_mamba.tasks.training.run_folders import (
     find_last_checkpoint,
     open_csv_logs,
@@ -69,49 +72,40 @@ from skeleton_mamba.tasks.training.run_guards import (
     silence_interrupt_notice,
 )
 
-__all__ = ["DATA_TO_MODEL_LINKS", "SkeletonMambaCLI", "import_task_modules", "quiet_as_trainer_option", "run"]
-
-# Task packages whose ``module`` and ``data`` modules are imported before parsing, so recipes may
-# use short class names (``class_path: ActionRecognitionModule``).
-TASK_PACKAGES = ("recognition", "egodance", "qean", "text2motion", "stream")
-
-# data-module attribute -> model init argument (or a field of one: ``network.seed_frames``), applied once the
-# data module is instantiated. Linked arguments are not user-settable (jsonargparse overwrites them); set them
-# on the data module.
-DATA_TO_MODEL_LINKS: tuple[tuple[str, str], ...] = (
-    ("num_classes", "num_classes"),
-    ("skeleton", "skeleton"),
-    ("in_channels", "in_channels"),
-    ("batch_size", "batch_size"),
-    ("image_size", "image_size"),
-    ("fps", "fps"),
-    ("music_dim", "network.music_dim"),  # EMM's and QEAN's music width
-    ("music_dim", "music_dim"),  # the streaming dancer's
-    ("seed_frames", "network.seed_frames"),  # QEAN's window lengths
-    ("music_frames", "network.music_frames"),
-    ("predict_frames", "network.predict_frames"),
-    ("generate_frames", "generate_frames"),
-    ("window", "window"),  # EMM's training window and its frame (long-form test and predict)
-    ("canonicalize_init_head", "canonicalize_init_head"),
-)
+__all__ = ["SkeletonMambaCLI", "import_task_modules", "quiet_as_trainer_option", "run"]
 
 
-def _module_exists(name: str) -> bool:
-    try:
-        return importlib.util.find_spec(name) is not None
-    except ModuleNotFoundError:
-        return False
+def registered_links() -> list[tuple[str, str]]:
+    """The data-to-model links of every registered task: for each data-module class with a contract and each
+    LightningModule class of its task's modules (:attr:`.registry.TaskSpec.modules`), the links derived from
+    the two (:func:`~.contract_links.contract_links`; a pair that does not fit adds none), each once."""
+    links: dict[tuple[str, str], None] = {}
+    for spec in registered_tasks():
+        classes = [
+            value
+            for name in spec.modules
+            for value in vars(importlib.import_module(name)).values()
+            if isinstance(value, type) and value.__module__ == name
+        ]
+        models = [c for c in classes if issubclass(c, LightningModule)]
+        for data in filter(None, map(contract_class_of, classes)):
+            for model in models:
+                try:
+                    links.update(dict.fromkeys(contract_links(data, model)))
+                except InputError:
+                    continue
+    return list(links)
 
 
 def import_task_modules() -> list[str]:
-    """Import every installed task's ``module`` and ``data`` modules; returns their names."""
+    """Import every registered task's module and data-module modules (:attr:`.registry.TaskSpec.modules`),
+    so that recipes may use short class names (``class_path: ActionRecognitionModule``); returns their
+    names."""
     imported = []
-    for task in TASK_PACKAGES:
-        for part in ("module", "data"):
-            name = f"skeleton_mamba.tasks.{task}.{part}"
-            if _module_exists(name):
-                importlib.import_module(name)
-                imported.append(name)
+    for spec in registered_tasks():
+        for name in spec.modules:
+            importlib.import_module(name)
+            imported.append(name)
     return imported
 
 
@@ -162,7 +156,7 @@ class OneLineErrorParser(LightningArgumentParser):
 
 
 class SkeletonMambaCLI(LightningCLI):
-    """LightningCLI with ``--recipe``, the data-to-model links of :data:`DATA_TO_MODEL_LINKS` and one-line
+    """LightningCLI with ``--recipe``, the data-to-model links of :meth:`link_data_contract` and one-line
     parse errors (``parser_class`` defaults to :class:`OneLineErrorParser`)."""
 
     def __init__(
@@ -173,6 +167,7 @@ class SkeletonMambaCLI(LightningCLI):
         **kwargs,
     ):
         self.only_subcommand = only_subcommand
+        self._link_parsers: list[LightningArgumentParser] = []
         super().__init__(*args, parser_class=parser_class, **kwargs)
 
     def subcommands(self) -> dict[str, set[str]]:
@@ -203,8 +198,43 @@ class SkeletonMambaCLI(LightningCLI):
         return parser
 
     def add_arguments_to_parser(self, parser: LightningArgumentParser) -> None:
-        for source, target in DATA_TO_MODEL_LINKS:
-            parser.link_arguments(f"data.{source}", f"model.init_args.{target}", apply_on="instantiate")
+        """The registered tasks' data-to-model links (:func:`registered_links`), each reading the data
+        module's contract (``data.contract__<field>``, :class:`~.base_data.ContractDataModule`): linked
+        arguments are not options (jsonargparse sets them). A link whose field the chosen data module's
+        contract does not have is skipped; :meth:`link_data_contract` checks the chosen pair once parsed."""
+        for field, target in registered_links():
+            parser.link_arguments(
+                f"data.{LINK_PREFIX}{field}", f"model.init_args.{target}", apply_on="instantiate"
+            )
+        self._link_parsers.append(parser)
+
+    def link_data_contract(self) -> list[tuple[str, str]]:
+        """The links of the chosen data module's contract and the chosen model
+        (:func:`~.contract_links.contract_links`: a field the model takes nowhere is refused here, before
+        anything is built); those no registered pair has (a data module or model outside the registered tasks'
+        modules) are added to the running subcommand's parser. Returns the links (none when the data module
+        declares no contract).
+
+        LightningCLI builds one parser per subcommand (``sm`` one only) and calls
+        :meth:`add_arguments_to_parser` with each, in :meth:`subcommands` order, so the running subcommand's
+        parser is found by its place.
+        """
+        config = _subcommand_config(self.config, self.subcommand)
+        data_class = _class_of(config.get("data"))
+        model_class = _class_of(config.get("model"))
+        contract_class = None if data_class is None else contract_class_of(data_class)
+        if contract_class is None or model_class is None:
+            return []
+        links = contract_links(contract_class, model_class)
+        names = list(self.subcommands())
+        parser = self._link_parsers[names.index(self.subcommand) if self.subcommand in names else -1]
+        known = set(registered_links())
+        for field, target in links:
+            if (field, target) not in known:
+                parser.link_arguments(
+                    f"data.{LINK_PREFIX}{field}", f"model.init_args.{target}", apply_on="instantiate"
+                )
+        return links
 
     def parse_arguments(self, parser: LightningArgumentParser, args: ArgsType) -> None:
         """Parse, then check ``--ckpt_path`` before Lightning reads it (:mod:`.checkpoints`).
@@ -260,6 +290,7 @@ class SkeletonMambaCLI(LightningCLI):
         (:mod:`skeleton_mamba.tasks.training.lightning_compat`).
         """
         install_accepted_links(self)
+        self.link_data_contract()
 
     def instantiate_trainer(self, **kwargs) -> pl.Trainer:
         """The trainer, with every logger's version fixed before any of them creates its folder.
@@ -286,6 +317,16 @@ class SkeletonMambaCLI(LightningCLI):
             recorder.new_run_dirs = sorted(set(new), key=lambda p: -len(p.parts))
         open_csv_logs(trainer.loggers)
         return trainer
+
+
+def _class_of(component) -> type | None:
+    """The class a parsed ``model`` / ``data`` entry names by its ``class_path`` (the parse imported it);
+    None for an entry without one."""
+    path = component.get("class_path") if hasattr(component, "get") else None
+    if not isinstance(path, str) or "." not in path:
+        return None
+    module, _, name = path.rpartition(".")
+    return getattr(importlib.import_module(module), name, None)
 
 
 def _subcommand_config(config, subcommand: str | None):

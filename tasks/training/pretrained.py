@@ -49,6 +49,7 @@ from skeleton_mamba.tasks.training.checkpoints import (
     check_finite_tensors,
     load_module_and_checkpoint,
 )
+from skeleton_mamba.tasks.training.registry import task_packages
 
 __all__ = [
     "MODULE_WEIGHTS_NAME",
@@ -104,10 +105,12 @@ def _resolve(source: str | os.PathLike[str]) -> tuple[Path, dict]:
 
 
 def import_project_class(path: str, source: str, base: type | None = None) -> type:
-    """The class a config names: checked as text (project modules only) before its module is imported,
-    then checked to be a class (a subclass of ``base`` when given)."""
+    """The class a config names: checked as text (the project's modules and the registered tasks' packages
+    only, :mod:`.registry`) before its module is imported, then checked to be a class (a subclass of ``base``
+    when given)."""
     check_class_paths({"class_path": path}, source)
-    if not path.startswith("skeleton_mamba.") or "." not in path:
+    project = ("skeleton_mamba.", *(f"{package}." for package in task_packages()))
+    if not path.startswith(project) or "." not in path:
         raise CheckpointError(f"{source}: names {path!r}, not a class of the project")
     module_name, _, name = path.rpartition(".")
     try:

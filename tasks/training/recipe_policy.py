@@ -4,12 +4,12 @@
 (``class_path: pkg.mod.Cls``, ``--model pkg.mod.Cls``, a callable given by its path), and importing a module
 runs it. Recipes get the checkpoints' policy
 (:data:`~skeleton_mamba.tasks.training.checkpoints.TRUSTED_CLASS_PREFIXES`: the project's modules and the
-Lightning, ``torch.optim``, ``torch.nn`` and torchmetrics classes recipes use): any other module is refused
-before it is imported, unless the user trusts it explicitly with ``--allow-import MODULE`` (repeatable) or
-``SM_ALLOW_IMPORT=mod1,mod2``. jsonargparse's own deny-list (``os``, ``subprocess``, ``builtins.exec``, ...)
-stays on top: it cannot be allowed. The check is jsonargparse's import-path policy
-(:func:`~skeleton_mamba.tasks.training.lightning_compat.import_policy`), which looks at the path before
-the import and at the imported object's defining module after it.
+Lightning, ``torch.optim``, ``torch.nn`` and torchmetrics classes recipes use, and the packages of the
+registered tasks): any other module is refused before it is imported, unless the user trusts it explicitly
+with ``--allow-import MODULE`` (repeatable) or ``SM_ALLOW_IMPORT=mod1,mod2``. jsonargparse's own deny-list
+(``os``, ``subprocess``, ``builtins.exec``, ...) stays on top: it cannot be allowed. The check is
+jsonargparse's import-path policy (:func:`~skeleton_mamba.tasks.training.lightning_compat.import_policy`),
+which looks at the path before the import and at the imported object's defining module after it.
 
 **Numbers.** Values the trainer, the seed and the task modules use are range-checked once parsed, before
 anything uses them (:func:`check_config_values`): a 24-digit seed, ``--trainer.max_epochs 1e30``, a batch
@@ -30,7 +30,7 @@ from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
 from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
-from skeleton_mamba.tasks.training.checkpoints import TRUSTED_CLASS_PREFIXES
+from skeleton_mamba.tasks.training.checkpoints import TRUSTED_CLASS_PREFIXES, trusted_class_prefixes
 
 __all__ = [
     "ALLOW_IMPORT_ENV",
@@ -43,6 +43,7 @@ __all__ = [
     "check_allowed_modules",
     "check_config_values",
     "split_allow_import",
+    "trusted_modules",
 ]
 
 ALLOW_IMPORT_OPTION = "--allow-import"
@@ -96,14 +97,20 @@ def check_allowed_modules(allowed: Sequence[str]) -> tuple[str, ...]:
             )
         if module == "jsonargparse" or module.startswith("jsonargparse."):
             raise InputError(f"{ALLOW_IMPORT_OPTION} / {ALLOW_IMPORT_ENV}: jsonargparse cannot be allowed")
-    return (*TRUSTED_MODULES, *allowed)
+    return (*trusted_modules(), *allowed)
+
+
+def trusted_modules() -> tuple[str, ...]:
+    """:data:`TRUSTED_MODULES` and the registered tasks' packages
+    (:func:`~skeleton_mamba.tasks.training.checkpoints.trusted_class_prefixes`)."""
+    return tuple(prefix.rstrip(".") for prefix in trusted_class_prefixes())
 
 
 def refused_import_message(path: str) -> str:
     """The one-line refusal of class path ``path``, saying how to trust its module."""
     top = path.split(".")[0]
     return (
-        f"class path {path!r} is outside the project's modules ({', '.join(TRUSTED_MODULES)}); "
+        f"class path {path!r} is outside the project's modules ({', '.join(trusted_modules())}); "
         f"refusing to import it (trust it with {ALLOW_IMPORT_OPTION} {top} or {ALLOW_IMPORT_ENV}={top})"
     )
 

@@ -1,0 +1,17 @@
+"""Streaming's registration (entry point ``stream`` of ``skeleton_mamba.tasks``; torch-free)."""
+
+from skeleton_mamba.tasks.training.registry import Command, TaskSpec
+
+_PKG = "skeleton_mamba.tasks.stream"
+TASK = TaskSpec(
+    name="stream",
+    title="streaming",
+    package=_PKG,
+    modules=(f"{_PKG}.module", f"{_PKG}.data"),
+    commands={
+        "stream": Command(
+            f"{_PKG}.cli:main", "live music-to-dance / online recognition", f"{_PKG}.cli_args:build_parser"
+        ),
+    },
+    networks={"StreamDancer": f"{_PKG}.onnx_graphs:dancer_specs"},
+)
