@@ -390,17 +390,12 @@ def open_wav_stream(stream: BinaryIO, name: str = "standard input") -> AudioRead
     unknown: the stream is read to its end, at most :data:`MAX_DURATION_S`.
 
     Examples:
-        >>> import tempfile, wave
-        >>> import numpy as np
+        >>> import tempfile
         >>> from pathlib import Path
-        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
-        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
-        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
-        ...     f.setnchannels(1)
-        ...     f.setsampwidth(2)
-        ...     f.setframerate(16000)
-        ...     f.writeframes(tone.tobytes())
+        >>> from skeleton_mamba.tasks.motion.synthetic.music import write_tone
+        >>> path = write_tone(Path(tempfile.mkdtemp()) / "tone.wav")  # 0.5 s of 440 Hz, 16 kHz mono PCM
         >>> import io
+        >>> import numpy as np
         >>> with open_wav_stream(io.BytesIO(path.read_bytes()), name="pipe") as reader:
         ...     samples = np.concatenate(list(reader.blocks()))
         >>> reader.info.name, samples.shape
@@ -482,16 +477,10 @@ def open_audio(path: str | os.PathLike) -> AudioReader:
         AudioFileError: the header is malformed or out of bounds, or the format is not one libsndfile reads.
 
     Examples:
-        >>> import tempfile, wave
-        >>> import numpy as np
+        >>> import tempfile
         >>> from pathlib import Path
-        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
-        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
-        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
-        ...     f.setnchannels(1)
-        ...     f.setsampwidth(2)
-        ...     f.setframerate(16000)
-        ...     f.writeframes(tone.tobytes())
+        >>> from skeleton_mamba.tasks.motion.synthetic.music import write_tone
+        >>> path = write_tone(Path(tempfile.mkdtemp()) / "tone.wav")  # 0.5 s of 440 Hz, 16 kHz mono PCM
         >>> with open_audio(path) as reader:
         ...     blocks = list(reader.blocks(block_frames=3000))
         >>> reader.info.sample_rate, [block.shape for block in blocks]
@@ -525,16 +514,10 @@ def probe_audio(path: str | os.PathLike) -> AudioInfo:
     """The checked header of ``path`` (:func:`open_audio` without decoding a sample).
 
     Examples:
-        >>> import tempfile, wave
-        >>> import numpy as np
+        >>> import tempfile
         >>> from pathlib import Path
-        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
-        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
-        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
-        ...     f.setnchannels(1)
-        ...     f.setsampwidth(2)
-        ...     f.setframerate(16000)
-        ...     f.writeframes(tone.tobytes())
+        >>> from skeleton_mamba.tasks.motion.synthetic.music import write_tone
+        >>> path = write_tone(Path(tempfile.mkdtemp()) / "tone.wav")  # 0.5 s of 440 Hz, 16 kHz mono PCM
         >>> info = probe_audio(path)
         >>> info.sample_rate, info.channels, info.frames, info.encoding, info.duration_s
         (16000, 1, 8000, 'PCM 16-bit', 0.5)
@@ -557,16 +540,10 @@ def read_audio(
         AudioFileError: a refused header, a decode error, bad samples, or no samples at all.
 
     Examples:
-        >>> import tempfile, wave
-        >>> import numpy as np
+        >>> import tempfile
         >>> from pathlib import Path
-        >>> path = Path(tempfile.mkdtemp()) / "tone.wav"
-        >>> tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(8000) / 16000) * 32767).astype("<i2")
-        >>> with wave.open(str(path), "wb") as f:  # 0.5 s of 440 Hz, 16 kHz mono PCM 16-bit
-        ...     f.setnchannels(1)
-        ...     f.setsampwidth(2)
-        ...     f.setframerate(16000)
-        ...     f.writeframes(tone.tobytes())
+        >>> from skeleton_mamba.tasks.motion.synthetic.music import write_tone
+        >>> path = write_tone(Path(tempfile.mkdtemp()) / "tone.wav")  # 0.5 s of 440 Hz, 16 kHz mono PCM
         >>> samples, rate = read_audio(path, offset_s=0.25)
         >>> samples.shape, samples.dtype, rate, round(float(abs(samples).max()), 2)
         ((4000,), dtype('float32'), 16000, 0.5)

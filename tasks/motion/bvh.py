@@ -306,13 +306,12 @@ def save_bvh(path: str | PathLike[str], motion: BvhMotion) -> Path:
         >>> import tempfile
         >>> from pathlib import Path
         >>> lines = [
-        ...     "HIERARCHY", "ROOT hips", "{", "OFFSET 0 0 0",
+        ...     "HIERARCHY", "ROOT pelvis", "{", "OFFSET 0 0 0",
         ...     "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
-        ...     "JOINT spine", "{", "OFFSET 0 10 0", "CHANNELS 3 Zrotation Xrotation Yrotation",
-        ...     "End Site", "{", "OFFSET 0 5 0", "}", "}", "}",
-        ...     "MOTION", "Frames: 2", "Frame Time: 0.0333333", "0 90 0 0 0 0 0 0 0", "1 90 0 0 0 0 0 45 0",
+        ...     "End Site", "{", "OFFSET 0 5 0", "}", "}",
+        ...     "MOTION", "Frames: 1", "Frame Time: 0.0333333", "0 90 0 0 45 0",
         ... ]
-        >>> path = Path(tempfile.mkdtemp()) / "two_joints.bvh"
+        >>> path = Path(tempfile.mkdtemp()) / "one_joint.bvh"
         >>> _ = path.write_text("\\n".join(lines) + "\\n")
         >>> motion = load_bvh(path)
         >>> copy = load_bvh(save_bvh(path.with_name("copy.bvh"), motion))

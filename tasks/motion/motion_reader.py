@@ -204,12 +204,11 @@ def load_joints(
         >>> import tempfile
         >>> import numpy as np
         >>> from pathlib import Path
-        >>> from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
+        >>> path = Path(tempfile.mkdtemp()) / "clip.npy"  # joint positions (T, J, 3); 24 joints: SMPL-24
         >>> joints = np.zeros((4, 24, 3), np.float32)
         >>> joints[:, :, 1] = np.linspace(0.0, 1.7, 24)  # a standing column of joints, y up
-        >>> path = Path(tempfile.mkdtemp()) / "clip.npz"
-        >>> path = save_motion(path, MotionData(30.0, "smpl24", joints=joints))
-        >>> clip = load_joints(path)
+        >>> np.save(path, joints)
+        >>> clip = load_joints(path, motion_fps=30.0)
         >>> clip.joints.shape, clip.fps, len(clip.parents), clip.names[0]
         ((4, 24, 3), 30.0, 24, 'pelvis')
     """

@@ -10,10 +10,13 @@ Beat ``k`` lies at ``t_k = k * 60 / bpm`` seconds (the first beat at 0). In ever
   four-bar root progression (A1, F1, C2, G1) chosen per seed.
 
 The mix is normalised to a peak of 0.9. Everything is deterministic given the seed.
+
+:func:`write_tone` writes a plain sine tone (16-bit PCM mono wav), the audio of the readers' examples.
 """
 
 from __future__ import annotations
 
+import wave
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -23,7 +26,7 @@ import soundfile as sf
 
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 
-__all__ = ["SyntheticTrack", "synthesize_music", "write_music", "beat_times"]
+__all__ = ["SyntheticTrack", "synthesize_music", "write_music", "write_tone", "beat_times"]
 
 _PROGRESSIONS = ((55.0, 43.65, 65.41, 49.0), (43.65, 49.0, 55.0, 65.41), (65.41, 55.0, 43.65, 49.0))
 
@@ -112,4 +115,27 @@ def write_music(path: str | PathLike[str], track: SyntheticTrack) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         sf.write(tmp, track.audio, track.sr, subtype="PCM_16")
+    return path
+
+
+def write_tone(
+    path: str | PathLike[str], seconds: float = 0.5, sr: int = 16000, hz: float = 440.0, peak: float = 0.5
+) -> Path:
+    """Write ``seconds`` of a ``hz`` sine of amplitude ``peak`` as 16-bit PCM mono wav at ``sr`` Hz
+    (atomically).
+
+    Examples:
+        >>> import tempfile
+        >>> path = write_tone(Path(tempfile.mkdtemp()) / "tone.wav")  # 0.5 s of 440 Hz, 16 kHz
+        >>> path.name, path.stat().st_size  # a 44-byte header and 8000 two-byte samples
+        ('tone.wav', 16044)
+    """
+    path = Path(path)
+    t = np.arange(int(round(seconds * sr))) / sr
+    samples = (peak * np.sin(2 * np.pi * hz * t) * 32767).astype("<i2")
+    with atomic_path(path) as tmp, wave.open(str(tmp), "wb") as f:
+        f.setnchannels(1)
+        f.setsampwidth(2)
+        f.setframerate(sr)
+        f.writeframes(samples.tobytes())
     return path
