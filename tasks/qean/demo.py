@@ -21,24 +21,19 @@ It prints and writes into ``<log dir>/demo/``:
 
 from __future__ import annotations
 
-import json
 import warnings
 
 from lightning.pytorch import LightningModule, Trainer
 
-from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,
     held_out_dynamics_checks,
 )
-from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
-from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.qean.module import features_to_motion
-from skeleton_mamba.tasks.training.demo_callback import DemoCallback
+from skeleton_mamba.tasks.training.demo_callback import DemoCallback, write_summary
 
 __all__ = ["QEANDemo"]
 
@@ -48,10 +43,7 @@ class QEANDemo(DemoCallback):
 
     Args:
         num_samples: held-out sequences whose dance (and ground truth) are written and rendered.
-        out_subdir: folder under the trainer's log dir (``runs/<name>/version_N``).
-        render: write the mp4 renderings.
-        width: video width (multiple of 16).
-        height: video height (multiple of 16).
+        out_subdir, render, width, height: where to write, and the size of the mp4s (:class:`DemoCallback`).
     """
 
     def __init__(
@@ -100,24 +92,11 @@ class QEANDemo(DemoCallback):
         out = self.out_dir(trainer)
         records = []
         for name, dance, truth in list(zip(names, generated, truths, strict=True))[: self.num_samples]:
-            wav = data.music_file(name)
-            stem = name if name.startswith("synthetic") else f"synthetic_{name}"
-            record = {"sequence": name, "music": str(wav)}
-            for kind, features, title in (
-                ("dance", dance, "QEAN dance from the seed (synthetic demo)"),
-                ("reference", truth, "ground truth (synthetic)"),
-            ):
-                files = write_motion(
-                    features_to_motion(features),
-                    out,
-                    f"{stem}_{kind}",
-                    music=wav,
-                    render=self.render,
-                    style=self.style,
-                    title=title,
-                )
-                record[kind] = {k: str(v) for k, v in vars(files).items() if v is not None}
-            records.append(record)
+            motions = (
+                ("dance", features_to_motion(dance), "QEAN dance from the seed (synthetic demo)"),
+                ("reference", features_to_motion(truth), "ground truth (synthetic)"),
+            )
+            records.append(self.write_sample(out, name, data.music_file(name), motions))
         summary = {
             "synthetic": True,
             "label": LABEL,
@@ -139,9 +118,7 @@ class QEANDemo(DemoCallback):
             "scores": {"held_out_sequences": len(names), "training_sequences": len(train), **scores},
             "checks": checks,
         }
-        out.mkdir(parents=True, exist_ok=True)
-        with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
-            f.write(json.dumps(summary, indent=2))
+        view = write_summary(out, summary)
         lines = [
             f"[qean demo] {LABEL}",
             f"[qean demo] dances from held-out (val) seed motions and music -> {out}",
@@ -155,9 +132,6 @@ class QEANDemo(DemoCallback):
             "training sequences):",
             format_dynamics(scores, checks),
         ]
-        if records:
-            first = records[0]
-            motions = [(kind, load_skeleton_motion(first[kind]["npz"])) for kind in ("dance", "reference")]
-            view = write_view(motions, out / "view.html", first["music"], summary["scores"])
+        if view is not None:
             lines.append(f"[qean demo] viewer: {view}")
         print("\n".join(lines), flush=True)

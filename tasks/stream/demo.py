@@ -20,24 +20,19 @@ Everything is labelled synthetic: the demo set is procedural dances and synthesi
 
 from __future__ import annotations
 
-import json
 import warnings
 
 import torch
 from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.aistpp import music_id
-from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.fact_features import features_to_joints
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,
     held_out_dynamics_checks,
 )
-from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
-from skeleton_mamba.tasks.motion.view import write_view
 from skeleton_mamba.tasks.stream.features import FPS
 from skeleton_mamba.tasks.stream.model import (
     POSE_CHANNELS,
@@ -45,7 +40,7 @@ from skeleton_mamba.tasks.stream.model import (
     tokens_to_features,
     tokens_to_motion,
 )
-from skeleton_mamba.tasks.training.demo_callback import DemoCallback
+from skeleton_mamba.tasks.training.demo_callback import DemoCallback, write_summary
 
 __all__ = ["StreamDanceDemo", "dance_to_features"]
 
@@ -75,10 +70,7 @@ class StreamDanceDemo(DemoCallback):
         num_samples: held-out sequences whose dance (and ground truth) are written and rendered.
         score_samples: held-out sequences danced and scored (None: every one).
         seconds: dance to at most this much of each sequence's music (None: all of it).
-        out_subdir: folder under the trainer's log dir (``runs/<name>/version_N``).
-        render: write the mp4 renderings.
-        width: video width (multiple of 16).
-        height: video height (multiple of 16).
+        out_subdir, render, width, height: where to write, and the size of the mp4s (:class:`DemoCallback`).
     """
 
     def __init__(
@@ -127,23 +119,11 @@ class StreamDanceDemo(DemoCallback):
             if i >= self.num_samples:
                 continue
             wav = trainer.datamodule.music_dir / f"{music_id(name)}.wav"
-            stem = name if name.startswith("synthetic") else f"synthetic_{name}"
-            record = {"sequence": name, "music": str(wav)}
-            for kind, motion_tokens, title in (
-                ("dance", tokens, "live dance (synthetic demo)"),
-                ("reference", motion, "ground truth (synthetic)"),
-            ):
-                files = write_motion(
-                    tokens_to_motion(motion_tokens.float(), FPS),
-                    out,
-                    f"{stem}_{kind}",
-                    music=wav,
-                    render=self.render,
-                    style=self.style,
-                    title=title,
-                )
-                record[kind] = {k: str(v) for k, v in vars(files).items() if v is not None}
-            records.append(record)
+            motions = (
+                ("dance", tokens_to_motion(tokens.float(), FPS), "live dance (synthetic demo)"),
+                ("reference", tokens_to_motion(motion.float(), FPS), "ground truth (synthetic)"),
+            )
+            records.append(self.write_sample(out, name, wav, motions))
         if was_training:
             pl_module.train()
         train = [_joints(motion) for motion, _ in datasets["train"].sequences.values()]
@@ -158,9 +138,7 @@ class StreamDanceDemo(DemoCallback):
             "scores": {"held_out_sequences": scored, "training_sequences": len(train), **scores},
             "checks": checks,
         }
-        out.mkdir(parents=True, exist_ok=True)
-        with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
-            f.write(json.dumps(summary, indent=2))
+        view = write_summary(out, summary)
         lines = [f"[stream demo] {LABEL}", f"[stream demo] live dance to held-out (val) music -> {out}"]
         for record in records:
             lines += [f"  {k}: {v}" for k, v in record["dance"].items()]
@@ -169,9 +147,6 @@ class StreamDanceDemo(DemoCallback):
             f"(baselines from the {len(train)} training sequences):",
             format_dynamics(scores, checks),
         ]
-        if records:
-            first = records[0]
-            motions = [(kind, load_skeleton_motion(first[kind]["npz"])) for kind in ("dance", "reference")]
-            view = write_view(motions, out / "view.html", first["music"], summary["scores"])
+        if view is not None:
             lines.append(f"[stream demo] viewer: {view}")
         print("\n".join(lines), flush=True)
