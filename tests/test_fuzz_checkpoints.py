@@ -340,21 +340,15 @@ def test_a_full_disk_while_saving_leaves_the_previous_checkpoint(tmp_path, monke
 
 
 def test_the_cli_trainer_reads_and_writes_checkpoints_through_the_checker(tmp_path, monkeypatch):
-    from lightning.pytorch import LightningDataModule, LightningModule
+    from cli_builds import build_cli
 
     from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
 
     monkeypatch.chdir(tmp_path)
     import_task_modules()
     with contextlib.redirect_stderr(io.StringIO()):
-        cli = SkeletonMambaCLI(
-            LightningModule,
-            LightningDataModule,
-            subclass_mode_model=True,
-            subclass_mode_data=True,
-            run=False,
-            args=["--recipe", "recognition_synthetic.yaml", "--trainer.logger", "false"],
-        )
+        args = ["--recipe", "recognition_synthetic.yaml", "--trainer.logger", "false"]
+        cli = build_cli(SkeletonMambaCLI, args)
     checkpoint_io = cli.trainer.strategy.checkpoint_io
     assert type(checkpoint_io) is CheckedCheckpointIO
     target = tmp_path / "x" / "last.ckpt"

@@ -17,6 +17,7 @@ import jsonargparse
 import lightning.pytorch as pl
 import pytest
 import torch
+from cli_builds import build_cli
 from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import LightningCLI
 
@@ -139,15 +140,7 @@ class LinkingCLI(LightningCLI):
 def build(model: type, cli_class: type = LinkingCLI, model_args: tuple[str, ...] = ()) -> LightningModule:
     args = [f"--model={__name__}.{model.__name__}", *model_args, f"--data={__name__}.Data"]
     args += ["--trainer.logger=false", "--trainer.enable_checkpointing=false"]
-    cli = cli_class(
-        LightningModule,
-        LightningDataModule,
-        subclass_mode_model=True,
-        subclass_mode_data=True,
-        run=False,
-        args=args,
-    )
-    return cli.model
+    return build_cli(cli_class, args).model
 
 
 @pytest.fixture(autouse=True)

@@ -9,7 +9,8 @@ from types import SimpleNamespace
 import lightning.pytorch as pl
 import pytest
 import torch
-from lightning.pytorch import LightningDataModule, LightningModule
+from cli_builds import build_cli
+from lightning.pytorch import LightningModule
 from lightning.pytorch.callbacks import Callback, TQDMProgressBar
 from torch.utils.data import DataLoader, TensorDataset
 
@@ -134,15 +135,7 @@ def test_a_time_bounded_run_shows_the_time_left():
 
 def cli_trainer(args: list[str]) -> pl.Trainer:
     import_task_modules()
-    cli = SkeletonMambaCLI(
-        LightningModule,
-        LightningDataModule,
-        subclass_mode_model=True,
-        subclass_mode_data=True,
-        run=False,
-        args=args,
-    )
-    return cli.trainer
+    return build_cli(SkeletonMambaCLI, args).trainer
 
 
 def test_sm_installs_the_bar_unless_the_recipe_has_one_or_turns_it_off(tmp_path, monkeypatch):
