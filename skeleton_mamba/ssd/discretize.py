@@ -27,11 +27,12 @@ def check_inputs(
     A: torch.Tensor,
     B: torch.Tensor,
     C: torch.Tensor,
-    D: torch.Tensor | None = None,
-    dt_bias: torch.Tensor | None = None,
-    initial_state: torch.Tensor | None = None,
+    D: torch.Tensor | None,
+    dt_bias: torch.Tensor | None,
+    initial_state: torch.Tensor | None,
 ) -> None:
-    """Raise ``ValueError`` naming the offending argument when a shape breaks the SSD contract."""
+    """Raise ``ValueError`` naming the offending argument when a shape breaks the SSD contract (each SSD
+    form passes all eight, ``None`` for an absent optional one)."""
     if x.dim() != 4:
         raise ValueError(f"ssd: x must be (batch, length, heads, headdim), got shape {tuple(x.shape)}")
     b, L, H, P = x.shape
