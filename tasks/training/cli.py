@@ -113,6 +113,11 @@ COMMANDS: dict[str, Command] = {
         "a backbone or task network as ONNX (sequence forward, streaming step)",
         f"{_PKG}.training.onnx_export_args:build_parser",
     ),
+    "export-web": Command(
+        f"{_PKG}.stream.web_export:main",
+        "the streaming dancer as a static page: dances in the browser (onnxruntime-web)",
+        f"{_PKG}.stream.web_export_args:build_parser",
+    ),
     "convert": Command(
         f"{_PKG}.text2motion.convert_cli:main",
         "HumanML3D features to joints",
@@ -157,7 +162,10 @@ TASKS_EXTRA_MODULES = (
     "tqdm",
     "pygltflib",
 )
-COMMAND_EXTRAS = {"export-onnx": ("export", ("onnx", "onnxscript", "onnxruntime"))}
+COMMAND_EXTRAS = {
+    "export-onnx": ("export", ("onnx", "onnxscript", "onnxruntime")),
+    "export-web": ("export", ("onnx", "onnxscript", "onnxruntime")),
+}
 EXIT_BAD_INPUT = 2  # an expected failure: bad or missing input, unwritable output (one line, no traceback)
 EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT), as shells report it
 
