@@ -23,12 +23,14 @@ def build_parser() -> argparse.ArgumentParser:
         "microphone as input. One HTML file; opens from disk or any static server, no network request.",
         EXAMPLES,
     )
-    p.add_argument("--ckpt", required=True, help="a streaming-dancer checkpoint, or its from_pretrained folder")
+    p.add_argument(
+        "--ckpt", required=True, help="a streaming-dancer checkpoint, or its from_pretrained folder"
+    )
     p.add_argument("--out", required=True, help="the folder to write (index.html and the licences)")
     p.add_argument(
         "--ort-web",
         default=None,
-        help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache, fetched by npm pack if missing)",
+        help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache; npm pack fetches it if missing)",
     )
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p

@@ -30,8 +30,8 @@ whenever the block's determinant is positive, as for a trained dancer's poses.
 from __future__ import annotations
 
 import librosa
-import onnxruntime
 import numpy as np
+import onnxruntime
 import torch
 from torch import nn
 
