@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--ort-web",
         default=None,
-        help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache; npm pack fetches it if missing)",
+        help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache; npm pack fetches it)",
     )
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p
