@@ -21,10 +21,10 @@ browser feeds 512 samples and gets the pose and the joints to draw::
           [next_smoothing], next_conv_0, next_ssm_0, ...)
 
 ``started`` is 0 at a stream's first frame and 1 after (the onset and the low-pass read it); zeros are
-every state of a new stream; ``prev`` is the previous frame's ``pose`` (zeros first). The joints use each
-predicted 3x3 block's orthogonal polar factor (scaled Newton iteration, :func:`polar_rotation`), which is
-the nearest rotation that :func:`~skeleton_mamba.tasks.stream.model.tokens_to_motion` takes (by SVD)
-whenever the block's determinant is positive, as for a trained dancer's poses.
+every state of a new stream; ``prev`` is the previous frame's ``pose`` (zeros first). The joints are those
+of :func:`~skeleton_mamba.tasks.stream.model.tokens_to_motion`: each predicted 3x3 block projected to its
+nearest rotation (by SVD there; here :func:`nearest_rotation_graph`, from the polar factor, as ONNX has no
+SVD), then the SMPL forward kinematics.
 """
 
 from __future__ import annotations
@@ -52,6 +52,8 @@ __all__ = [
     "POLAR_ITERATIONS",
     "MusicFrontEnd",
     "WebStepGraph",
+    "SQUARINGS",
+    "nearest_rotation_graph",
     "polar_rotation",
     "run_web_graph",
     "web_step_spec",
@@ -63,6 +65,7 @@ NUM_MFCC = 20
 AMIN = 1e-10  # librosa.power_to_db's floor
 RMS_EPS = 1e-5  # features.py: log(rms + 1e-5)
 POLAR_ITERATIONS = 12  # scaled Newton converges in well under 10 for any non-singular 3x3 block
+SQUARINGS = 12  # the adjugate's power 4096: separates singular values 0.5 % apart to float32 precision
 
 
 class MusicFrontEnd(nn.Module):
@@ -105,20 +108,46 @@ def _cofactor(m: torch.Tensor) -> torch.Tensor:
     return torch.stack([torch.linalg.cross(b, c), torch.linalg.cross(c, a), torch.linalg.cross(a, b)], dim=-2)
 
 
+def _det(m: torch.Tensor, cof: torch.Tensor) -> torch.Tensor:
+    return (m[..., 0, :] * cof[..., 0, :]).sum(dim=-1)[..., None, None]
+
+
 def polar_rotation(m: torch.Tensor, iterations: int = POLAR_ITERATIONS) -> torch.Tensor:
-    """The orthogonal polar factor of (..., 3, 3) blocks by scaled Newton iteration
+    """The orthogonal polar factor ``U V^T`` of (..., 3, 3) blocks ``U S V^T`` by scaled Newton iteration
     ``X <- (g X + X^-T / g) / 2``, ``g = sqrt(|X^-1|_F / |X|_F)`` (Higham 1986); elementwise ops only."""
     x = m
     for _ in range(iterations):
         cof = _cofactor(x)
-        det = (x[..., 0, :] * cof[..., 0, :]).sum(dim=-1)[..., None, None]
-        det = torch.where(det.abs() < 1e-20, torch.full_like(det, 1e-20), det)
-        inv_t = cof / det
+        det = _det(x, cof)
+        inv_t = cof / torch.where(det.abs() < 1e-20, torch.full_like(det, 1e-20), det)
         norm = x.square().sum(dim=(-2, -1), keepdim=True).sqrt()
         inv_norm = inv_t.square().sum(dim=(-2, -1), keepdim=True).sqrt()
         gamma = (inv_norm / norm).sqrt()
         x = 0.5 * (gamma * x + inv_t / gamma)
     return x
+
+
+def nearest_rotation_graph(m: torch.Tensor, squarings: int = SQUARINGS) -> torch.Tensor:
+    """The rotation nearest each (..., 3, 3) block, ``U diag(1, 1, det(U V^T)) V^T`` as
+    :func:`~skeleton_mamba.tasks.motion.fact_features.nearest_rotation` takes it by SVD, in ops ONNX has.
+
+    The polar factor ``Q = U V^T`` (:func:`polar_rotation`) where ``det M > 0``; else ``Q (I - 2 v v^T)``
+    with ``v`` the right singular vector of the smallest singular value: the dominant eigenvector of the
+    adjugate of ``S = Q^T M = V diag(s) V^T`` (eigenvalues ``s1 s2 >= s1 s3 >= s2 s3``), taken as the
+    largest column of its ``2^squarings``-th power (repeated squaring, normalised each time)."""
+    q = polar_rotation(m)
+    s = q.mT @ m
+    s = 0.5 * (s + s.mT)
+    power = _cofactor(s).mT  # the adjugate
+    for _ in range(squarings):
+        power = power / power.square().sum(dim=(-2, -1), keepdim=True).sqrt().clamp_min(1e-30)
+        power = power @ power
+    lengths = power.square().sum(dim=-2, keepdim=True)  # (..., 1, 3): squared column norms
+    pick = (lengths == lengths.amax(dim=-1, keepdim=True)).to(power.dtype)
+    v = (power * pick).sum(dim=-1, keepdim=True)  # the largest column (ties: their sum, same direction)
+    v = v / v.square().sum(dim=-2, keepdim=True).sqrt().clamp_min(1e-30)
+    flipped = q - 2.0 * (q @ v) @ v.mT
+    return torch.where(_det(m, _cofactor(m)) < 0, flipped, q)
 
 
 class WebStepGraph(nn.Module):
@@ -143,7 +172,7 @@ class WebStepGraph(nn.Module):
         extra = (started,) if self.smoothing else ()
         pose, *next_states = self.step(prev, features, *extra, *states)
         flat = tokens_to_features(pose)  # (B, 219): root (mean of the joints' copies) | 24 rotations
-        rotations = polar_rotation(flat[:, 3:].reshape(-1, 24, 3, 3))
+        rotations = nearest_rotation_graph(flat[:, 3:].reshape(-1, 24, 3, 3))
         joints = smpl_forward_kinematics(rotations, flat[:, :3])
         return (pose, joints, features, next_audio, next_mel, *next_states)
 
