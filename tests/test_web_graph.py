@@ -12,21 +12,18 @@ import numpy as np
 import pytest
 import soundfile as sf
 import torch
-from checkpoint_files import save_module_checkpoint
+from checkpoint_files import tiny_stream_checkpoint
 from conftest import SHARED_DATA
 
-from skeleton_mamba import SkeletonMambaConfig
 from skeleton_mamba.tasks.motion.fact_features import nearest_rotation
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.stream.features import SR, music_features
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
-from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.stream.web_export import export_web_graph
 from skeleton_mamba.tasks.stream.web_graph import nearest_rotation_graph, polar_rotation, run_web_graph
 from skeleton_mamba.tasks.training.cli import main as sm
 
-TINY = SkeletonMambaConfig(dim=16, depth=1, heads=2, mlp_dim=32, mixer={"d_state": 16, "headdim": 8})
 TRACKS = sorted((SHARED_DATA / "music").glob("*.opus")) if (SHARED_DATA / "music").is_dir() else []
 FEATURE_TOLERANCE = 1e-3  # of each feature's range over the track
 JOINT_TOLERANCE_M = 1e-3
@@ -60,11 +57,8 @@ def dancer_graph(tmp_path_factory):
     if not TRACKS:
         pytest.skip(f"real sample music not found under {SHARED_DATA / 'music'}")
     tmp = tmp_path_factory.mktemp("web_graph")
-    torch.manual_seed(0)
-    module = StreamDanceModule(backbone={**TINY.__dict__, "causal": True}, smoothing_stages=8)
-    module.model.set_music_statistics(torch.from_numpy(music_features(load_audio(TRACKS[0], SR), SR)))
-    ckpt = save_module_checkpoint(module, tmp / "dancer.ckpt")
-    dancer = module.model.eval()
+    music = torch.from_numpy(music_features(load_audio(TRACKS[0], SR), SR))
+    ckpt, dancer = tiny_stream_checkpoint(tmp / "dancer.ckpt", music)
     graph = tmp / "dancer.onnx"
     _, check = export_web_graph(dancer, graph)
     assert check < 1e-3  # onnxruntime vs eager on the example inputs (random states)
