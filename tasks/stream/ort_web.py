@@ -6,9 +6,10 @@ The repository vendors none of it (its one wasm build is 15 MB). ``sm export-web
 cache folder, else one that ``npm pack`` fetches into the cache (the only network access, at export
 time; the page makes none). Its SHA-512 must be the npm registry's integrity of :data:`VERSION`.
 
-From it the page takes two files: ``dist/ort.wasm.bundle.min.mjs`` (the wasm-only ES module with its
-emscripten glue inside: nothing else to import) and ``dist/ort-wasm-simd-threaded.wasm`` (the one wasm
-build, SIMD, threads when the page is cross-origin isolated).
+From it the page takes three files: ``dist/ort.wasm.bundle.min.mjs`` (the wasm-only ES module with its
+emscripten glue inside: nothing else to import on one thread), ``dist/ort-wasm-simd-threaded.wasm`` (the
+one wasm build, SIMD, threads when the page is cross-origin isolated) and the glue on its own,
+``dist/ort-wasm-simd-threaded.mjs`` (24 kB), from which the threads' workers start.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ INTEGRITY = "sha512-5GeH+bWQ+HxM10z7erGlsWqryrwMbSvm/1tkIsKTT48g0fI19VXVVC435t4t
 TARBALL = f"onnxruntime-web-{VERSION}.tgz"
 MODULE = "package/dist/ort.wasm.bundle.min.mjs"
 WASM = "package/dist/ort-wasm-simd-threaded.wasm"
+GLUE = "package/dist/ort-wasm-simd-threaded.mjs"
+PAGE_FILES = (MODULE, WASM, GLUE)
 LICENCE_FILE = "LICENSE-onnxruntime-web.txt"
 NPM_TIMEOUT_S = 300
 
@@ -42,6 +45,7 @@ class OrtWeb:
 
     module: bytes
     wasm: bytes
+    glue: bytes
     licence: str
 
 
@@ -88,8 +92,8 @@ def read_ort_web(tarball: str | os.PathLike[str] | None = None) -> OrtWeb:
         raise InputError(f"{path}: not the npm tarball of onnxruntime-web {VERSION} (its SHA-512 differs)")
     try:
         with tarfile.open(path, "r:gz") as archive:
-            module, wasm = (archive.extractfile(archive.getmember(name)).read() for name in (MODULE, WASM))
+            module, wasm, glue = (archive.extractfile(archive.getmember(n)).read() for n in PAGE_FILES)
     except (KeyError, tarfile.TarError, OSError) as err:
-        raise InputError(f"{path}: cannot read {MODULE} and {WASM} from it ({err})") from err
+        raise InputError(f"{path}: cannot read {MODULE}, {WASM} and {GLUE} from it ({err})") from err
     licence = files("skeleton_mamba.tasks.stream.web").joinpath(LICENCE_FILE).read_text(encoding="utf-8")
-    return OrtWeb(module=module, wasm=wasm, licence=licence)
+    return OrtWeb(module=module, wasm=wasm, glue=glue, licence=licence)

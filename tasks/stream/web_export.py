@@ -79,6 +79,7 @@ def write_web_page(dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: st
         "__DATA__": script_json(data),
         "__MODEL__": base64.b64encode(model).decode("ascii"),
         "__WASM__": base64.b64encode(ort.wasm).decode("ascii"),
+        "__GLUE__": base64.b64encode(ort.glue).decode("ascii"),
     }
     template = files("skeleton_mamba.tasks.stream.web").joinpath("dancer.html").read_text(encoding="utf-8")
     page = re.sub("|".join(fields), lambda match: fields[match.group()], template)
