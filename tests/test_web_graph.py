@@ -15,11 +15,13 @@ import torch
 from checkpoint_files import tiny_stream_checkpoint
 from conftest import SHARED_DATA
 
+from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.fact_features import nearest_rotation
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.stream.features import SR, music_features
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
+from skeleton_mamba.tasks.stream.ort_web import VERSION, read_ort_web
 from skeleton_mamba.tasks.stream.web_export import export_web_graph
 from skeleton_mamba.tasks.stream.web_graph import nearest_rotation_graph, polar_rotation, run_web_graph
 from skeleton_mamba.tasks.training.cli import main as sm
@@ -85,3 +87,12 @@ def test_web_graph_equals_the_python_features_and_sm_stream(dancer_graph, track,
     decoded = tokens_to_motion(torch.from_numpy(ours["pose"])).joints
     assert np.abs(decoded - streamed.joints).max() < JOINT_TOLERANCE_M
     assert np.abs(ours["joints"] - streamed.joints).max() < JOINT_TOLERANCE_M  # the graph's own joints
+
+
+def test_the_onnxruntime_web_tarball_is_checked(tmp_path):
+    with pytest.raises(InputError, match=f"{tmp_path / 'missing.tgz'}: no such file"):
+        read_ort_web(tmp_path / "missing.tgz")
+    other = tmp_path / "onnxruntime-web-1.31.1.tgz"
+    other.write_bytes(b"not the release")
+    with pytest.raises(InputError, match=f"{other}: not the npm tarball of onnxruntime-web {VERSION}"):
+        read_ort_web(other)
