@@ -38,7 +38,7 @@ from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.stream.ort_web import LICENCE_FILE, VERSION, OrtWeb, read_ort_web
 from skeleton_mamba.tasks.stream.web_export_args import build_parser
 from skeleton_mamba.tasks.stream.web_graph import web_step_spec
-from skeleton_mamba.tasks.training.onnx_export import _check, export_onnx
+from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
 from skeleton_mamba.tasks.training.pretrained import load_module_from
 
 __all__ = ["PAGE", "THREE_LICENCE", "export_web_graph", "main", "write_web_page"]
@@ -57,7 +57,7 @@ def export_web_graph(dancer: StreamDancer, path: Path) -> tuple[dict[str, list[i
     spec = web_step_spec(dancer)
     export_onnx(spec, path)
     shapes = {n: list(a.shape) for n, a in zip(spec.input_names, spec.args) if n != "audio"}
-    return shapes, _check(spec, path)
+    return shapes, max_difference_from_eager(spec, path)
 
 
 def write_web_page(dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str) -> tuple[Path, float]:

@@ -41,8 +41,8 @@ from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer, token
 from skeleton_mamba.tasks.training.onnx_export import (
     DancerStepGraph,
     ExportSpec,
-    _network_ready,
-    _state_names,
+    network_ready,
+    state_names,
     zero_states,
 )
 
@@ -188,7 +188,7 @@ def web_zero_inputs(dancer: StreamDancer) -> dict[str, torch.Tensor]:
     if dancer.smoothing.enabled:
         inputs["smoothing"] = torch.zeros(dancer.smoothing.stages, 1, 24, POSE_CHANNELS)
     states = zero_states(dancer.backbone, 1)
-    inputs.update(zip(_state_names(len(states)), states))
+    inputs.update(zip(state_names(len(states)), states))
     return inputs
 
 
@@ -196,7 +196,7 @@ def web_step_spec(dancer: StreamDancer) -> ExportSpec:
     """The :class:`WebStepGraph` of ``dancer`` with example inputs (one stream, static shapes).
 
     The example is a started stream with random states, so that no branch is traced away."""
-    _network_ready(dancer)
+    network_ready(dancer)
     zeros = web_zero_inputs(dancer)
     names = list(zeros)
     examples = [torch.randn_like(t) for t in zeros.values()]

@@ -86,10 +86,13 @@ __all__ = [
     "export_onnx",
     "export_program",
     "main",
+    "max_difference_from_eager",
+    "network_ready",
     "network_specs",
     "recognizer_specs",
     "run_onnx",
     "sequence_spec",
+    "state_names",
     "step_spec",
     "text_denoiser_specs",
     "zero_states",
@@ -248,7 +251,7 @@ def step_spec(backbone: SkeletonMamba, batch: int = 2) -> ExportSpec:
     j = backbone.skeleton.num_joints
     c = backbone.config.in_channels or backbone.config.dim
     states = [torch.randn_like(t) for t in zero_states(backbone, batch)]
-    names = _state_names(len(states))
+    names = state_names(len(states))
     dynamic = {name: {0: "batch"} for name in ["x", *names]}
     return ExportSpec(graph, (torch.randn(batch, j, c), *states), ["x", *names],
                       ["y", *(f"next_{n}" for n in names)], dynamic, varargs_from=1)  # fmt: skip
@@ -261,7 +264,7 @@ def _padding_mask(batch: int, frames: int) -> torch.Tensor:
     return mask
 
 
-def _network_ready(network: nn.Module) -> nn.Module:
+def network_ready(network: nn.Module) -> nn.Module:
     """The network in eval mode with every backbone in it :func:`_export_ready`."""
     for module in network.modules():
         if isinstance(module, SkeletonMamba):
@@ -269,7 +272,8 @@ def _network_ready(network: nn.Module) -> nn.Module:
     return network.eval()
 
 
-def _state_names(count: int) -> list[str]:
+def state_names(count: int) -> list[str]:
+    """The names of ``count`` step-graph state tensors: ``conv_0, ssm_0, conv_1, ssm_1, ...``."""
     return [f"{kind}_{i}" for i in range(count // 2) for kind in ("conv", "ssm")]
 
 
@@ -283,14 +287,14 @@ def backbone_specs(backbone: SkeletonMamba, batch: int = 2, frames: int = 20) ->
 
 def dancer_specs(dancer: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
     """The streaming dancer's ``sequence`` (teacher-forced forward) and ``step`` (one frame) graphs."""
-    _network_ready(dancer)
+    network_ready(dancer)
     cfg = dancer.backbone.config
     prev = torch.randn(batch, frames, dancer.backbone.skeleton.num_joints, cfg.out_channels)
     music = torch.randn(batch, frames, dancer.music_dim)
     axes = {0: "batch", 1: "frames"}
     sequence = ExportSpec(dancer, (prev, music), ["prev", "music"], ["pose"], {"prev": axes, "music": axes})
     states = [torch.randn_like(t) for t in zero_states(dancer.backbone, batch)]
-    names = _state_names(len(states))
+    names = state_names(len(states))
     inputs, outputs, dynamic = ["prev", "music"], ["pose"], {"prev": {0: "batch"}, "music": {0: "batch"}}
     examples: list[torch.Tensor] = [prev[:, 0], music[:, 0]]
     if dancer.smoothing.enabled:
@@ -312,7 +316,7 @@ def recognizer_specs(
 
     The example's last sample has its other bodies absent (zeros), the padding the network reads.
     """
-    _network_ready(network)
+    network_ready(network)
     cfg = network.backbone.config
     x = torch.randn(batch, bodies, frames, network.backbone.skeleton.num_joints, cfg.in_channels or cfg.dim)
     x[-1, 1:] = 0.0
@@ -322,7 +326,7 @@ def recognizer_specs(
 
 def emm_specs(emm: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
     """EMM's ``denoiser`` graph: (x_t, t, context, mask) -> x0, the condition already encoded."""
-    _network_ready(emm)
+    network_ready(emm)
     per_frame = emm.frame_condition is not None  # one condition token per frame
     tokens = frames if per_frame else frames // 2 + 1
     x_t = torch.randn(batch, frames, *emm.skip_x0.data_mean.shape)
@@ -338,7 +342,7 @@ def emm_specs(emm: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, Exp
 
 def text_denoiser_specs(denoiser: nn.Module, batch: int = 2, frames: int = 20) -> dict[str, ExportSpec]:
     """The text-to-motion denoiser's ``denoiser`` graph: (x_t, t, text, text_mask, mask) -> x0."""
-    _network_ready(denoiser)
+    network_ready(denoiser)
     words = frames // 2 + 1
     x_t = torch.randn(batch, frames, *denoiser.skip_x0.data_mean.shape)
     t = torch.arange(batch, dtype=torch.long) % denoiser.skip_x0.num_steps
@@ -408,7 +412,7 @@ def run_onnx(path: str | Path, inputs: dict[str, torch.Tensor]) -> list[np.ndarr
     return session.run(None, {k: v.numpy() for k, v in inputs.items() if k in names})
 
 
-def _check(spec: ExportSpec, path: Path) -> float:
+def max_difference_from_eager(spec: ExportSpec, path: Path) -> float:
     """Max abs difference between onnxruntime and eager PyTorch on the example inputs."""
     with torch.no_grad():
         eager = spec.module(*spec.args)
@@ -512,7 +516,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "outputs": spec.output_names,
         }  # fmt: skip
         if args.check:
-            diff = entry["max_abs_diff_vs_eager"] = _check(spec, path)
+            diff = entry["max_abs_diff_vs_eager"] = max_difference_from_eager(spec, path)
             print(f"sm export-onnx: {name}: onnxruntime vs eager max |diff| {diff:.2e}")
         record["graphs"][name] = entry
     with atomic_path(out / "export.json") as tmp:
