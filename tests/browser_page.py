@@ -30,7 +30,10 @@ def browser_or_skip() -> str:
 
 
 class Page:
-    def __init__(self, url: str, tmp: Path):
+    """A page of a headless Chromium; ``flags``: more command-line switches. ``errors`` collects console
+    errors and exceptions, ``requests`` the URL of every request the page made."""
+
+    def __init__(self, url: str, tmp: Path, flags: tuple[str, ...] = ()):
         import websocket
 
         self.proc = subprocess.Popen(
@@ -44,6 +47,7 @@ class Page:
                 "--remote-debugging-port=0",
                 f"--user-data-dir={tmp / 'profile'}",
                 "--window-size=800,600",
+                *flags,
                 url,
             ],
             stdout=subprocess.DEVNULL,
@@ -66,9 +70,10 @@ class Page:
         self.ws = websocket.create_connection(
             pages[0]["webSocketDebuggerUrl"], timeout=60, suppress_origin=True
         )
-        self.next_id, self.errors = 0, []
+        self.next_id, self.errors, self.requests = 0, [], []
         self.call("Runtime.enable")
         self.call("Log.enable")
+        self.call("Network.enable")
 
     def call(self, method: str, **params):
         self.next_id += 1
@@ -81,6 +86,8 @@ class Page:
                 self.errors.append(message["params"]["args"])
             elif message.get("method") == "Log.entryAdded" and message["params"]["entry"]["level"] == "error":
                 self.errors.append(message["params"]["entry"])
+            elif message.get("method") == "Network.requestWillBeSent":
+                self.requests.append(message["params"]["request"]["url"])
             if message.get("id") == self.next_id:
                 assert "error" not in message, message
                 return message["result"]
@@ -108,7 +115,18 @@ class Page:
         self.wait_for_viewer(timeout)
 
     def wait_for_viewer(self, timeout: float = 60.0) -> None:
+        started = "typeof window.smViewer === 'object' && window.smViewer !== null"
+        self.wait_for(started, timeout, "the viewer's start")
+
+    def wait_for(self, expression: str, timeout: float = 60.0, what: str | None = None) -> None:
+        """Poll until the JavaScript ``expression`` is truthy (fails after ``timeout`` seconds)."""
         deadline = time.time() + timeout
-        while not self.js("typeof window.smViewer === 'object' && window.smViewer !== null"):
-            assert time.time() < deadline, "the viewer did not start"
+        while not self.js(expression):
+            assert time.time() < deadline, f"{what or expression}: not in {timeout:g} s ({self.errors})"
             time.sleep(0.1)
+
+    def set_file(self, selector: str, path: Path) -> None:
+        """Choose ``path`` in the file input at ``selector`` (as a user would: its change event fires)."""
+        root = self.call("DOM.getDocument")["root"]["nodeId"]
+        node = self.call("DOM.querySelector", nodeId=root, selector=selector)["nodeId"]
+        self.call("DOM.setFileInputFiles", files=[str(path)], nodeId=node)

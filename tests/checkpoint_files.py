@@ -19,3 +19,16 @@ def save_module_checkpoint(module: lightning.LightningModule, path: Path, **extr
     }
     torch.save(checkpoint, path)
     return path
+
+
+def tiny_stream_checkpoint(path: Path, music: torch.Tensor | None = None) -> tuple[Path, torch.nn.Module]:
+    """A tiny causal streaming dancer (random weights, seed 0, the demo recipe's 8-stage low-pass) saved at
+    ``path``, with the music statistics of ``music`` (T, 34) when given; returns the path and its network."""
+    from skeleton_mamba.tasks.stream.module import StreamDanceModule  # lazy: only the stream tests need it
+
+    torch.manual_seed(0)
+    tiny = {"dim": 16, "depth": 1, "heads": 2, "mlp_dim": 32, "mixer": {"d_state": 16, "headdim": 8}}
+    module = StreamDanceModule(backbone={**tiny, "causal": True}, smoothing_stages=8)
+    if music is not None:
+        module.model.set_music_statistics(music)
+    return save_module_checkpoint(module, path), module.model.eval()

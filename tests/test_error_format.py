@@ -51,6 +51,11 @@ CASES = {
         "{tmp}/notes.ckpt",
         "",
     ),
+    "export-web": (
+        ["export-web", "--ckpt", "{tmp}/notes.ckpt", "--out", "{tmp}/web"],
+        "{tmp}/notes.ckpt",
+        " checkpoint",
+    ),
     "export-pretrained": (
         ["export-pretrained", "--ckpt", "{tmp}/notes.ckpt", "--out", "{tmp}/folder"],
         "{tmp}/notes.ckpt",

@@ -12,6 +12,11 @@ TASK = TaskSpec(
         "stream": Command(
             f"{_PKG}.cli:main", "live music-to-dance / online recognition", f"{_PKG}.cli_args:build_parser"
         ),
+        "export-web": Command(
+            f"{_PKG}.web_export:main",
+            "the streaming dancer as a static page: dances in the browser (onnxruntime-web)",
+            f"{_PKG}.web_export_args:build_parser",
+        ),
     },
     networks={"StreamDancer": f"{_PKG}.onnx_graphs:dancer_specs"},
 )

@@ -63,6 +63,7 @@ __all__ = [
     "export_onnx",
     "export_program",
     "main",
+    "max_difference_from_eager",
     "network_spec_builder",
     "network_specs",
     "run_onnx",
@@ -130,7 +131,7 @@ def run_onnx(path: str | Path, inputs: dict[str, torch.Tensor]) -> list[np.ndarr
     return session.run(None, {k: v.numpy() for k, v in inputs.items() if k in names})
 
 
-def _check(spec: ExportSpec, path: Path) -> float:
+def max_difference_from_eager(spec: ExportSpec, path: Path) -> float:
     """Max abs difference between onnxruntime and eager PyTorch on the example inputs."""
     with torch.no_grad():
         eager = spec.module(*spec.args)
@@ -235,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "outputs": spec.output_names,
         }  # fmt: skip
         if args.check:
-            diff = entry["max_abs_diff_vs_eager"] = _check(spec, path)
+            diff = entry["max_abs_diff_vs_eager"] = max_difference_from_eager(spec, path)
             print(f"sm export-onnx: {name}: onnxruntime vs eager max |diff| {diff:.2e}")
         record["graphs"][name] = entry
     with atomic_path(out / "export.json") as tmp:

@@ -1,0 +1,107 @@
+"""``sm export-web --ckpt CKPT --out site/``: the streaming dancer as a static page that dances in a browser.
+
+Writes ``index.html``, ONE self-contained file that opens from disk (``file://``) or from any static server
+and makes no network request, with the licences of what it embeds beside it:
+
+- the dancer's :class:`~skeleton_mamba.tasks.stream.web_graph.WebStepGraph` (the causal music features of
+  one 512-sample hop at 15360 Hz, the dancer's step, the joints) as one ONNX graph, base64;
+- onnxruntime-web's wasm-only ES module and its wasm binary (:mod:`.ort_web`; the binary handed to it as
+  ``env.wasm.wasmBinary``, so nothing is fetched), ``LICENSE-onnxruntime-web.txt``;
+- three.js r170 and its OrbitControls as ``sm view`` embeds them (:mod:`skeleton_mamba.tasks.motion.viewer`),
+  ``LICENSE-three.txt``.
+
+The page (``web/dancer.html``) dances to a picked music file as it plays (decoded and resampled to 15360 Hz
+by the browser) or to the microphone (an AudioWorklet at 15360 Hz), steps the graph once per hop with its
+state fed back, draws the skeleton, and shows the step's time, the frames per second it allows and the
+audio-to-pose latency. The wasm backend runs one thread from disk; served cross-origin isolated (headers
+``Cross-Origin-Opener-Policy: same-origin`` and ``Cross-Origin-Embedder-Policy: require-corp``) it takes
+``?threads=N``. ``window.smDance`` exposes the poses, joints, features and timings it computed.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import re
+import tempfile
+from collections.abc import Sequence
+from importlib.resources import files
+from pathlib import Path
+
+from skeleton_mamba.skeletons import SMPL24
+from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.view import script_json
+from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
+from skeleton_mamba.tasks.stream.model import StreamDancer
+from skeleton_mamba.tasks.stream.module import StreamDanceModule
+from skeleton_mamba.tasks.stream.ort_web import LICENCE_FILE, VERSION, OrtWeb, read_ort_web
+from skeleton_mamba.tasks.stream.web_export_args import build_parser
+from skeleton_mamba.tasks.stream.web_graph import web_step_spec
+from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
+from skeleton_mamba.tasks.training.pretrained import load_module_from
+
+__all__ = ["PAGE", "THREE_LICENCE", "export_web_graph", "main", "write_web_page"]
+
+PAGE = "index.html"
+THREE_LICENCE = "LICENSE-three.txt"
+
+
+def _data_uri(data: bytes, mime: str) -> str:
+    return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
+
+
+def export_web_graph(dancer: StreamDancer, path: Path) -> tuple[dict[str, list[int]], float]:
+    """Write ``dancer``'s web graph to ``path``; its input shapes (but the audio) and onnxruntime's max
+    |difference| from eager PyTorch on the example inputs."""
+    spec = web_step_spec(dancer)
+    export_onnx(spec, path)
+    shapes = {n: list(a.shape) for n, a in zip(spec.input_names, spec.args) if n != "audio"}
+    return shapes, max_difference_from_eager(spec, path)
+
+
+def write_web_page(dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str) -> tuple[Path, float]:
+    """Export ``dancer`` and write the page into the (claimed) folder ``out``; the page's path and the
+    graph's onnxruntime-vs-eager difference."""
+    out = Path(out)
+    with tempfile.TemporaryDirectory() as tmp:
+        graph = Path(tmp) / "dancer.onnx"
+        shapes, diff = export_web_graph(dancer, graph)
+        model = graph.read_bytes()
+    viewer = files("skeleton_mamba.tasks.motion.viewer")
+    data = {"title": title, "sr": SR, "hop": HOP, "fps": FPS, "parents": list(SMPL24.parents),
+            "inputs": shapes, "ort_version": VERSION}  # fmt: skip
+    fields = {
+        "__TITLE__": html.escape(title),
+        "__THREE__": _data_uri(viewer.joinpath("three.module.min.js").read_bytes(), "text/javascript"),
+        "__ORBIT__": _data_uri(viewer.joinpath("OrbitControls.js").read_bytes(), "text/javascript"),
+        "__ORT__": _data_uri(ort.module, "text/javascript"),
+        "__DATA__": script_json(data),
+        "__MODEL__": base64.b64encode(model).decode("ascii"),
+        "__WASM__": base64.b64encode(ort.wasm).decode("ascii"),
+        "__GLUE__": base64.b64encode(ort.glue).decode("ascii"),
+    }
+    template = files("skeleton_mamba.tasks.stream.web").joinpath("dancer.html").read_text(encoding="utf-8")
+    page = re.sub("|".join(fields), lambda match: fields[match.group()], template)
+    with atomic_open(out / PAGE, "w", encoding="utf-8") as f:
+        f.write(page)
+    with atomic_open(out / LICENCE_FILE, "w", encoding="utf-8") as f:
+        f.write(ort.licence)
+    with atomic_open(out / THREE_LICENCE, "w", encoding="utf-8") as f:
+        f.write(viewer.joinpath(THREE_LICENCE).read_text(encoding="utf-8"))
+    return out / PAGE, diff
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``sm export-web``; returns 0 (bad input raises: ``sm`` prints one line, exit 2)."""
+    args = build_parser().parse_args(list(argv) if argv is not None else None)
+    produced = [PAGE, LICENCE_FILE, THREE_LICENCE]
+    out = claim_output_folder(args.out, "sm export-web", produced, overwrite=args.overwrite)
+    dancer = load_module_from(StreamDanceModule, args.ckpt).model.eval()
+    ort = read_ort_web(args.ort_web)  # checked before the export (a minute at the paper width)
+    record_outputs(out, "sm export-web", produced)
+    print("sm export-web: exporting the dancer's step with its music front end ...", flush=True)
+    page, diff = write_web_page(dancer, out, ort, f"Skeleton Mamba dancer: {Path(args.ckpt).name}")
+    print(f"sm export-web: wrote {page} ({page.stat().st_size / 1e6:.1f} MB; onnxruntime vs eager max |diff| "
+          f"{diff:.1e}); open it from disk or serve {out} (python -m http.server -d {out})")  # fmt: skip
+    return 0

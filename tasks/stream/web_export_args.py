@@ -1,0 +1,36 @@
+"""The command line of ``sm export-web`` (argparse only: ``--help`` imports no torch)."""
+
+from __future__ import annotations
+
+import argparse
+
+from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+
+__all__ = ["build_parser"]
+
+EXAMPLES = """examples:
+  sm export-web --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out site/
+  sm export-web --ckpt my-dancer/ --out site/ --ort-web onnxruntime-web-1.31.1.tgz   # no npm, no network
+  python -m http.server -d site/     # or open site/index.html from disk"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = command_parser(
+        "sm export-web",
+        "Write a static page where the streaming dancer dances in the browser: its step and music front end "
+        "as one ONNX graph run by onnxruntime-web (wasm), the three.js skeleton, a music file or the "
+        "microphone as input. One HTML file; opens from disk or any static server, no network request.",
+        EXAMPLES,
+    )
+    p.add_argument(
+        "--ckpt", required=True, help="a streaming-dancer checkpoint, or its from_pretrained folder"
+    )
+    p.add_argument("--out", required=True, help="the folder to write (index.html and the licences)")
+    p.add_argument(
+        "--ort-web",
+        default=None,
+        help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache; npm pack fetches it)",
+    )
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    return p
