@@ -73,7 +73,7 @@ def test_sm_takes_its_task_commands_and_variants_from_the_registrations():
         "egodance": {"make-ego", "dance"},
         "qean": set(),
         "recognition": {"prepare"},
-        "stream": {"stream"},
+        "stream": {"stream", "export-web"},
         "text2motion": {"generate", "convert"},
     }
     assert set(cli.COMMANDS) == set(cli.MACHINERY_COMMANDS).union(*by_task.values())

@@ -52,7 +52,7 @@ def music_or_synthetic(seconds: float) -> np.ndarray:
     tracks = sorted((SHARED_DATA / "music").glob("*.opus")) if (SHARED_DATA / "music").is_dir() else []
     if tracks:
         return load_audio(tracks[0], SR)[: int(seconds * SR)]
-    return synthesize_music(120.0, seconds, sr=SR, seed=0)
+    return synthesize_music(120.0, seconds, sr=SR, seed=0).audio
 
 
 @pytest.fixture(scope="module")
