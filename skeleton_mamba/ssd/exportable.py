@@ -36,7 +36,8 @@ def masked_quadratic(xd: torch.Tensor, cs: torch.Tensor, B: torch.Tensor, C: tor
     Args:
         xd: (b, L, H, P) Δ ⊙ x in the compute dtype.
         cs: (b, H, L) the inclusive cumulative sums of a = Δ·A over each sequence (float64).
-        B, C: (b, L, G, N) the projections in xd's dtype; head h reads group h // (H // G).
+        B: (b, L, G, N) the input projections in xd's dtype; head h reads group h // (H // G).
+        C: (b, L, G, N) the output projections, grouped as B.
 
     Returns:
         (b, L, H, P) in xd's dtype.

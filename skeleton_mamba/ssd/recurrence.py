@@ -29,7 +29,8 @@ def recurrence_step(
         h: (b, H, P, N) the state before the step.
         decay: (b, H) exp(Δ A).
         xd: (b, H, P) Δ x.
-        B, C: (b, G, N) the projections; head h reads group h // (H // G).
+        B: (b, G, N) the input projections; head h reads group h // (H // G).
+        C: (b, G, N) the output projections, grouped as B.
         out: optional (b, H, P, N) contiguous tensor for h' (may be ``h`` itself, then updated in place).
 
     Returns:

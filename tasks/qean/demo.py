@@ -43,7 +43,10 @@ class QEANDemo(DemoCallback):
 
     Args:
         num_samples: held-out sequences whose dance (and ground truth) are written and rendered.
-        out_subdir, render, width, height: where to write, and the size of the mp4s (:class:`DemoCallback`).
+        out_subdir: folder under the trainer's log dir (:class:`DemoCallback`).
+        render: write the renderings (a demo may take a format name instead of True).
+        width: video width (multiple of 16).
+        height: video height (multiple of 16).
     """
 
     def __init__(

@@ -70,7 +70,10 @@ class StreamDanceDemo(DemoCallback):
         num_samples: held-out sequences whose dance (and ground truth) are written and rendered.
         score_samples: held-out sequences danced and scored (None: every one).
         seconds: dance to at most this much of each sequence's music (None: all of it).
-        out_subdir, render, width, height: where to write, and the size of the mp4s (:class:`DemoCallback`).
+        out_subdir: folder under the trainer's log dir (:class:`DemoCallback`).
+        render: write the renderings (a demo may take a format name instead of True).
+        width: video width (multiple of 16).
+        height: video height (multiple of 16).
     """
 
     def __init__(
