@@ -167,7 +167,8 @@ class IntraChunk(torch.autograd.Function):
             if ctx.needs_input_grad[2]:
                 M = dW.view(s, G, R, Q, Q).mul_(CB[:s, :, None]).view(s, H, Q, Q)
                 da[t] = decay_mask_backward(M)
-            u = torch.linalg.vecdot(x[t].transpose(1, 2), dxd[t])  # (s, H, Q): Σ_p X dXd'
+            # (s, H, Q): Σ_p X dXd', the product written into dY's buffer (no longer read)
+            u = torch.mul(x[t].transpose(1, 2), dxd[t], out=dys[t]).sum(-1)
             if col is None:
                 ddelta[t].copy_(u)
             else:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import torch
 
+from skeleton_mamba.ssd.below_diagonal import below_diagonal
 from skeleton_mamba.ssd.chunked import ssd_chunked
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT, check_inputs, compute_dtype, padded_inputs, skip_matrix
 from skeleton_mamba.ssd.intra_chunk import intra_chunk
@@ -30,36 +31,6 @@ from skeleton_mamba.ssd.precision import full_precision
 
 # Target block length q, the fastest at L = 150 (4 heads, P = N = 64, fp32, 2 CPU threads).
 BLOCK_SIZE = 64
-
-
-def below_diagonal(
-    xd: torch.Tensor, cs: torch.Tensor, B: torch.Tensor, C: torch.Tensor, q: int
-) -> torch.Tensor:
-    """The contribution of earlier blocks to every block (zero for the first), see the module docstring.
-
-    Args:
-        xd: (b, K·q, H, P) Δ ⊙ x.
-        cs: (b, K·q, H) float64 cumulative sums of a = Δ·A over the whole sequence.
-        B: (b, K·q, G, N) input projections.
-        C: (b, K·q, G, N) output projections.
-        q: block length.
-
-    Returns:
-        (b, K·q, H, P) in xd's dtype.
-    """
-    b, L, H, P = xd.shape
-    G = B.shape[2]
-    R = H // G
-    parts = [xd.new_zeros(b, q, H, P)]
-    for s in range(q, L, q):
-        alpha = cs[:, s - 1 : s]  # (b, 1, H)
-        v = torch.exp(alpha - cs[:, :s]).to(xd.dtype)  # (b, s, H), ≤ 1
-        u = torch.exp(cs[:, s : s + q] - alpha).to(xd.dtype)  # (b, q, H), ≤ 1
-        rhs = (xd[:, :s] * v[..., None]).view(b, s, G, R * P).transpose(1, 2)  # (b, G, s, R·P)
-        cb = torch.matmul(C[:, s : s + q].transpose(1, 2), B[:, :s].permute(0, 2, 3, 1))  # (b, G, q, s)
-        z = torch.matmul(cb, rhs).view(b, G, q, R, P).transpose(1, 2).reshape(b, q, H, P)
-        parts.append(z * u[..., None])
-    return torch.cat(parts, dim=1)
 
 
 @full_precision
