@@ -13,7 +13,10 @@ inputs once per call (the fast path of ``skeleton_mamba/ssd/non_finite.py``); ``
 divides it by ``ssd_ms``. The recurrence
 (one Python step per time step) is timed at the first length, and at later lengths only when the
 per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
-``--compile`` adds the SSD compiled by inductor (``compiled_*``: compile seconds, median ms, error, ratios)
+``ssd_ms`` and ``sdpa_ms`` are medians of ``--repeats`` runs taken in turn, after three untimed rounds.
+As ``sm fit`` does, the run keeps the memory a step frees in the heap (``malloc_kept``:
+``skeleton_mamba.allocator.keep_freed_memory``), so that every step does not fault in fresh pages;
+``--default-malloc`` leaves glibc's defaults. ``--compile`` adds the SSD compiled by inductor (``compiled_*``: compile seconds, median ms, error, ratios)
 in the same run.
 
     python benchmarks/bench_ssd.py --json
@@ -35,13 +38,15 @@ import torch.nn.functional as F
 from torch.utils.flop_counter import sdpa_backward_flop_count, sdpa_flop_count
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, rate  # noqa: E402
+from common import alternate_ms, gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, rate  # noqa: E402
 
+from skeleton_mamba.allocator import keep_freed_memory  # noqa: E402
 from skeleton_mamba.ssd import ssd, ssd_recurrence  # noqa: E402
 from skeleton_mamba.ssd.non_finite import inputs_finite  # noqa: E402
 
 HEADS, HEADDIM, STATE, GROUPS = 4, 64, 64, 1
 TOKENS = 192 * 150
+WARMUP_ROUNDS = 3
 
 
 def make_inputs(batch: int, T: int, dtype=torch.float32, seed: int = 0) -> dict[str, torch.Tensor]:
@@ -137,8 +142,9 @@ def bench_row(
     inp = make_inputs(batch, T)
     ssd_run = fwd_bwd(ssd, inp, chunk_size=chunk_size, impl=impl)
     sdpa_run = sdpa_fwd_bwd(batch, T)
-    ssd_ms = median_ms(ssd_run, repeats=repeats)
-    sdpa_ms = median_ms(sdpa_run, repeats=repeats)
+    # side by side: SSD and SDPA alternate, after rounds that let the heap reach its steady size
+    times = alternate_ms({"ssd": ssd_run, "sdpa": sdpa_run}, repeats=repeats, warmup=WARMUP_ROUNDS)
+    ssd_ms, sdpa_ms = times["ssd"], times["sdpa"]
     check_ms = median_ms(lambda: inputs_finite(inp["x"], inp["dt"], inp["B"], inp["C"]), repeats=repeats)
     recurrence_ms = None
     # The recurrence is one Python step per time step; run it only when the cost measured on an
@@ -203,6 +209,12 @@ def main(argv: list[str] | None = None) -> int:
         help="skip the recurrence (null) where the cost measured at an earlier length "
         "predicts more than this many seconds",
     )
+    parser.add_argument(
+        "--default-malloc",
+        action="store_true",
+        help="leave glibc's malloc thresholds at their defaults (by default they are set as sm fit sets them: "
+        "skeleton_mamba.allocator.keep_freed_memory)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
         "--compile",
@@ -211,6 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
+    malloc_kept = False if args.default_malloc else keep_freed_memory()
     batches = args.batch or [max(1, TOKENS // T) for T in args.lengths]
     if len(batches) == 1:
         batches = batches * len(args.lengths)
@@ -236,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
             print(row, flush=True)
     gemm = {"before": gemm_before, "after": gemm_gflop_per_s()}
     if args.json:
-        print(json.dumps({"machine": machine_info(), "threads": args.threads, "gemm": gemm, "rows": rows}))
+        info = {"machine": machine_info(), "threads": args.threads, "malloc_kept": malloc_kept}
+        print(json.dumps({**info, "gemm": gemm, "rows": rows}))
     else:
         print("gemm GFLOP/s before / after:", gemm_before["gflop_per_s"], gemm["after"]["gflop_per_s"])
     return 0

@@ -42,15 +42,15 @@ def median_ms(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> fl
     return statistics.median(times)
 
 
-def alternate_ms(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
-    """Median ms of each function, called in turn ``repeats`` times after one untimed round (so a change of
-    load on a shared machine hits every function alike)."""
+def alternate_ms(fns: dict[str, Callable[[], object]], repeats: int, warmup: int = 1) -> dict[str, float]:
+    """Median ms of each function, called in turn ``repeats`` times after ``warmup`` untimed rounds (so a
+    change of load on a shared machine hits every function alike)."""
     times: dict[str, list[float]] = {k: [] for k in fns}
-    for i in range(repeats + 1):
+    for i in range(warmup + repeats):
         for k, fn in fns.items():
             start = time.perf_counter()
             fn()
-            if i:
+            if i >= warmup:
                 times[k].append(1e3 * (time.perf_counter() - start))
     return {k: statistics.median(v) for k, v in times.items()}
 

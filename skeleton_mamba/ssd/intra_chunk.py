@@ -176,8 +176,8 @@ class IntraChunk(torch.autograd.Function):
             torch.mul(dxd[t].transpose(1, 2), wcol[t].transpose(1, 2)[..., None], out=dx[t])
             if D is not None:
                 dx[t].addcmul_(dy[t], D)
-            if want_dD:
-                dD += sum_over_positions(dy[t], x[t])
+            if want_dD:  # the product goes to dY's buffer, free again
+                dD += sum_over_positions(dy[t], x[t], scratch=dys[t])
         dy_off = dy if ctx.needs_input_grad[6] else None
         da = da.to(ctx.a_dtype) if ctx.needs_input_grad[2] else None
         return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2), dD, dy_off)

@@ -5,12 +5,9 @@ evaluated in blocks of q ≈ ``block_size`` positions (the length is right-padde
 blocks of q, which injects nothing):
 
 - diagonal blocks: the masked quadratic form of :func:`intra_chunk` (mask, per head, q×q);
-- below the diagonal, row block I against all earlier positions j < s_I (s_I its first position):
-  with the anchor α_I = cs_{s_I - 1} (cs the fp64 cumulative sum of a = Δ·A over the sequence),
-  Lmask_ij = exp(cs_i - α_I) · exp(α_I - cs_j) for i ≥ s_I > j, both factors ≤ 1 (so nothing
-  overflows, and a factor that underflows bounds a negligible entry), hence
-  Y_I += u_I ⊙ (C_I B_{<I}ᵀ)(v_I ⊙ Δ ⊙ X_{<I}),  u_I = exp(cs_I - α_I),  v_I = exp(α_I - cs_{<I}).
-  C_I B_{<I}ᵀ is one matrix per B/C group shared by its heads, and no per-head mask is formed.
+- below the diagonal, row block I against all earlier positions j < s_I (s_I its first position),
+  factorised with an anchor per block so that no per-head mask is formed
+  (:mod:`~skeleton_mamba.ssd.below_diagonal`, which has its own backward).
 
 Per head the work is O(L·q) mask entries instead of O(L²) and one (q × s_I)(s_I × R·P) matrix
 product per row block and group (R heads per group). Suited to the joint scan (L = 6), the group
@@ -85,7 +82,7 @@ def ssd_quadratic(
     a = delta.to(torch.float64) * A.to(torch.float64)  # (b, K·q, H)
     y_off = None
     if K > 1:
-        y_off = below_diagonal(xc * delta[..., None], a.cumsum(dim=1), Bc, Cc, q).view(b * K, q, H, P)
+        y_off = below_diagonal(xc, delta, a.cumsum(dim=1), Bc, Cc, q).view(b * K, q, H, P)
     D2 = skip_matrix(D, H, P, ct)
     n = b * K
     y = intra_chunk(
