@@ -51,7 +51,7 @@ import torch
 from skeleton_mamba.ssd.discretize import sum_over_positions
 from skeleton_mamba.ssd.intra_chunk import column_weights, compute_inputs, split_cumsum
 from skeleton_mamba.ssd.precision import full_precision
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
+from skeleton_mamba.ssd.segsum import decay_mask, decay_mask_backward
 from skeleton_mamba.ssd.state_scan import decay_factor, scan_states, scan_states_backward
 
 
@@ -85,7 +85,7 @@ class ChunkScan(torch.autograd.Function):
         ).reshape(n, H, N, Q)
         d = decay_factor(total.reshape(b, c, H), x.dtype)
         S_in, final = scan_states(torch.matmul(Be, xd).view(b, c, H, N, P), d, h0)
-        E = decay_mask(hi, bias=causal_bias(Q, x.dtype, x.device))  # (n, H, Q, Q)
+        E = decay_mask(hi)  # (n, H, Q, Q)
         CB = torch.matmul(C.transpose(1, 2), B.permute(0, 2, 3, 1))  # (n, G, Q, Q), shared by R heads
         W = torch.mul(E.view(n, G, R, Q, Q), CB[:, :, None]).view(n, H, Q, Q)
         f = decay_factor(hi, x.dtype)

@@ -42,7 +42,7 @@ import torch
 
 from skeleton_mamba.ssd.discretize import sum_over_positions
 from skeleton_mamba.ssd.precision import full_precision
-from skeleton_mamba.ssd.segsum import causal_bias, decay_mask, decay_mask_backward
+from skeleton_mamba.ssd.segsum import decay_mask, decay_mask_backward
 
 # Most Q×Q entries (chunks · heads · Q²) per tile: 64 MB per buffer in fp32.
 TILE_ELEMENTS = 1 << 24
@@ -81,13 +81,13 @@ def compute_inputs(
     return a, [t if t is None else t.to(dtype).contiguous() for t in tensors]
 
 
-def _weights(hi, B, C, bias, E, CB, W):
+def _weights(hi, B, C, E, CB, W):
     """Fill the tile buffers: CB = C Bᵀ (s, G, Q, Q), E = exp(hi_i - hi_j) causal (s, H, Q, Q) and
     W = E ∘ CB (s, H, Q, Q); W may be E itself (then E is overwritten)."""
     s, G, Q = CB.shape[0], CB.shape[1], CB.shape[2]
     R = E.shape[1] // G
     torch.matmul(C.transpose(1, 2), B.transpose(1, 2).transpose(-1, -2), out=CB)
-    decay_mask(hi, out=E, bias=bias)
+    decay_mask(hi, out=E)
     torch.mul(E.view(s, G, R, Q, Q), CB[:, :, None], out=W.view(s, G, R, Q, Q))
     return W
 
@@ -109,11 +109,10 @@ class IntraChunk(torch.autograd.Function):
         keep = len(tiles) == 1  # one tile: keep E and W for the backward
         E, CB = x.new_empty(m, H, Q, Q), x.new_empty(m, G, Q, Q)
         Wbuf = torch.empty_like(E) if keep else E
-        bias = causal_bias(Q, x.dtype, x.device)
         for r0, r1 in tiles:
             t, s = slice(r0, r1), r1 - r0
             torch.mul(x[t].transpose(1, 2), wcol[t, :, :, None], out=xd[t])
-            W = _weights(hi[t], B[t], C[t], bias, E[:s], CB[:s], Wbuf[:s])
+            W = _weights(hi[t], B[t], C[t], E[:s], CB[:s], Wbuf[:s])
             torch.matmul(W, xd[t], out=y_in[t])
             if row is None:
                 y[t].copy_(y_in[t].transpose(1, 2))
@@ -148,14 +147,13 @@ class IntraChunk(torch.autograd.Function):
             E, W, CB = kept
         else:
             E, W, CB = x.new_empty(m, H, Q, Q), x.new_empty(m, H, Q, Q), x.new_empty(m, G, Q, Q)
-        bias = causal_bias(Q, x.dtype, x.device)
         for r0, r1 in tiles:
             t, s = slice(r0, r1), r1 - r0
             if row is None:
                 dys[t].copy_(dy[t].transpose(1, 2))
             else:
                 torch.mul(dy[t].transpose(1, 2), row[t, :, :, None], out=dys[t])
-            Wt = W if kept else _weights(hi[t], B[t], C[t], bias, E[:s], CB[:s], W[:s])
+            Wt = W if kept else _weights(hi[t], B[t], C[t], E[:s], CB[:s], W[:s])
             torch.matmul(Wt.transpose(-1, -2), dys[t], out=dxd[t])
             # W is not needed any more: dW takes its storage (a second backward through this graph
             # would then fail loudly on the version check of a kept W instead of reading it).

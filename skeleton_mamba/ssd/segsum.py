@@ -26,37 +26,29 @@ def segsum_stable(a: torch.Tensor) -> torch.Tensor:
     return x.masked_fill(~strict.logical_or(torch.eye(T, dtype=torch.bool, device=a.device)), -torch.inf)
 
 
-def causal_bias(T: int, dtype: torch.dtype, device: torch.device | None = None) -> torch.Tensor:
-    """(T, T) with 0 on and below the diagonal and -inf above it (exp of it is the causal 0/1 mask)."""
-    return torch.full((T, T), -torch.inf, dtype=dtype, device=device).triu_(1)
-
-
-def decay_mask(
-    cs: torch.Tensor, out: torch.Tensor | None = None, bias: torch.Tensor | None = None
-) -> torch.Tensor:
+def decay_mask(cs: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
     """exp(segsum) from the inclusive cumulative sum ``cs`` of the log decays of one chunk.
 
-    Entry [i, j] = exp(cs_i - cs_j) for i ≥ j, 0 above the diagonal (exp(-inf)); three passes over
-    the T×T result (difference, causal -inf bias, exp) and no -inf - (-inf). The difference of two
+    Entry [i, j] = exp(cs_i - cs_j) for i ≥ j, 0 above the diagonal. Four passes over the T×T result:
+    the difference, a clamp at 0 (so that no entry above the diagonal overflows), exp, and zeroing
+    above the diagonal (``tril_``): the same bits as exp of the difference plus a -inf causal bias, without
+    exp's slow path for -inf arguments on CPU (``benchmarks/README.md``). The difference of two
     fp32 numbers is correctly rounded, but ``cs`` itself carries the error of its fp32 rounding,
     u·|cs_i| (u = 2^-24), i.e. a relative error of u·|cs_i| on the mask even next to the diagonal.
     :class:`~skeleton_mamba.ssd.intra_chunk.IntraChunk` therefore passes the fp32 rounding ``hi``
     of an fp64 cumulative sum and applies the remainder exp(cs - hi) as row/column factors. With
     a ≤ 0 the cumsum is non-increasing and rounding is monotone, so cs_i - cs_j ≤ 0 for i ≥ j also
-    after rounding and no clamp is needed.
+    after rounding: the clamp changes no entry on or below the diagonal.
     Not differentiable by autograd (in-place); :class:`IntraChunk` has its own backward.
 
     Args:
         cs: (..., T) inclusive cumulative sums of a = Δ·A ≤ 0 (any strides).
         out: optional (..., T, T) buffer to write into.
-        bias: optional :func:`causal_bias` of cs's dtype (made here when omitted).
 
     Returns:
         (..., T, T) decay mask, zero above the diagonal.
     """
-    T = cs.shape[-1]
-    bias = causal_bias(T, cs.dtype, cs.device) if bias is None else bias
-    return torch.sub(cs[..., :, None], cs[..., None, :], out=out).add_(bias).exp_()
+    return torch.sub(cs[..., :, None], cs[..., None, :], out=out).clamp_(max=0.0).exp_().tril_()
 
 
 def decay_mask_backward(M: torch.Tensor) -> torch.Tensor:
