@@ -114,13 +114,16 @@ class IntraChunk(torch.autograd.Function):
             torch.mul(x[t].transpose(1, 2), wcol[t, :, :, None], out=xd[t])
             W = _weights(hi[t], B[t], C[t], E[:s], CB[:s], Wbuf[:s])
             torch.matmul(W, xd[t], out=y_in[t])
-            if row is None:
-                y[t].copy_(y_in[t].transpose(1, 2))
-            else:
-                torch.mul(y_in[t].transpose(1, 2), row[t].transpose(1, 2)[..., None], out=y[t])
+            if row is not None:
+                y_in[t].mul_(row[t, :, :, None])
+            # the head-major result transposed into y in the same pass as the first term added to it
             if y_off is not None:
-                y[t].add_(y_off[t])
-            if D is not None:
+                torch.add(y_in[t].transpose(1, 2), y_off[t], out=y[t])
+            elif D is not None:
+                torch.addcmul(y_in[t].transpose(1, 2), x[t], D, out=y[t])
+            else:
+                y[t].copy_(y_in[t].transpose(1, 2))
+            if y_off is not None and D is not None:
                 y[t].addcmul_(x[t], D)
         ctx.a_dtype = a.dtype
         ctx.save_for_backward(x, delta, hi, row, col, B, C, D, xd, *((E, Wbuf, CB) if keep else ()))
@@ -171,9 +174,11 @@ class IntraChunk(torch.autograd.Function):
                 ddelta[t].copy_(u)
             else:
                 torch.mul(u, col[t], out=ddelta[t])
-            torch.mul(dxd[t].transpose(1, 2), wcol[t].transpose(1, 2)[..., None], out=dx[t])
+            dxd[t].mul_(wcol[t, :, :, None])  # dXd' is used: it becomes c ⊙ Δ ⊙ dXd' in place
             if D is not None:
-                dx[t].addcmul_(dy[t], D)
+                torch.addcmul(dxd[t].transpose(1, 2), dy[t], D, out=dx[t])
+            else:
+                dx[t].copy_(dxd[t].transpose(1, 2))
             if want_dD:  # the product goes to dY's buffer, free again
                 dD += sum_over_positions(dy[t], x[t], scratch=dys[t])
         dy_off = dy if ctx.needs_input_grad[6] else None
