@@ -16,8 +16,8 @@ per-step cost measured so far predicts less than ``--recurrence-budget-s``; othe
 ``ssd_ms`` and ``sdpa_ms`` are medians of ``--repeats`` runs taken in turn, after three untimed rounds.
 As ``sm fit`` does, the run keeps the memory a step frees in the heap (``malloc_kept``:
 ``skeleton_mamba.allocator.keep_freed_memory``), so that every step does not fault in fresh pages;
-``--default-malloc`` leaves glibc's defaults. ``--compile`` adds the SSD compiled by inductor (``compiled_*``: compile seconds, median ms, error, ratios)
-in the same run.
+``--default-malloc`` leaves glibc's defaults. ``--compile`` adds the SSD compiled by inductor
+(``compiled_*``: compile seconds, median ms, error, ratios) in the same run.
 
     python benchmarks/bench_ssd.py --json
     python benchmarks/bench_ssd.py --lengths 150 --batch 64 --repeats 3
@@ -212,8 +212,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--default-malloc",
         action="store_true",
-        help="leave glibc's malloc thresholds at their defaults (by default they are set as sm fit sets them: "
-        "skeleton_mamba.allocator.keep_freed_memory)",
+        help="leave glibc's malloc thresholds at their defaults (by default they are set as sm fit sets "
+        "them: skeleton_mamba.allocator.keep_freed_memory)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(

@@ -5,10 +5,10 @@ minute to minute, so two runs an hour apart say little. This builds the package 
 commit, branch or tag of this repository: ``git archive``, then ``pip install --no-deps --target`` into
 a temporary folder; nothing else in the environment changes), then runs the benchmark script -- always
 the working tree's copy, so both sides measure the same thing -- ``--rounds`` times per side, before and
-after in turn, each in a fresh process with ``--json``. It reports, for every numeric top-level field
-of the script's JSON, the median over the rounds of each side and ``before / after`` (above 1: the
-working tree is faster, for times). Each process states which package it imported, and a round whose
-package is not the intended one stops the run.
+after in turn, each in a fresh process with ``--json``. It reports, for every number in the script's JSON
+(nested objects under dotted names, ``paper.step.median_ms``), the median over the rounds of each side and
+``before / after`` (above 1: the working tree is faster, for times). Each process states which package it
+imported, and a round whose package is not the intended one stops the run.
 
     python benchmarks/side_by_side.py --before 99f3cf0 -- bench_demo_step.py --repeats 5
     python benchmarks/side_by_side.py --before HEAD~3 --rounds 7 --json -- bench_stream.py
@@ -79,8 +79,15 @@ def run_once(site: Path | None, script: Path, args: list[str]) -> dict:
     return json.loads(text[start:])
 
 
-def numeric_fields(result: dict) -> dict[str, float]:
-    return {k: float(v) for k, v in result.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+def numeric_fields(result: dict, prefix: str = "") -> dict[str, float]:
+    """The numbers of a JSON object, nested objects included under dotted names (``paper.step.median_ms``)."""
+    fields = {}
+    for k, v in result.items():
+        if isinstance(v, dict):
+            fields.update(numeric_fields(v, f"{prefix}{k}."))
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            fields[f"{prefix}{k}"] = float(v)
+    return fields
 
 
 def main(argv: list[str] | None = None) -> int:

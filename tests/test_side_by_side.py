@@ -49,3 +49,6 @@ def test_refuses_a_missing_script_and_reports_numeric_fields():
         side_by_side.main(["--before", "HEAD"])
     fields = side_by_side.numeric_fields({"ms": 3, "rate": 1.5, "ok": True, "name": "x", "rows": [1]})
     assert fields == {"ms": 3.0, "rate": 1.5}
+    report = {"paper": {"step": {"median_ms": 2, "ok": False}, "fps": 30}, "n": 1}
+    nested = side_by_side.numeric_fields(report)
+    assert nested == {"paper.step.median_ms": 2.0, "paper.fps": 30.0, "n": 1.0}
