@@ -141,14 +141,15 @@ class ChunkScan(torch.autograd.Function):
         if da is not None:  # dCB is used: dW becomes M = W ∘ ∂L/∂W = dW ∘ CB in place
             da += decay_mask_backward(dW.view(n, G, R, Q, Q).mul_(CB[:, :, None]).view(n, H, Q, Q))
             da = da.to(ctx.a_dtype)
-        u = torch.linalg.vecdot(x.transpose(1, 2), dxd)  # (n, H, Q): Σ_p X dXd
+        # (n, H, Q): Σ_p X dXd, the product written into dY's buffer (no longer read)
+        u = torch.mul(x.transpose(1, 2), dxd, out=dys).sum(-1)
         ddelta = u if col is None else u * col
         dx = torch.mul(dxd.transpose(1, 2), wcol.transpose(1, 2)[..., None], out=torch.empty_like(x))
         if D is not None:
             dx.addcmul_(dy, D)
         dD = None
         if D is not None and ctx.needs_input_grad[5]:
-            dD = sum_over_positions(dy, x)
+            dD = sum_over_positions(dy, x, scratch=dys)  # the product goes to dY's buffer, free again
         return (dx, ddelta.transpose(1, 2), da, dB_t.transpose(1, 2), dC_t.transpose(1, 2), dD, dh0)
 
 

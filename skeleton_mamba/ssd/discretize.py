@@ -111,18 +111,17 @@ def apply_skip(y: torch.Tensor, x: torch.Tensor, D: torch.Tensor | None) -> torc
     return torch.addcmul(y, x.to(y.dtype), skip_matrix(D, *y.shape[-2:], y.dtype))
 
 
-def sum_over_positions(a: torch.Tensor, b: torch.Tensor, scratch: torch.Tensor | None = None) -> torch.Tensor:
+def sum_over_positions(a: torch.Tensor, b: torch.Tensor, scratch: torch.Tensor) -> torch.Tensor:
     """Σ a ⊙ b over chunks and positions, (n, Q, H, P) -> (H, P) in a's dtype (the gradient of D).
 
-    Eagerly PyTorch's cascade summation keeps the sum of n·Q terms accurate; ``scratch``, a free
-    contiguous buffer of a's size and dtype, takes the product instead of a fresh allocation. Under
-    ``torch.compile``, which traces the hand-written backwards, inductor reduces sequentially (14x the
-    recurrence's error at T = 4800), so there it is summed per chunk, then over the chunks in float64.
+    ``scratch`` is a free contiguous buffer of a's size and dtype: eagerly the product goes there instead
+    of a fresh allocation (whose pages would be faulted in on every call), and PyTorch's cascade
+    summation keeps the sum of n·Q terms accurate. Under ``torch.compile``, which traces the hand-written
+    backwards, inductor reduces sequentially (14x the recurrence's error at T = 4800), so there it is
+    summed per chunk, then over the chunks in float64.
     """
     if torch.compiler.is_compiling():
         return torch.mul(a, b).sum(1).to(torch.float64).sum(0).to(a.dtype)
-    if scratch is None:
-        return torch.linalg.vecdot(a.flatten(0, 1), b.flatten(0, 1), dim=0)
     return torch.mul(a, b, out=scratch.view(a.shape)).sum((0, 1))
 
 

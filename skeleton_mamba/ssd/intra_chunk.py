@@ -119,12 +119,12 @@ class IntraChunk(torch.autograd.Function):
             # the head-major result transposed into y in the same pass as the first term added to it
             if y_off is not None:
                 torch.add(y_in[t].transpose(1, 2), y_off[t], out=y[t])
+                if D is not None:
+                    y[t].addcmul_(x[t], D)
             elif D is not None:
                 torch.addcmul(y_in[t].transpose(1, 2), x[t], D, out=y[t])
             else:
                 y[t].copy_(y_in[t].transpose(1, 2))
-            if y_off is not None and D is not None:
-                y[t].addcmul_(x[t], D)
         ctx.a_dtype = a.dtype
         ctx.save_for_backward(x, delta, hi, row, col, B, C, D, xd, *((E, Wbuf, CB) if keep else ()))
         return y
