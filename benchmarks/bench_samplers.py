@@ -8,7 +8,8 @@ the demo's) from that noise (mean joint distance, metres) and scored against the
 ground truth as the demo scores it (MPJPE, BeatAlign, amplitude and jitter ratios), with the wall time per
 window. ``--task text2motion``: a ``humanml3d_demo.yaml`` checkpoint, every held-out caption of the synthetic
 set (6 s each, one motion per caption, the demo's seed), amplitude, jitter and energy above 6 Hz beside each
-caption's held-out clip. ``--json`` prints the rows as JSON.
+caption's held-out clip. DPM-Solver++ also runs with diffusers' default second-order last step
+(``euler_at_final: false`` in its rows) beside ours (first order). ``--json`` prints the rows as JSON.
 
     python benchmarks/bench_samplers.py --ckpt runs/egodance_demo/version_0/checkpoints/last.ckpt --json
     python benchmarks/bench_samplers.py --task text2motion --windows 6 \
@@ -18,6 +19,7 @@ caption's held-out clip. ``--json`` prints the rows as JSON.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import statistics
@@ -37,10 +39,24 @@ from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.text2motion.data import SyntheticTextMotionDataModule
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.checkpoints import load_module, load_module_and_checkpoint
+from skeleton_mamba.tasks.training.diffusion.solvers import SOLVERS
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipe_dir
 
 CONFIGS = [("ddim", 50, 1.0), ("ddim", 50, 0.0)]
 CONFIGS += [(solver, steps, 0.0) for solver in ("dpmpp", "unipc") for steps in (5, 10, 20)]
+SECOND_ORDER_FINAL = [("dpmpp", steps, 0.0) for steps in (5, 10, 20)]
+"""DPM-Solver++ with a second-order last step (diffusers' default, ``euler_at_final=False``) beside ours."""
+
+
+@contextlib.contextmanager
+def dpmpp_options(**options):
+    """DPM-Solver++ with ``options`` replacing its scheduler options while inside."""
+    saved = SOLVERS["dpmpp"]
+    SOLVERS["dpmpp"] = (saved[0], {**saved[1], **options})
+    try:
+        yield
+    finally:
+        SOLVERS["dpmpp"] = saved
 
 
 class EgoMusicCase:
@@ -135,16 +151,20 @@ def main() -> None:
     reference_config = ("ddim", case.num_steps, 0.0)  # every step of the schedule, no noise
     reference, reference_s = case.sample(*reference_config)
     rows = []
-    for config in [reference_config, *CONFIGS]:
+    configs = [(c, {}) for c in [reference_config, *CONFIGS]]
+    configs += [(c, {"euler_at_final": False}) for c in SECOND_ORDER_FINAL]
+    for config, options in configs:
         sampler, steps, eta = config
         is_reference = config == reference_config
-        motions, seconds = (reference, reference_s) if is_reference else case.sample(*config)
+        with dpmpp_options(**options):
+            motions, seconds = (reference, reference_s) if is_reference else case.sample(*config)
         scores = case.score(motions)
         pairs = zip(motions, reference, strict=True)
         gap = statistics.mean(float((m - r).norm(dim=-1).mean()) for m, r in pairs)
         rows.append({
             "sampler": sampler, "steps": steps, "eta": eta, f"seconds_per_{case.unit}": round(seconds, 3),
             "to_ddim_all_steps_m": round(gap, 4), **{k: round(v, 4) for k, v in scores.items()},
+            **({"euler_at_final": options["euler_at_final"]} if options else {}),
         })  # fmt: skip
     count = len(reference)
     result = {"machine": machine_info(), "checkpoint": args.ckpt, f"{case.unit}s": count, "rows": rows}
@@ -155,7 +175,10 @@ def main() -> None:
     keys = list(rows[0])
     print(" | ".join(keys))
     for row in rows:
-        print(" | ".join(str(row[k]) for k in keys))
+        print(
+            " | ".join(str(row[k]) for k in keys)
+            + (" | second-order last step" if "euler_at_final" in row else "")
+        )
 
 
 if __name__ == "__main__":

@@ -28,7 +28,14 @@ import numpy as np
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.motion.music import DANCE_BPM_RANGE, audio_stack, extract_music_features
+from skeleton_mamba.tasks.motion.music import (
+    DANCE_BPM_RANGE,
+    ENVELOPE,
+    OCTAVE_AMBIGUITY,
+    audio_stack,
+    extract_music_features,
+    tempo_octaves,
+)
 from skeleton_mamba.tasks.motion.option_types import real_option
 
 __all__ = ["build_parser", "main"]
@@ -41,14 +48,23 @@ def build_parser() -> argparse.ArgumentParser:
         "35-d FACT/EDGE librosa features (envelope, 20 MFCC, 12 chroma, onset peaks, beats).",
     )
     p.add_argument("file", type=Path, help="audio file (wav, flac, ogg/opus, mp3, ...)")
-    p.add_argument("--fps", type=int, choices=(30, 60), default=60, help="feature frame rate")
+    p.add_argument(
+        "--fps",
+        type=int,
+        choices=(30, 60),
+        default=60,
+        help="feature frame rate (default 60, FACT's; 30 is EDGE's): the beats fall on this frame grid, so "
+        "the tempo read from them can move by a fraction of a BPM between the two",
+    )
     p.add_argument("--out", type=Path, default=None, help="save the (T, 35) features to this .npy file")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument(
         "--start-bpm",
         type=real_option(1.0, 1000.0, "a tempo (BPM)"),
         default=None,
-        help="beat-tracker tempo prior (default: auto)",
+        help="the beat tracker's tempo prior (default: librosa's estimate): given near half or double the "
+        "detected tempo, the tracker follows that octave instead (the 'tempo octaves' line says when both "
+        "are plausible)",
     )
     p.add_argument("--cache-dir", type=Path, default=None, help="feature cache folder")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the feature cache")
@@ -92,6 +108,14 @@ def _analyse(args: argparse.Namespace):
         ) from err
 
 
+def _ambiguous(tempo: float | None, octaves: list[tuple[float, float]]) -> bool:
+    """Whether another octave of ``tempo`` is nearly as strong as the strongest (:data:`OCTAVE_AMBIGUITY`)."""
+    if tempo is None or len(octaves) < 2 or octaves[0][1] <= 0:
+        return False
+    close = [b for b, s in octaves if s >= OCTAVE_AMBIGUITY * octaves[0][1]]
+    return len(close) > 1 or close[0] != tempo
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``sm analyze-music``; returns the process exit code."""
     args = build_parser().parse_args(argv)
@@ -107,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError(f"{args.out}: cannot write ({err.strerror or err})") from err
     beats = [round(float(t), 4) for t in analysis.beat_times]
     tempo, dance = analysis.tempo_bpm, analysis.dance_tempo_bpm
+    octaves = [] if tempo is None else tempo_octaves(analysis.features[:, ENVELOPE], analysis.fps, tempo)
     if args.json:
         report = {
             "file": str(args.file),
@@ -114,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
             "tempo_bpm": None if tempo is None else round(tempo, 3),
             "dance_tempo_bpm": None if dance is None else round(dance, 3),
             "dance_bpm_range": list(DANCE_BPM_RANGE),
+            "tempo_octaves": [{"bpm": round(b, 3), "strength": round(s, 3)} for b, s in octaves],
+            "tempo_ambiguous": _ambiguous(tempo, octaves),
             "beats_s": beats,
             "fps": analysis.fps,
             "feature_shape": list(analysis.features.shape),
@@ -129,6 +156,14 @@ def main(argv: list[str] | None = None) -> int:
         else:
             tempo_text = f"tempo {tempo:.1f} BPM (dance range {low:g}-{high:g} BPM: {dance:.1f})"
         print(f"{args.file}: {analysis.duration_s:.2f} s, {tempo_text}, {len(beats)} beats")
+        if _ambiguous(tempo, octaves):
+            print(
+                "tempo octaves (onset periodicity, 1 = perfectly periodic): "
+                + ", ".join(
+                    f"{b:.1f} BPM {s:.2f}" for b, s in octaves if s >= OCTAVE_AMBIGUITY * octaves[0][1]
+                )
+                + f"; the beat tracker chose {tempo:.1f}: --start-bpm near another one chooses that octave"
+            )
         print("beats (s): " + " ".join(f"{t:.3f}" for t in beats))
         if args.out is not None:
             print(f"features {tuple(analysis.features.shape)} @ {analysis.fps} fps -> {args.out}")

@@ -70,6 +70,7 @@ __all__ = [
     "load_audio",
     "record_audio_stack",
     "tempo_from_beats",
+    "tempo_octaves",
 ]
 
 HOP_LENGTH = 512
@@ -123,6 +124,50 @@ def tempo_from_beats(beat_frames: np.ndarray, fps: float) -> float:
         return 0.0
     slope = np.polyfit(np.arange(beats.size, dtype=np.float64), beats / fps, 1)[0]
     return float(60.0 / slope)
+
+
+OCTAVE_AMBIGUITY = 0.8
+"""Another tempo octave at least this fraction of the detected tempo's strength makes the choice ambiguous."""
+
+
+def tempo_octaves(envelope: np.ndarray, fps: float, tempo_bpm: float) -> list[tuple[float, float]]:
+    """The detected tempo, half and double it (those within 30-300 BPM), each with the strength a beat
+    tracker weighs it by: the onset envelope's normalised autocorrelation at that tempo's beat period (the
+    best lag within 3 % of it, clipped at 0; 1 is a perfectly periodic envelope) times librosa's tempo prior
+    (log-normal about 120 BPM, one octave wide, as ``librosa.feature.tempo`` weighs its tempogram). Where
+    another octave is nearly as strong (:data:`OCTAVE_AMBIGUITY`), the tracker's choice between them is a
+    toss-up: a 68 BPM track with busy eighth notes may be read at 136.
+
+    Args:
+        envelope: (T,) onset strength per frame (column 0 of the features).
+        fps: frames per second of ``envelope``.
+        tempo_bpm: the detected tempo.
+
+    Returns:
+        ``[(bpm, strength), ...]``, strongest first.
+
+    Examples:
+        >>> fps, period = 60, 30  # a pulse every 30 frames (120 BPM), every other one twice as strong
+        >>> env = np.zeros(1200)
+        >>> env[::period] = 1.0
+        >>> env[::2 * period] = 2.0
+        >>> [(bpm, round(s, 2)) for bpm, s in tempo_octaves(env, fps, 120.0)]
+        [(120.0, 0.79), (60.0, 0.61), (240.0, 0.0)]
+    """
+    env = np.asarray(envelope, dtype=np.float64)
+    env = env - env.mean()
+    power = float(env @ env) / max(env.size, 1)
+    out = []
+    for bpm in (tempo_bpm / 2, tempo_bpm, tempo_bpm * 2):
+        period = 60.0 * fps / bpm
+        if not 30.0 <= bpm <= 300.0 or period < 1 or 2 * period >= env.size or power <= 0:
+            continue
+        lags = range(max(1, int(np.floor(0.97 * period))), int(np.ceil(1.03 * period)) + 1)
+        # unbiased: each lag's products averaged over the frames it has, against the mean power per frame
+        periodicity = max(float(env[:-lag] @ env[lag:]) / (env.size - lag) for lag in lags) / power
+        prior = np.exp(-0.5 * np.log2(bpm / 120.0) ** 2)
+        out.append((float(bpm), max(0.0, periodicity) * float(prior)))
+    return sorted(out, key=lambda pair: -pair[1])
 
 
 _RESAMPLER_PACKAGES = {"soxr": "soxr", "kaiser": "resampy", "fft": "scipy", "scipy": "scipy",
