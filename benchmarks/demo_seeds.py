@@ -352,7 +352,35 @@ def runs_line(results: dict, demo: str) -> str:
             f"(`python benchmarks/demo_seeds.py run --demos {demo}`).")  # fmt: skip
 
 
+CAUSE = REPO / "benchmarks" / "long_song_cause.json"
+
+
+def egodance_cause(results: dict) -> str:
+    """The long song's error by held-out window and segment, and the head estimator's yaw
+    (``benchmarks/long_song_cause.py``'s JSON; ``results`` is not used)."""
+    cause = json.loads(CAUSE.read_text(encoding="utf-8"))
+    rows = [[f"`{w['window'].removeprefix('synthetic_')}`", w["window"].split("_")[1], _f(w["mpjpe_m"]),
+             _f(w["mean_pose_mpjpe_m"])] for w in cause["held_out_windows"]]  # fmt: skip
+    table = _table(["held-out window", "style", "MPJPE (m)", "mean pose (m)"], rows)
+    long, yaw = cause["long_song"], cause["head_estimator_yaw"]
+    segments = ", ".join(_f(v) for v in long["per_segment_mpjpe_m"][:4])
+    means = ", ".join(_f(v) for v in long["per_segment_mean_pose_mpjpe_m"][:4])
+    error = yaw["error_at_next_window_deg"]
+    return (
+        f"{table}\n\nThe long song's {len(long['per_segment_mpjpe_m'])} segments: sampled alone "
+        f"{_f(long['windows_alone_mpjpe_m'])} m, joined {_f(long['mpjpe_m'])} m, the mean pose "
+        f"{_f(long['mean_pose_mpjpe_m'])} m; segment by segment {segments}, ... against the mean "
+        f"pose's {means}, ... The head estimator's yaw swings {_f(yaw['estimated_swing_std_deg'], 1)} "
+        f"degrees (standard deviation after removing the slow turn) where the truth's swings "
+        f"{_f(yaw['true_swing_std_deg'], 1)} (correlation {_f(yaw['swing_correlation'], 2)}), and is "
+        f"{_f(error['min'], 0)} to {_f(error['max'], 0)} degrees off (mean {_f(error['mean'], 0)}) at the "
+        "next window's first frame. Measured by "
+        "`python benchmarks/long_song_cause.py --run runs/egodance_demo/version_0` on seed 0's run."
+    )
+
+
 TABLES: dict[str, Callable[[dict], str]] = {
+    "egodance-cause": egodance_cause,
     "readme": readme_demos,
     "egodance-windows": egodance_windows,
     "egodance-long-song": egodance_long_song,

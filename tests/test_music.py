@@ -18,12 +18,14 @@ from skeleton_mamba.tasks.motion.music import (
     CHROMA,
     ENVELOPE,
     MFCC,
+    OCTAVE_AMBIGUITY,
     ONSET_PEAK,
     aist_start_bpm,
     compute_music_features,
     extract_music_features,
     fold_tempo,
     load_audio,
+    tempo_octaves,
 )
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -180,7 +182,11 @@ def test_analyze_music_cli_json_and_out(tmp_path, capsys):
     assert rc == 0
     report = json.loads(capsys.readouterr().out)
     keys = {"file", "duration_s", "tempo_bpm", "dance_tempo_bpm", "dance_bpm_range", "beats_s", "fps"}
-    assert set(report) == keys | {"feature_shape", "audio_stack"}
+    assert set(report) == keys | {"feature_shape", "audio_stack", "tempo_octaves", "tempo_ambiguous"}
+    # a click every beat: the tracker's octave is the strongest, half and double it clearly weaker
+    octaves = report["tempo_octaves"]
+    assert octaves[0]["bpm"] == pytest.approx(report["tempo_bpm"], rel=1e-3) and not report["tempo_ambiguous"]
+    assert all(o["strength"] < OCTAVE_AMBIGUITY * octaves[0]["strength"] for o in octaves[1:])
     assert report["fps"] == 30 and report["duration_s"] == pytest.approx(8.0)
     assert report["tempo_bpm"] == pytest.approx(120.0, rel=0.03)
     feats = np.load(out)
@@ -192,6 +198,46 @@ def test_analyze_music_cli_json_and_out(tmp_path, capsys):
 
     assert analyze_main([str(wav), "--fps", "30", "--no-cache"]) == 0
     assert "BPM" in capsys.readouterr().out
+
+
+def test_analyze_music_prints_both_octaves_of_a_slow_track_with_busy_eighths(tmp_path, capsys):
+    """A 68 BPM kick with a hi-hat on every eighth note: half the periods hold a kick, so 68 and 136 BPM both
+    fit; the tracker (prior about 120 BPM) reads one of them, and both are printed with their strengths."""
+    sr, seconds, bpm = 22050, 20.0, 68.0
+    y = np.zeros(int(seconds * sr), dtype=np.float32)
+    n = np.arange(int(0.12 * sr))
+    kick = 0.9 * np.sin(2 * np.pi * 55 * n / sr) * np.exp(-n / 1500)
+    hat = (
+        0.5
+        * np.random.default_rng(0).standard_normal(int(0.04 * sr))
+        * np.exp(-np.arange(int(0.04 * sr)) / 150)
+    )
+    for k, start in enumerate(np.arange(0.5, seconds - 0.2, 30.0 / bpm)):
+        i = int(start * sr)
+        y[i : i + hat.size] += hat.astype(np.float32)
+        if k % 2 == 0:
+            y[i : i + kick.size] += kick.astype(np.float32)
+    wav = tmp_path / "slow.wav"
+    sf.write(wav, y, sr)
+    assert analyze_main([str(wav), "--json", "--no-cache"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["tempo_ambiguous"]
+    bpms = sorted(o["bpm"] for o in report["tempo_octaves"][:2])
+    assert bpms[1] == pytest.approx(2 * bpms[0], abs=0.002) and bpms[0] == pytest.approx(bpm, rel=0.03)
+    assert analyze_main([str(wav), "--no-cache"]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("tempo octaves"))
+    assert f"{bpms[0]:.1f} BPM" in line and f"{bpms[1]:.1f} BPM" in line and "--start-bpm" in line
+
+
+def test_tempo_octaves_of_envelopes():
+    fps = 60
+    pulse = np.zeros(1800)
+    pulse[::30] = 1.0  # 120 BPM
+    octaves = dict(tempo_octaves(pulse, fps, 120.0))
+    assert octaves[120.0] == pytest.approx(1.0, abs=0.01)  # perfectly periodic, at the prior's centre
+    assert octaves[240.0] == 0.0  # between the pulses: anti-correlated, clipped at 0
+    assert octaves[60.0] == pytest.approx(np.exp(-0.5), abs=0.01)  # periodic too, weighed down by the prior
+    assert tempo_octaves(np.zeros(1800), fps, 120.0) == []  # silence: no strength anywhere
 
 
 def test_bad_audio_inputs_name_the_file(tmp_path, capsys):

@@ -1,0 +1,132 @@
+"""Where the EgoMusic demo's long-song error comes from, measured on a trained ``egodance_demo.yaml`` run.
+
+For every held-out window the demo scores, the window sampled alone (as the demo samples it) against the mean
+pose's MPJPE on the same window; for the demo's 60 s song, each 5 s segment of the joined dance and of the
+segments sampled alone against the mean pose; and how well the head-trajectory estimator sees the head's
+yaw in the song's egocentric video: its yaw over each sampling window against the truth's (after removing
+the slow turn with a 31-frame moving average: the swing of the dance), and its error at the frame where the
+next window starts (what a heading anchor would need). Writes ``benchmarks/long_song_cause.json`` (``--out``),
+from which ``demo_seeds.py tables`` renders the tutorial's table.
+
+    python benchmarks/long_song_cause.py --run runs/egodance_demo/version_0 --data runs/egodance_demo/data
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import torch
+from common import machine_info
+
+from skeleton_mamba.tasks.egodance.data import data_module_from_hparams
+from skeleton_mamba.tasks.egodance.head_estimator import estimate_window_trajectories
+from skeleton_mamba.tasks.egodance.long_demo import _segment_starts, score_long_dance
+from skeleton_mamba.tasks.egodance.long_form import LongForm
+from skeleton_mamba.tasks.egodance.long_form_scores import segments
+from skeleton_mamba.tasks.egodance.module import EgoDanceModule
+from skeleton_mamba.tasks.egodance.representation import motion_joints
+from skeleton_mamba.tasks.egodance.window_frames import head_heading, head_rotation
+from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
+from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
+
+OUT = Path(__file__).resolve().parent / "long_song_cause.json"
+
+
+def _mpjpe(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float(mpjpe(a.double(), b.double()))
+
+
+def _swing(heading: torch.Tensor, width: int = 31) -> torch.Tensor:
+    """(B, T) headings (radians) less their moving average over ``width`` frames."""
+    padded = torch.nn.functional.pad(heading[:, None], (width // 2, width // 2), mode="replicate")
+    return heading - torch.nn.functional.avg_pool1d(padded, width, 1)[:, 0]
+
+
+def _wrap_deg(angle: torch.Tensor) -> torch.Tensor:
+    return torch.rad2deg(torch.remainder(angle + torch.pi, 2 * torch.pi) - torch.pi)
+
+
+@torch.no_grad()
+def measure(run: Path, data_root: Path) -> dict:
+    module, checkpoint = load_module_and_checkpoint(EgoDanceModule, str(run / "checkpoints" / "last.ckpt"))
+    module.eval()
+    data = data_module_from_hparams({**checkpoint["datamodule_hyper_parameters"], "root": str(data_root)})
+    data.setup("fit")
+    train = [motion_joints(item["motion"]) for item in data.datasets["train"].items]
+    mean_pose = torch.cat([c.reshape(-1, 24, 3) for c in train]).mean(0)
+    dataset = data.datasets["test"]
+    windows = []
+    for index in range(len(dataset)):
+        item = dataset[index]
+        batch = {k: v[None] for k, v in item.items() if torch.is_tensor(v)}
+        truth = motion_joints(item["motion"])
+        dance = motion_joints(module.sample(batch, index)[0])
+        windows.append({"window": dataset.folders[index].name, "mpjpe_m": _mpjpe(dance, truth),
+                        "mean_pose_mpjpe_m": _mpjpe(mean_pose.expand_as(truth), truth)})  # fmt: skip
+    folder = sorted((data_root / "long_60s" / "ego" / "samples").iterdir())[0]
+    tokens, inputs, scores = score_long_dance(module, folder, mean_pose)
+    hp = module.hparams
+    long_form = LongForm(hp.window, 75, bool(hp.canonicalize_init_head))
+    starts = _segment_starts(len(inputs.music), long_form)
+    truth_segments = segments(inputs.truth, starts, long_form.window, long_form.canonical)
+    dance_segments = segments(tokens, starts, long_form.window, long_form.canonical)
+    per_segment = [_mpjpe(motion_joints(a), motion_joints(b)) for a, b in zip(dance_segments, truth_segments)]
+    mean_segment = [
+        _mpjpe(mean_pose.expand(long_form.window, 24, 3), motion_joints(b)) for b in truth_segments
+    ]
+    # the head estimator's yaw over the sampling windows that fit in the song
+    window_starts = [
+        s for s in long_form.starts(len(inputs.music)) if s + long_form.window <= len(inputs.music)
+    ]
+    _, rotations = estimate_window_trajectories(
+        module.head_estimator.eval(), inputs.video.head, window_starts, long_form.window
+    )
+    true_windows = segments(inputs.truth, window_starts, long_form.window, long_form.canonical)
+    true_yaw = head_heading(head_rotation(true_windows.double()))
+    estimated_yaw = head_heading(rotations.double())
+    true_swing, estimated_swing = _swing(true_yaw), _swing(estimated_yaw)
+    at_next = _wrap_deg(estimated_yaw[:, long_form.hop] - true_yaw[:, long_form.hop]).abs()
+    return {
+        "machine": machine_info(),
+        "run": str(run),
+        "held_out_windows": windows,
+        "long_song": {
+            "sample": folder.name,
+            "mpjpe_m": scores["mpjpe_m"],
+            "windows_alone_mpjpe_m": scores["windows_alone_mpjpe_m"],
+            "mean_pose_mpjpe_m": scores["mean_pose_mpjpe_m"],
+            "per_segment_mpjpe_m": per_segment,
+            "per_segment_mean_pose_mpjpe_m": mean_segment,
+        },
+        "head_estimator_yaw": {
+            "true_swing_std_deg": float(torch.rad2deg(true_swing).std()),
+            "estimated_swing_std_deg": float(torch.rad2deg(estimated_swing).std()),
+            "swing_correlation": float(
+                (true_swing * estimated_swing).sum() / (true_swing.norm() * estimated_swing.norm())
+            ),
+            "error_at_next_window_deg": {
+                "min": float(at_next.min()),
+                "max": float(at_next.max()),
+                "mean": float(at_next.mean()),
+            },  # fmt: skip
+        },
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--run", type=Path, required=True, help="runs/egodance_demo/version_N of a demo run")
+    parser.add_argument(
+        "--data", type=Path, default=Path("runs/egodance_demo/data"), help="the demo's data root"
+    )
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args()
+    result = measure(args.run, args.data)
+    args.out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    print(json.dumps(result["long_song"] | result["head_estimator_yaw"], indent=2))
+
+
+if __name__ == "__main__":
+    main()
