@@ -95,6 +95,21 @@ def build_parser() -> argparse.ArgumentParser:
         "camera path of a --sample (oracle), or none (default for music-only models)",
     )
     p.add_argument(
+        "--heading",
+        choices=("video", "none"),
+        default="video",
+        help="what holds each window's heading over a long track: the head's turns read from the egocentric "
+        "video (default; models whose windows face their first heading), or none (the sampled motion's, "
+        "which drifts over a minute)",
+    )
+    p.add_argument(
+        "--fov",
+        type=real_option(1.0, 179.0, "an angle in degrees"),
+        default=90.0,
+        help="the egocentric camera's horizontal field of view in degrees, for reading the head's turns from "
+        "--video (default 90; a --sample's own camera is used)",
+    )
+    p.add_argument(
         "--window",
         type=int_option(1, MAX_FRAMES, "a frame count"),
         default=150,

@@ -77,9 +77,11 @@ def _inputs(args, module, long_form: LongForm) -> DanceInputs:
     estimate = _head_source(args, module) == "estimate" and module.head_estimator is not None
     model = _denoiser(args, module)
     with inference_precision(args.precision):  # the encoders in the dance's precision, as in the sampler
+        heading = args.heading == "video"
         if args.sample:
-            return sample_inputs(args.sample, module, model, long_form, estimate, args.progress)
-        return track_inputs(args.music, args.video, module, model, long_form, estimate, args.progress)
+            return sample_inputs(args.sample, module, model, long_form, estimate, args.progress, heading)
+        fov = args.fov if heading else None
+        return track_inputs(args.music, args.video, module, model, long_form, estimate, args.progress, fov)
 
 
 def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torch.Tensor, str]:
@@ -95,6 +97,7 @@ def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torc
         _denoiser(args, module),
         module.diffusion,
         inputs.music,
+        headings=None if inputs.video is None else inputs.video.heading,
         head=head,
         window=long_form.window,
         overlap=long_form.overlap,

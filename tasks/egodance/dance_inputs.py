@@ -25,6 +25,7 @@ from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 from skeleton_mamba.tasks.egodance.frames import video_header
 from skeleton_mamba.tasks.egodance.long_form import LongForm
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
+from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.value_checks import load_npz
@@ -53,7 +54,31 @@ class DanceInputs:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-def _encode(video: Path, module, model, frames: int, long_form: LongForm, estimate: bool, progress: bool):
+ROTATION_SIZE = 64
+"""Frames are aligned for the head's rotation at most this many pixels across (:mod:`.video_rotation`)."""
+
+
+def rotation_stream(image_size: int, K: torch.Tensor) -> HeadRotationStream:
+    """A rotation tracker for frames decoded at ``image_size`` whose intrinsics there are ``K``."""
+    size = min(image_size, ROTATION_SIZE)
+    scale = torch.tensor([size / image_size, size / image_size, 1.0])[:, None]
+    return HeadRotationStream(K.float() * scale, size)
+
+
+def _encode(
+    video: Path,
+    module,
+    model,
+    frames: int,
+    long_form: LongForm,
+    estimate: bool,
+    progress: bool,
+    K: torch.Tensor | None = None,
+):
+    """``K``: the frames' intrinsics at the model's image size, for the head's rotation (None: not tracked;
+    only models whose windows face their first heading use it)."""
+    size = module.hparams.image_size
+    rotation = rotation_stream(size, K) if K is not None and long_form.canonical else None
     return encode_video(
         video,
         module.hparams.image_size,
@@ -64,13 +89,24 @@ def _encode(video: Path, module, model, frames: int, long_form: LongForm, estima
         progress=progress,
         hops=(long_form.hop,),  # every long-form window's start, for its own head estimate
         fps=float(module.hparams.fps),
+        rotation=rotation,
     )
 
 
 def track_inputs(
-    music: str, video: str | None, module, model, long_form: LongForm, estimate: bool, progress: bool = False
+    music: str,
+    video: str | None,
+    module,
+    model,
+    long_form: LongForm,
+    estimate: bool,
+    progress: bool = False,
+    fov: float | None = 90.0,
 ) -> DanceInputs:
     """A user's track: the music file and, for a vision model, the egocentric video (file or image folder).
+
+    ``fov``: the camera's horizontal field of view (degrees) for reading the head's turns from the video
+    (:mod:`.video_rotation`; the video's aspect from its header), or None: not read.
 
     The video's length is read from its header first: when it is shorter than the music the dance covers
     the video's part, and a warning says so before the decoding starts.
@@ -96,7 +132,10 @@ def track_inputs(
             file=sys.stderr,
         )
     start = time.perf_counter()
-    encoded = _encode(Path(video), module, model, len(features), long_form, estimate, progress)
+    size = module.hparams.image_size
+    aspect = header.width / header.height if header.width and header.height else 1.0
+    K = None if fov is None else intrinsics_for(size, fov, aspect)
+    encoded = _encode(Path(video), module, model, len(features), long_form, estimate, progress, K)
     seconds["video"] = time.perf_counter() - start  # decoding, the vision encoder, the head estimator
     n = encoded.num_frames  # at most len(music); the header can be off by a frame or two
     if covered is None and len(features) - n > 1:
@@ -106,12 +145,20 @@ def track_inputs(
 
 
 def sample_inputs(
-    folder: str, module, model, long_form: LongForm, estimate: bool, progress: bool = False
+    folder: str,
+    module,
+    model,
+    long_form: LongForm,
+    estimate: bool,
+    progress: bool = False,
+    heading: bool = True,
 ) -> DanceInputs:
     """An EgoAIST++ sample folder of any length: its music slice, the features of its egocentric video, its
-    ground-truth motion and head path (in the sample's canonical frame, as the data module reads them)."""
+    ground-truth motion and head path (in the sample's canonical frame, as the data module reads them);
+    ``heading``: the head's turns read from the video with the sample's camera intrinsics."""
     folder = Path(folder)
-    frames = len(load_npz(folder / "camera.npz")["positions"])
+    camera = load_npz(folder / "camera.npz")
+    frames = len(camera["positions"])
     item = EgoDanceDataset(
         [folder],
         window=frames,
@@ -122,7 +169,10 @@ def sample_inputs(
     video = None
     if model.vision_encoder is not None:
         rgb = folder / "rgb.mp4" if (folder / "rgb.mp4").is_file() else folder / "rgb"
-        video = _encode(rgb, module, model, frames, long_form, estimate, progress)
+        size = module.hparams.image_size  # the rendered intrinsics, scaled to the decoded frames
+        width, height = float(camera["width"]), float(camera["height"])
+        K = torch.from_numpy(camera["K"]).float() * torch.tensor([size / width, size / height, 1.0])[:, None]
+        video = _encode(rgb, module, model, frames, long_form, estimate, progress, K if heading else None)
         if video.num_frames < frames:
             raise InputError(f"{rgb}: {video.num_frames} frames, the sample's camera path {frames}")
     return DanceInputs(

@@ -106,10 +106,13 @@ class VideoHeader:
     Attributes:
         frames: the frame count (from the header's duration and rate; None when the header gives none).
         fps: the frame rate (None for an image folder, whose frames are taken at the model's rate).
+        width, height: the frame size in pixels (None when the header gives none, and for an image folder).
     """
 
     frames: int | None
     fps: float | None
+    width: int | None = None
+    height: int | None = None
 
     def frames_at(self, fps: float) -> int | None:
         """The frame count once the video is taken at ``fps`` (:func:`iter_video_frames`)."""
@@ -133,9 +136,11 @@ def video_header(path: str | Path) -> VideoHeader:
     reader, meta = _open_video(path)
     reader.close()
     fps, duration = float(meta.get("fps") or 0.0), float(meta.get("duration") or 0.0)
+    size = meta.get("size") or (None, None)
+    width, height = (int(v) if v else None for v in size)
     if not (np.isfinite(fps) and fps > 0):
-        return VideoHeader(None, None)
-    return VideoHeader(int(round(duration * fps)) if duration > 0 else None, fps)
+        return VideoHeader(None, None, width, height)
+    return VideoHeader(int(round(duration * fps)) if duration > 0 else None, fps, width, height)
 
 
 def _resampled_count(frames: int, source_fps: float, fps: float) -> int:

@@ -13,10 +13,19 @@ import numpy as np
 import torch
 
 from skeleton_mamba.tasks.egodance.builder.camera import HEAD_TO_CAMERA
-from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, motion_joints
+from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, ROT, motion_joints
+from skeleton_mamba.tasks.egodance.window_frames import head_heading, head_rotation, yaw_matrices
 from skeleton_mamba.tasks.training.diffusion.samplers import GuidanceTerm
 
-__all__ = ["head_pose_from_camera", "head_targets_from_camera", "head_guidance_objective", "HeadGuidance"]
+ROOT_JOINT = 0
+
+__all__ = [
+    "HeadGuidance",
+    "HeadingGuidance",
+    "head_guidance_objective",
+    "head_pose_from_camera",
+    "head_targets_from_camera",
+]
 
 
 def head_pose_from_camera(
@@ -87,3 +96,36 @@ class HeadGuidance(GuidanceTerm):
                 (grad,) = torch.autograd.grad(g, x)
                 x = (x - self.weight * grad).detach()
         return x
+
+
+class HeadingGuidance(GuidanceTerm):
+    """Turns x0_hat about the vertical so that its head faces the heading the video shows (ours).
+
+    At every sampling step each frame's root orientation (and so the whole body, the head with it) is turned
+    by ``weight`` times the gap between the target heading and the head's heading in x0_hat
+    (:func:`.window_frames.head_heading`): ``weight = 1`` sets every frame's heading to the target,
+    smaller weights pull towards it. The root's position is left as sampled, so the body turns in place.
+    The targets come from the egocentric video (:mod:`.video_rotation`), in the window's own frame.
+
+    Args:
+        target: (B, T) head headings (radians) in the motion's (canonical) frame.
+        weight: fraction of the gap closed at each step, in (0, 1].
+        mask: (B, T) bool frames where a target exists (None: all).
+    """
+
+    def __init__(self, target: torch.Tensor, weight: float = 1.0, mask: torch.Tensor | None = None):
+        if not 0 < weight <= 1:
+            raise ValueError(f"the heading guidance weight must lie in (0, 1], got {weight}")
+        self.target, self.weight, self.mask = target, weight, mask
+
+    def adjust_x0(self, x0: torch.Tensor, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        target = self.target.to(x0.device, x0.dtype)
+        gap = torch.remainder(target - head_heading(head_rotation(x0)) + torch.pi, 2 * torch.pi) - torch.pi
+        if self.mask is not None:
+            gap = gap * self.mask.to(gap.dtype)
+        turn = yaw_matrices(self.weight * gap)[..., None, :, :]  # (B, T, 1, 3, 3)
+        out = x0.clone()
+        root = x0[..., ROOT_JOINT, :]
+        for part in (slice(ROT.start, ROT.start + 3), slice(ROT.start + 3, ROT.stop)):
+            out[..., ROOT_JOINT, part] = (turn[..., 0, :, :] @ root[..., part, None])[..., 0]
+        return out

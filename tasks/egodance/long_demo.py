@@ -134,10 +134,12 @@ def score_long_dance(
     video = None if inputs.video is None else inputs.video.head
     head, head_windows = head_targets(source, long_form, total, module.head_estimator, video)
     seed = module.evaluation.seed
+    headings = None if inputs.video is None else inputs.video.heading
     tokens = sample_long_dance(
         model,
         module.diffusion,
         inputs.music,
+        headings=headings,
         head=head,
         window=long_form.window,
         overlap=overlap,
@@ -162,6 +164,7 @@ def score_long_dance(
         "windows": len(long_form.starts(total)),
         "segments": len(starts),
         "head_source": source,
+        "heading_source": "video" if headings is not None else "sampled motion",
         "mpjpe_m": _mean_mpjpe(
             segments(tokens, starts, long_form.window, long_form.canonical), truth_segments
         ),
@@ -183,7 +186,7 @@ def format_long_scores(scores: dict) -> str:
         f"  whole-sequence MPJPE (m, {scores['segments']} segments each in its first frame): "
         f"{scores['mpjpe_m']:.3f}   the segments sampled alone: {scores['windows_alone_mpjpe_m']:.3f}   "
         f"mean pose: {scores['mean_pose_mpjpe_m']:.3f}",
-        "  drift over the whole song (no target): "
+        f"  where the dance ends up (heading held by the {scores.get('heading_source', 'sampled motion')}): "
         + "   ".join(f"{k} {v:.3f}" for k, v in scores["drift"].items()),
         "  dynamics / ground truth's (the segments sampled alone): "
         + "   ".join(

@@ -15,11 +15,12 @@ Two things can go wrong where the windows meet, and one over the whole length:
   MPJPE over the whole length must stay below the mean-pose baseline's and within
   :data:`WHOLE_TO_WINDOWS_TARGET` (10 %) of the mean MPJPE of the same segments sampled alone.
 
-Where the whole dance goes over the minute is reported beside them without a target (:func:`drift`): every
-window's frame is found from the dance before it, so an error in one window's turn is carried by all later
-ones, and nothing in music and egocentric frames tells a model trained on windows turned to their first
-heading which way the dancer faced a minute ago ([EgoMusic] takes the head's world trajectory from SLAM
-for that). The world-frame MPJPE, the heading error and the root's distance from the truth's are printed.
+Where the whole dance goes over the minute is reported beside them (:func:`drift`): the world-frame MPJPE,
+the head's heading error over the last window and the root's distance from the truth's. Each window's frame
+is found from the one before, so without an anchor an error in one window's turn is carried by all later
+ones; where the egocentric video holds the heading (the head's turns read from it, :mod:`.video_rotation`;
+[EgoMusic] takes the head's world trajectory from SLAM), the heading error at the end of the song must stay
+within :data:`END_HEADING_TARGET_DEG`. The root's path has no anchor and no target.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames, head_head
 __all__ = [
     "SEAM_METRICS",
     "SEAM_TARGETS",
+    "END_HEADING_TARGET_DEG",
     "WHOLE_TO_WINDOWS_TARGET",
     "drift",
     "long_form_checks",
@@ -47,6 +49,7 @@ SEAM_METRICS = {  # key -> printed name
     "root_step_ratio": "seam root step / elsewhere",
 }
 WHOLE_TO_WINDOWS_TARGET = 1.1  # whole-sequence MPJPE at most 10 % above its windows sampled alone
+END_HEADING_TARGET_DEG = 30.0  # where the video holds the heading, the head's heading at the end of the song
 
 
 def seam_frames(starts: list[int], overlap: int, total: int) -> list[int]:
@@ -127,4 +130,9 @@ def long_form_checks(scores: dict) -> dict[str, bool]:
     }
     for key, target in SEAM_TARGETS.items():
         checks[f"{SEAM_METRICS[key]} <= {target:g}"] = scores["seams"][key] <= target
+    if scores.get("heading_source") == "video":
+        error = scores["drift"]["end_heading_error_deg"]
+        checks[f"end-of-song heading error <= {END_HEADING_TARGET_DEG:g} degrees (held by the video)"] = (
+            error <= END_HEADING_TARGET_DEG
+        )
     return checks

@@ -14,7 +14,7 @@ import torch
 
 from skeleton_mamba.compiling import compile_for_inference
 from skeleton_mamba.tasks.egodance.dance_args import DEFAULT_BATCH_WINDOWS  # torch-free, for sm dance --help
-from skeleton_mamba.tasks.egodance.guidance import HeadGuidance
+from skeleton_mamba.tasks.egodance.guidance import HeadGuidance, HeadingGuidance
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
     FPS,
@@ -76,8 +76,13 @@ def sample_dance(
     progress: bool = False,
     compile: bool = False,
     vision: torch.Tensor | None = None,
+    heading: torch.Tensor | None = None,
+    heading_weight: float = 1.0,
 ) -> torch.Tensor:
     """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
+
+    ``heading``: (B, T) the head's heading in each window's frame, read from the video
+    (:mod:`.video_rotation`), held by :class:`.guidance.HeadingGuidance` with ``heading_weight``.
 
     ``vision``: instead of ``frames``, their vision features z_v (B, T, Dc), what the model's vision
     encoder gives them (:func:`.video_features.encode_video` computes them from a decoded stream).
@@ -95,6 +100,8 @@ def sample_dance(
         guidance.append(
             HeadGuidance(head, head_guidance_weight, head_guidance_steps, num_steps=diffusion.num_steps)
         )
+    if heading is not None:
+        guidance.append(HeadingGuidance(heading, heading_weight))
     return sample(
         diffusion,
         CompiledDenoiser(model) if compile else model,
@@ -127,6 +134,7 @@ def sample_long_dance(
     head_windows: torch.Tensor | None = None,
     batch_windows: int | None = DEFAULT_BATCH_WINDOWS,
     inpaint_last: bool = False,
+    headings: torch.Tensor | None = None,
     **kwargs,
 ) -> torch.Tensor:
     """A whole track: music (T, L), frames (T, 3, S, S) or their vision features ``vision`` (T, Dc) (the
@@ -148,6 +156,13 @@ def sample_long_dance(
     once sampled; world-yaw models only), or ``head_windows`` (B, window, 3): each window's targets in its
     own frame (:func:`.head_estimator.estimate_window_trajectories`; what a ``canonical`` model needs, since
     its windows' headings are only known once sampled). Other arguments as :func:`sample_dance`.
+
+    Heading anchor: ``headings`` (T,) the head's heading through the track (radians, relative to frame 0),
+    read from the egocentric video (:class:`.video_rotation.HeadRotationStream`; a ``canonical`` model).
+    Each window's frame is then turned from the one before by the heading the video turned between their
+    first frames (the ``anchors`` of :func:`~skeleton_mamba.tasks.training.diffusion.sample_long`), not by
+    the sampled motion's, and each window's head is held to the video's heading in that frame
+    (:class:`.guidance.HeadingGuidance`), so the dance faces where the dancer faced however long the track.
     """
     if frames is not None and vision is not None:
         raise ValueError("give frames or their vision features, not both")
@@ -158,6 +173,8 @@ def sample_long_dance(
             "a model trained on windows turned to face their first heading needs its head targets per "
             "window (head_windows), in each window's own frame"
         )
+    if headings is not None and not canonical:
+        raise ValueError("heading anchors need a model whose windows face their first heading (canonical)")
     total = music.shape[0]
     starts, _ = window_starts(total, window, overlap)
     if head_windows is not None and head_windows.shape[:2] != (len(starts), window):
@@ -166,6 +183,14 @@ def sample_long_dance(
         vision, frames = model.vision_encoder(frames[None])[0], None
     music_w = split_windows(music, window, overlap)
     vision_w = None if vision is None else split_windows(vision, window, overlap)
+    anchors = heading_w = None
+    if headings is not None:
+        if headings.shape != (total,):
+            raise ValueError(f"headings {tuple(headings.shape)}: expected ({total},), one per frame")
+        first = headings[[min(s, total - 1) for s in starts]].to(music.dtype)
+        heading_w = split_windows(headings.to(music.dtype), window, overlap) - first[:, None]
+        anchors = torch.full((len(starts), 3), float("nan"), dtype=music.dtype)
+        anchors[1:, 0] = first[1:] - first[:-1]
     head_w = head_windows
     if head is not None:
         head_w = split_windows(head, window, overlap)
@@ -182,6 +207,7 @@ def sample_long_dance(
             None if head_w is None else head_w[which],
             post_step=post_step,
             vision=None if vision_w is None else vision_w[which],
+            heading=None if heading_w is None else heading_w[which],
             **kwargs,
         )
 
@@ -193,6 +219,7 @@ def sample_long_dance(
         num_windows=len(starts),
         batch_windows=batch_windows,
         inpaint_last=inpaint_last,
+        anchors=anchors,
     )
 
 

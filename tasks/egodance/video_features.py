@@ -18,6 +18,7 @@ Dc + dim floats per frame (1.5 KB at the paper's Dc = 256), not the 600 KB of a 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,7 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadFrameFeatures,
     HeadTrajectoryEstimator,
 )
+from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, head_headings
 from skeleton_mamba.tasks.motion.errors import InputError
 
 __all__ = ["VideoFeatures", "encode_video"]
@@ -44,11 +46,14 @@ class VideoFeatures:
         num_frames: T.
         vision: z_v (T, Dc) of the vision encoder, or None (none given).
         head: the head-trajectory estimator's features, or None (none given).
+        heading: (T,) the head's heading change since frame 0 (radians) read from the frames
+            (:mod:`.video_rotation`), or None (no rotation tracker given).
     """
 
     num_frames: int
     vision: torch.Tensor | None = None
     head: HeadFrameFeatures | None = None
+    heading: torch.Tensor | None = None
 
 
 @torch.no_grad()
@@ -63,6 +68,7 @@ def encode_video(
     progress: bool = False,
     hops: tuple[int, ...] = (),
     fps: float | None = None,
+    rotation: HeadRotationStream | None = None,
 ) -> VideoFeatures:
     """Decode a video file or image folder as a stream at ``image_size`` and encode its frames.
 
@@ -76,6 +82,8 @@ def encode_video(
             (:func:`.head_estimator.estimate_window_trajectories`: long-form sampling's windows).
         fps: the model's frame rate: a video file of another rate is taken at this one
             (:func:`.frames.iter_video_frames`).
+        rotation: a rotation tracker the frames are pushed to (:class:`.video_rotation.HeadRotationStream`),
+            or None.
         max_frames: decode at most this many frames.
         chunk: frames decoded and encoded together.
         progress: show a progress bar (frames encoded).
@@ -95,6 +103,8 @@ def encode_video(
                 vision.append(vision_encoder(frames[None])[0])
             if head is not None:
                 head.push(frames)
+            if rotation is not None:
+                rotation.push(frames)
             count += len(frames)
             bar.update(len(frames))
     if count == 0:
@@ -103,4 +113,22 @@ def encode_video(
         num_frames=count,
         vision=torch.cat(vision) if vision else None,
         head=None if head is None else head.finish(),
+        heading=_headings(rotation, path),
     )
+
+
+def _headings(rotation: HeadRotationStream | None, path: str | Path) -> torch.Tensor | None:
+    """The head's headings read by ``rotation``, or None (no tracker; frames a rotation does not explain,
+    said on one line)."""
+    if rotation is None:
+        return None
+    camera = rotation.finish()
+    if not rotation.reliable:
+        warnings.warn(
+            f"{Path(path)}: the frames do not show one scene turning (a rotation explains "
+            f"{rotation.explained} of {len(rotation.steps)} frame pairs): the head's turns are not read from "
+            "this video, each window's heading is the sampled motion's",
+            stacklevel=3,
+        )
+        return None
+    return head_headings(camera).float()

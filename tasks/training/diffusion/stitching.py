@@ -81,6 +81,11 @@ class WindowConsistency:
     the sample keeps its noise and takes the known clean part. ``base``: the frame of the window the prefix
     belongs to, relative to the global frame (:meth:`to_global`).
 
+    ``anchors``: window frames known before sampling, (B, K) with NaN where a number is not known: window
+    b's frame relative to window b - 1's (row 0: window 0's relative to the prefix window). A known number
+    replaces the one read from x0_hat (EgoMusic: the heading turned between two window starts, read from
+    the egocentric video, so that the windows' headings do not drift with the sampled motion).
+
     Args:
         overlap: frames shared by consecutive windows.
         relative: the per-window-relative channel mask, or None.
@@ -88,6 +93,7 @@ class WindowConsistency:
         prefix: (overlap, ...) the clean motion window 0 continues, or None.
         base: (1, K) the prefix window's global frame (None: identity).
         inpaint_last: in-paint after the last step too.
+        anchors: (B, K) known relative frames, NaN where unknown, or None.
     """
 
     def __init__(
@@ -98,6 +104,7 @@ class WindowConsistency:
         prefix: torch.Tensor | None = None,
         base: torch.Tensor | None = None,
         inpaint_last: bool = False,
+        anchors: torch.Tensor | None = None,
     ):
         if relative is not None and frames is not None:
             raise ValueError("give relative channels or window frames, not both")
@@ -108,6 +115,9 @@ class WindowConsistency:
         self.prefix = prefix
         self.base = base
         self.inpaint_last = inpaint_last
+        if anchors is not None and frames is None:
+            raise ValueError("anchors are window frames: give the windows' frames too")
+        self.anchors = anchors
         self.relative_frames: torch.Tensor | None = None  # (B, K) frame of window b in window b - 1's
 
     def _relative_frames(self, x: torch.Tensor, x0: torch.Tensor | None) -> torch.Tensor | None:
@@ -119,6 +129,9 @@ class WindowConsistency:
             frames[:1] = self.frames.relative_frame(self.prefix[:1].to(x.device, x.dtype))
         if x0 is not None and x.shape[0] > 1:
             frames[1:] = self.frames.relative_frame(x0[:-1, x.shape[1] - self.overlap])
+        if self.anchors is not None:
+            known = self.anchors.to(frames)
+            frames = torch.where(known.isfinite(), known, frames)
         return frames
 
     def __call__(
@@ -211,6 +224,7 @@ def sample_long(
     num_windows: int | None = None,
     batch_windows: int | None = None,
     inpaint_last: bool = False,
+    anchors: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Sample a long sequence as windows kept consistent during sampling, then stitch them.
 
@@ -220,8 +234,8 @@ def sample_long(
     in batches of at most ``batch_windows`` (None: all at once), so memory does not grow with the sequence;
     the first window of each later batch continues the last window of the batch before, sampled already
     (its tail is in-painted as a known ``prefix``). The windows are stitched, in window 0's frame, into
-    one sequence of ``total_frames`` frames, their overlaps cross-faded (``inpaint_last``: as
-    :class:`WindowConsistency`).
+    one sequence of ``total_frames`` frames, their overlaps cross-faded (``inpaint_last``, ``anchors``
+    (num_windows, K): as :class:`WindowConsistency`).
     """
     if num_windows is None:
         raise ValueError("sample_long needs num_windows (the windows sample_fn can sample)")
@@ -231,8 +245,10 @@ def sample_long(
     done: list[torch.Tensor] = []
     prefix = base = None
     for first in range(0, num_windows, step):
-        consistency = WindowConsistency(overlap, relative, frames, prefix, base, inpaint_last)
-        windows = sample_fn(consistency, slice(first, min(first + step, num_windows)))
+        which = slice(first, min(first + step, num_windows))
+        known = None if anchors is None else anchors[which]
+        consistency = WindowConsistency(overlap, relative, frames, prefix, base, inpaint_last, known)
+        windows = sample_fn(consistency, which)
         done.append(consistency.to_global(windows))
         if overlap > 0 and consistency.frames is not None:
             base = consistency.global_frames(windows.shape[0], windows)[-1:]
