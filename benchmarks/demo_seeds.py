@@ -38,6 +38,7 @@ RESULTS = REPO / "benchmarks" / "demo_seeds.json"
 DOCS = (
     "README.md",
     "docs/getting-started.md",
+    "docs/how-to/long-songs.md",
     "docs/tutorials/egodance.md",
     "docs/tutorials/qean.md",
     "docs/tutorials/stream.md",
@@ -379,7 +380,14 @@ def egodance_cause(results: dict) -> str:
     )
 
 
+def egodance_heading_before(results: dict) -> str:
+    """The end-of-song heading error before the video held the heading (the recorded row)."""
+    (row,) = results["demos"]["egodance"]["before"].values()
+    return f"{_f(row['long_song']['end_heading_error_deg'], 0)} degrees"
+
+
 TABLES: dict[str, Callable[[dict], str]] = {
+    "egodance-heading-before": egodance_heading_before,
     "egodance-cause": egodance_cause,
     "readme": readme_demos,
     "egodance-windows": egodance_windows,
@@ -392,7 +400,9 @@ TABLES: dict[str, Callable[[dict], str]] = {
     "text2motion": text2motion_seeds,
     "text2motion-runs": lambda r: runs_line(r, "text2motion"),
 }
-BLOCK = re.compile(r"(<!-- demo_seeds: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /demo_seeds -->)", re.DOTALL)
+BLOCK = re.compile(
+    r"(<!-- demo_seeds: (?P<name>[\w-]+) -->\n?)(?P<body>.*?)(<!-- /demo_seeds -->)", re.DOTALL
+)
 
 
 def render_docs(text: str, results: dict) -> str:
@@ -402,7 +412,8 @@ def render_docs(text: str, results: dict) -> str:
         name = match["name"]
         if name not in TABLES:
             raise KeyError(f"unknown demo_seeds table {name!r} (known: {', '.join(TABLES)})")
-        return match[1] + TABLES[name](results) + "\n" + match[4]
+        inline = not match[1].endswith("\n")  # a figure inside a sentence, not a table of its own
+        return match[1] + TABLES[name](results) + ("" if inline else "\n") + match[4]
 
     return BLOCK.sub(replace, text)
 
