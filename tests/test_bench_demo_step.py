@@ -1,18 +1,13 @@
 """benchmarks/bench_demo_step.py builds the demo recipe's module and times a real training step."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import torch
+from conftest import load_script
 
 
 def _load_benchmark():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_demo_step.py"
-    spec = importlib.util.spec_from_file_location("bench_demo_step", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("benchmarks/bench_demo_step.py")
 
 
 def test_demo_step_benchmark_trains_the_recipes_module(capsys):

@@ -7,23 +7,16 @@ and CI's guard of the main job on rows they build.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from conftest import load_script
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _load():
-    spec = importlib.util.spec_from_file_location("demo_seeds", REPO / "benchmarks" / "demo_seeds.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-demo_seeds = _load()
+demo_seeds = load_script("benchmarks/demo_seeds.py")
 
 
 def test_every_docs_table_equals_the_recorded_runs():
