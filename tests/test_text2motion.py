@@ -177,9 +177,11 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
     features = np.load(tmp_path / "gen" / "001_a_person_waves_features.npy")
     assert joints.shape == (8, 22, 3) and features.shape == (8, 263) and np.isfinite(joints).all()
     assert main([*args, "--steps", "1", "--out", str(tmp_path / "x"), "--length", "0s"]) == 2
+    assert "sampled with sampler ddim, sampling_steps 1, eta" in capsys.readouterr().out  # what it used
     for solver in ("dpmpp", "unipc"):  # the few-step solvers through sm generate
         assert main([*args, "--sampler", solver, "--steps", "3", "--out", str(tmp_path / solver)]) == 0
         assert np.isfinite(np.load(tmp_path / solver / "000_a_person_waves.npy")).all()
+        assert f"sampled with sampler {solver}, sampling_steps 3, guidance_weight" in capsys.readouterr().out
 
     # the T2M protocol through `sm test` in a subprocess: 2 repetitions, groups of 4, DDIM 2 steps
     test = ["test", "--recipe", "humanml3d_demo.yaml", "--ckpt_path", str(checkpoint)]

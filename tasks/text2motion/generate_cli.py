@@ -149,6 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "nothing written"
             )
     out = record_outputs(args.out, "sm generate", produced)
+    used = module.sampling.override(**overrides).describe()  # what module.generate sampled with
+    print("sampled with " + ", ".join(f"{k} {v}" for k, v in used.items()))
     for i, caption in enumerate(captions):
         paths = save_generated(features[i], caption, out / stems[i], args.render)
         print(f"{caption!r}: {frames} frames at {FPS:g} fps")
