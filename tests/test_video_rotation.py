@@ -61,6 +61,7 @@ def test_tracked_heading_follows_the_rendered_head_path(turning_sample):
     for frames in iter_video_frames(turning_sample / "rgb.mp4", 32, None, 16, FPS):
         stream.push(frames)
     tracked = head_headings(stream.finish())
+    assert stream.reliable and stream.explained == len(stream.steps)  # every pair a rotation explains
     truth = _true_headings(turning_sample)
     assert len(tracked) == len(truth) == 180
     assert float(torch.rad2deg(truth).max()) > 80  # the path does turn (about +90 degrees and back)
@@ -142,7 +143,13 @@ def test_frames_no_rotation_explains_are_not_read():
     stream = HeadRotationStream(intrinsics_for(32), 32)
     stream.push(noise)
     stream.finish()
-    assert not stream.reliable and stream.explained < 0.5 * len(stream.steps)
+    assert not stream.reliable and stream.explained == 0
+    flat = HeadRotationStream(intrinsics_for(32), 32)  # a covered lens: nothing to align
+    flat.push(
+        torch.full((40, 3, 32, 32), 0.5) + 0.002 * torch.rand(40, 3, 32, 32, generator=torch.Generator())
+    )
+    flat.finish()
+    assert not flat.reliable
 
 
 TURN = 0.01  # radians per frame of the turning oracle

@@ -37,8 +37,9 @@ KEYFRAME = 30
 MIN_EXPLAINED = 0.8
 """Share of consecutive frame pairs a rotation must explain for the video's reading to be used."""
 
-STILL_RESIDUAL = 0.01
-"""A pair whose frames differ by at most this mean residual (grey levels in [0, 1]) barely changed."""
+EXPLAINED_FRACTION = 0.5
+"""A pair is explained when the residual left by its rotation is at most this fraction of the frame's own
+spread about its mean grey level (both robust L1, :func:`alignment_residual`)."""
 
 SCALES = (2.0, 1.0, 0.0)
 """Gaussian blur sigmas (pixels) of the coarse-to-fine alignment; 0: the frames as they are."""
@@ -196,9 +197,11 @@ class HeadRotationStream:
             steps = align_rotations(first, second, self.K, iterations=self.step_iterations)
             self.steps.extend(steps)
             aligned = alignment_residual(first, second, self.K, steps)
-            still = alignment_residual(first, second, self.K, torch.eye(3).expand(len(first), 3, 3))
-            # explained: the rotation removes most of what changed, or little changed at all
-            self.explained += int(((aligned <= 0.5 * still) | (still <= STILL_RESIDUAL)).sum())
+            # explained: what is left after the rotation is small against how much the frame itself varies
+            # (noise frames are left with as much as they vary; a covered lens varies by nothing)
+            flat = second.flatten(1)
+            contrast = ((flat - flat.mean(1, keepdim=True)) ** 2 + 1e-4).sqrt().mean(1)
+            self.explained += int((aligned <= EXPLAINED_FRACTION * contrast).sum())
         self.pending = self.pending[-1:]
 
     @property
