@@ -309,10 +309,10 @@ def readme_demos(results: dict) -> str:
     out = []
     ego = [r for _, r in _seeds(results, "egodance")]
     if ego:  # every demo has rows (_seeds raises otherwise)
-        own = (f"MPJPE {_span([r['windows']['mpjpe_m'] for r in ego], 3)} m; a 60 s song: "
+        own = (f"MPJPE {_span([r['windows']['mpjpe_m'] for r in ego], 3)} m; 60 s song "
                f"{_span([r['long_song']['mpjpe_m'] for r in ego], 3)} m (mean pose "
-               f"{_f(ego[0]['long_song']['mean_pose_mpjpe_m'])}), end heading off "
-               f"{_span([r['long_song']['end_heading_error_deg'] for r in ego], 0)} deg")  # fmt: skip
+               f"{_f(ego[0]['long_song']['mean_pose_mpjpe_m'])}), heading off "
+               f"{_span([r['long_song']['end_heading_error_deg'] for r in ego], 0)} deg at its end")  # fmt: skip
         seeds = _seed_list(results, "egodance")
         out.append(["`egodance_demo.yaml`", seeds, *spans(ego, lambda r: r["windows"]),
                     own, reached(ego)])  # fmt: skip
@@ -328,7 +328,7 @@ def readme_demos(results: dict) -> str:
                     *spans(stream, lambda r: r["dance"]), "", reached(stream)])  # fmt: skip
     qean = [r for _, r in _seeds(results, "qean")]
     if qean:
-        own = f"BeatAlign {_span([r['protocol']['BeatAlign'] for r in qean])} (FACT protocol, 2 sequences)"
+        own = f"BeatAlign {_span([r['protocol']['BeatAlign'] for r in qean])} (FACT, 2 sequences)"
         out.append(["`qean_demo.yaml`", _seed_list(results, "qean"), *spans(qean, lambda r: r["dance"]), own,
                     reached(qean)])  # fmt: skip
     out.append(["target", "", ">= 0.7", "<= 1.5", "0.5 to 2", "", ""])

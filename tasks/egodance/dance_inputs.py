@@ -25,7 +25,7 @@ from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 from skeleton_mamba.tasks.egodance.frames import video_header
 from skeleton_mamba.tasks.egodance.long_form import LongForm
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
-from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for
+from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for, scale_intrinsics
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.value_checks import load_npz
@@ -61,8 +61,7 @@ ROTATION_SIZE = 64
 def rotation_stream(image_size: int, K: torch.Tensor) -> HeadRotationStream:
     """A rotation tracker for frames decoded at ``image_size`` whose intrinsics there are ``K``."""
     size = min(image_size, ROTATION_SIZE)
-    scale = torch.tensor([size / image_size, size / image_size, 1.0])[:, None]
-    return HeadRotationStream(K.float() * scale, size)
+    return HeadRotationStream(scale_intrinsics(K, size / image_size, size / image_size), size)
 
 
 def _encode(
@@ -81,7 +80,7 @@ def _encode(
     rotation = rotation_stream(size, K) if K is not None and long_form.canonical else None
     return encode_video(
         video,
-        module.hparams.image_size,
+        size,
         model.vision_encoder,
         module.head_estimator if estimate else None,
         window=long_form.window,
@@ -171,7 +170,7 @@ def sample_inputs(
         rgb = folder / "rgb.mp4" if (folder / "rgb.mp4").is_file() else folder / "rgb"
         size = module.hparams.image_size  # the rendered intrinsics, scaled to the decoded frames
         width, height = float(camera["width"]), float(camera["height"])
-        K = torch.from_numpy(camera["K"]).float() * torch.tensor([size / width, size / height, 1.0])[:, None]
+        K = scale_intrinsics(torch.from_numpy(camera["K"]), size / width, size / height)
         video = _encode(rgb, module, model, frames, long_form, estimate, progress, K if heading else None)
         if video.num_frames < frames:
             raise InputError(f"{rgb}: {video.num_frames} frames, the sample's camera path {frames}")

@@ -3,7 +3,8 @@
 :func:`long_sample` generates a held-out dance of ``duration_s`` seconds (the style, tempo and seed of a
 held-out demo dance, so the model never saw it), its music, and builds it as one EgoAIST++-style sample with
 the set's builder settings (a procedural room, the egocentric video). :func:`score_long_dance` dances it
-as ``sm dance --sample`` does (long-form windows, head targets estimated from the video) and scores it
+as ``sm dance --sample`` does (long-form windows, head targets estimated from the video, the heading read
+from it: :mod:`.video_rotation`) and scores it
 (:mod:`.long_form_scores`): MPJPE over the whole sequence beside the mean-pose baseline and beside the same
 frames' 5 s windows sampled alone (each segment in its own first frame, :mod:`.long_form_scores`), the
 dance's dynamics against the truth's, the seams, and the drift over the song.

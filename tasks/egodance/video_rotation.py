@@ -29,7 +29,14 @@ import kornia
 import numpy as np
 import torch
 
-__all__ = ["HeadRotationStream", "align_rotations", "alignment_residual", "head_headings", "intrinsics_for"]
+__all__ = [
+    "HeadRotationStream",
+    "align_rotations",
+    "alignment_residual",
+    "head_headings",
+    "intrinsics_for",
+    "scale_intrinsics",
+]
 
 KEYFRAME = 30
 """Frames between keyframes (a second at 30 fps)."""
@@ -55,6 +62,11 @@ def intrinsics_for(size: int, fov_x_deg: float = 90.0, aspect: float = 1.0) -> t
     return torch.tensor([[fx, 0.0, size / 2], [0.0, fx * aspect, size / 2], [0.0, 0.0, 1.0]])
 
 
+def scale_intrinsics(K: torch.Tensor, sx: float, sy: float) -> torch.Tensor:
+    """(3, 3) intrinsics of frames resized by ``sx`` horizontally and ``sy`` vertically."""
+    return K.float() * torch.tensor([sx, sy, 1.0])[:, None]
+
+
 def _blur(images: torch.Tensor, sigma: float) -> torch.Tensor:
     if sigma <= 0:
         return images
@@ -72,7 +84,8 @@ def align_rotations(
     """Relative rotations ``R`` (N, 3, 3) with ``second ~ warp(first, K R K^-1)`` (module docstring).
 
     Args:
-        first: (N, 1, H, W) grey frames; second: the frames they are aligned to.
+        first: (N, 1, H, W) grey frames.
+        second: (N, 1, H, W) the frames they are aligned to.
         K: (3, 3) intrinsics of both.
         init: (N, 3) axis-angle starting points (None: no rotation).
         iterations: L-BFGS iterations per scale of :data:`SCALES`.
