@@ -312,7 +312,8 @@ def readme_demos(results: dict) -> str:
         own = (f"MPJPE {_span([r['windows']['mpjpe_m'] for r in ego], 3)} m; 60 s song "
                f"{_span([r['long_song']['mpjpe_m'] for r in ego], 3)} m (mean pose "
                f"{_f(ego[0]['long_song']['mean_pose_mpjpe_m'])}), heading off "
-               f"{_span([r['long_song']['end_heading_error_deg'] for r in ego], 0)} deg at its end")  # fmt: skip
+               f"{_span([r['long_song']['end_heading_error_deg'] for r in ego], 0)} deg "
+               "at its end")  # fmt: skip
         seeds = _seed_list(results, "egodance")
         out.append(["`egodance_demo.yaml`", seeds, *spans(ego, lambda r: r["windows"]),
                     own, reached(ego)])  # fmt: skip
