@@ -10,10 +10,10 @@ the new sample at its noise level after each step. A solver has no posterior mea
 overrides ``adjust_mean`` is refused.
 
 DPM-Solver++ takes its last step with first-order (Euler) updates (``euler_at_final=True``), not diffusers'
-default second-order one: from 15 steps on (below that diffusers lowers the final order anyway, and the two are
-the same) the second-order last step left the EgoMusic demo model's dance further from deterministic DDIM over
-all steps and more trembling (20 steps: 6.8 against 5.5 mm, energy above 6 Hz 4.6 against 3.9 times the
-truth's; ``benchmarks/README.md``, "Few-step samplers").
+default second-order one: from 15 steps on (below that diffusers lowers the final order anyway, and the two
+are the same) the second-order last step left the EgoMusic demo model's dance further from deterministic
+DDIM over all steps and more trembling (20 steps: 6.8 against 5.5 mm, energy above 6 Hz 4.6 against 3.9
+times the truth's; ``benchmarks/README.md``, "Few-step samplers").
 """
 
 from __future__ import annotations
