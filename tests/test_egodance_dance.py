@@ -160,8 +160,8 @@ def test_sm_dance_joins_heading_canonical_windows_into_one_turning_walk(inputs, 
     args = ("--no-render", "--head", "none", "--heading", "none")  # the frames from the motion, not the video
     assert _dance(tmp, canonical, wav, tmp / "turn.npz", *args) == 0
     assert (
-        "4 windows of 150 frames every 75, each facing its first frame's head heading"
-        in capsys.readouterr().out
+        "4 windows of 150 frames every 75, each facing its first frame's head heading, held by the sampled "
+        "motion" in capsys.readouterr().out
     )
     motion = load_motion(tmp / "turn.npz")
     yaw = np.arange(360) * TURN

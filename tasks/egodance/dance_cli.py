@@ -229,7 +229,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"sm dance: {guidance}")
     starts = long_form.starts(tokens.shape[0])
     if len(starts) > 1:
-        turned = ", each facing its first frame's head heading" if long_form.canonical else ""
+        turned = ""
+        if long_form.canonical:
+            held = inputs.video is not None and inputs.video.heading is not None
+            by = "the head's turns read from the video" if held else "the sampled motion"
+            turned = f", each facing its first frame's head heading, held by {by}"
         print(f"sm dance: {len(starts)} windows of {long_form.window} frames every {long_form.hop}{turned}, "
               "joined into one dance")  # fmt: skip
     print(f"sm dance: {tokens.shape[0]} frames ({duration:.1f} s at {fps:g} fps) written to", out_dir)
