@@ -7,8 +7,8 @@ rotation that best aligns two frames under this homography is their relative rot
 parallax error. :func:`align_rotations` finds it for a batch of frame pairs: ``kornia.geometry``'s
 perspective warp of the first frame by ``K R K^-1`` against the second, a robust L1 photometric error over the
 pixels both see, minimised over R's axis-angle by L-BFGS, coarse to fine (Gaussian-blurred, then sharp).
-There are no features to match in the small, blurred frames of a dance video (32 px in the demo), but the
-whole image aligns to a fraction of a pixel.
+Whole-image alignment needs no features: the demo's frames are 32 px, and kornia's learned matchers need
+weights downloaded at run time; it aligns the frames to a fraction of a pixel.
 
 :class:`HeadRotationStream` tracks a whole video as it is decoded: every frame against the one before (small
 rotations, found from rest), then every ``keyframe``-th frame against the keyframe before it, starting from
