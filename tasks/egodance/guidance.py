@@ -110,19 +110,16 @@ class HeadingGuidance(GuidanceTerm):
     Args:
         target: (B, T) head headings (radians) in the motion's (canonical) frame.
         weight: fraction of the gap closed at each step, in (0, 1].
-        mask: (B, T) bool frames where a target exists (None: all).
     """
 
-    def __init__(self, target: torch.Tensor, weight: float = 1.0, mask: torch.Tensor | None = None):
+    def __init__(self, target: torch.Tensor, weight: float = 1.0):
         if not 0 < weight <= 1:
             raise ValueError(f"the heading guidance weight must lie in (0, 1], got {weight}")
-        self.target, self.weight, self.mask = target, weight, mask
+        self.target, self.weight = target, weight
 
     def adjust_x0(self, x0: torch.Tensor, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         target = self.target.to(x0.device, x0.dtype)
         gap = torch.remainder(target - head_heading(head_rotation(x0)) + torch.pi, 2 * torch.pi) - torch.pi
-        if self.mask is not None:
-            gap = gap * self.mask.to(gap.dtype)
         turn = yaw_matrices(self.weight * gap)[..., None, :, :]  # (B, T, 1, 3, 3)
         out = x0.clone()
         root = x0[..., ROOT_JOINT, :]

@@ -74,6 +74,22 @@ def _blur(images: torch.Tensor, sigma: float) -> torch.Tensor:
     return kornia.filters.gaussian_blur2d(images, (size, size), (sigma, sigma))
 
 
+def _robust(difference: torch.Tensor) -> torch.Tensor:
+    """The robust L1 penalty of a difference: ``sqrt(d^2 + 1e-4)`` (a floor of 0.01 where it is 0)."""
+    return (difference**2 + 1e-4).sqrt()
+
+
+def _warp(first: torch.Tensor, homography: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``first`` (N, 1, H, W) warped by ``homography`` (N, 3, 3), and the bool mask of the pixels it
+    covers."""
+    size = tuple(first.shape[-2:])
+    predicted = kornia.geometry.transform.warp_perspective(first, homography, size, align_corners=False)
+    seen = kornia.geometry.transform.warp_perspective(
+        torch.ones_like(first), homography, size, align_corners=False
+    )
+    return predicted, seen > 0.999
+
+
 def align_rotations(
     first: torch.Tensor,
     second: torch.Tensor,
@@ -90,11 +106,10 @@ def align_rotations(
         init: (N, 3) axis-angle starting points (None: no rotation).
         iterations: L-BFGS iterations per scale of :data:`SCALES`.
     """
-    n, _, h, w = first.shape
+    n = first.shape[0]
     angles = (torch.zeros(n, 3) if init is None else init.detach().clone()).float().requires_grad_(True)
     K = K.float()
     k, k_inv = K.expand(n, 3, 3), torch.linalg.inv(K).expand(n, 3, 3)
-    ones = torch.ones_like(first)
     with torch.enable_grad():
         for sigma in SCALES:
             a, b = _blur(first.float(), sigma), _blur(second.float(), sigma)
@@ -103,14 +118,8 @@ def align_rotations(
             def closure(a=a, b=b, optimizer=optimizer):
                 optimizer.zero_grad()
                 homography = k @ kornia.geometry.conversions.axis_angle_to_rotation_matrix(angles) @ k_inv
-                predicted = kornia.geometry.transform.warp_perspective(
-                    a, homography, (h, w), align_corners=False
-                )
-                seen = kornia.geometry.transform.warp_perspective(
-                    ones, homography, (h, w), align_corners=False
-                )
-                residual = ((predicted - b) ** 2 + 1e-4).sqrt() * (seen > 0.999)  # robust L1 where both see
-                loss = residual.sum() / n
+                predicted, seen = _warp(a, homography)
+                loss = (_robust(predicted - b) * seen).sum() / n  # robust L1 where both see
                 loss.backward()
                 return loss
 
@@ -125,18 +134,9 @@ def alignment_residual(
     """(N,) the mean robust photometric residual of ``second`` against ``first`` warped by ``K R K^-1`` over
     the pixels both see (infinite where they share less than a third of the frame): which of two rotations
     explains a pair of frames better."""
-    n, _, h, w = first.shape
-    homography = K.float() @ R.float() @ torch.linalg.inv(K.float())
-    predicted = kornia.geometry.transform.warp_perspective(
-        first.float(), homography, (h, w), align_corners=False
-    )
-    seen = kornia.geometry.transform.warp_perspective(
-        torch.ones_like(first), homography, (h, w), align_corners=False
-    )
-    seen = (seen > 0.999).flatten(1).float()
-    residual = (((predicted - second.float()) ** 2 + 1e-4).sqrt().flatten(1) * seen).sum(1) / seen.sum(
-        1
-    ).clamp_min(1)
+    predicted, seen = _warp(first.float(), K.float() @ R.float() @ torch.linalg.inv(K.float()))
+    seen = seen.flatten(1).float()
+    residual = (_robust(predicted - second.float()).flatten(1) * seen).sum(1) / seen.sum(1).clamp_min(1)
     return torch.where(seen.mean(1) >= 1 / 3, residual, torch.full_like(residual, float("inf")))
 
 
@@ -184,7 +184,6 @@ class HeadRotationStream:
         self.key_frames: list[torch.Tensor] = []  # (1, size, size) grey frames 0, keyframe, 2 keyframe, ...
         self.pending: list[torch.Tensor] = []  # grey frames not aligned yet (and the last one aligned)
         self.count = 0
-        self.rejected = 0  # keyframe alignments the chain explained better (kept the chain)
         self.explained = 0  # consecutive pairs a rotation explains (:attr:`reliable`)
 
     @torch.no_grad()
@@ -213,7 +212,7 @@ class HeadRotationStream:
             # explained: what is left after the rotation is small against how much the frame itself varies
             # (noise frames are left with as much as they vary; a covered lens varies by nothing)
             flat = second.flatten(1)
-            contrast = ((flat - flat.mean(1, keepdim=True)) ** 2 + 1e-4).sqrt().mean(1)
+            contrast = _robust(flat - flat.mean(1, keepdim=True)).mean(1)
             self.explained += int((aligned <= EXPLAINED_FRACTION * contrast).sum())
         self.pending = self.pending[-1:]
 
@@ -252,7 +251,6 @@ class HeadRotationStream:
             better = alignment_residual(first, second, self.K, aligned) <= alignment_residual(
                 first, second, self.K, chained
             )
-            self.rejected += int((~better).sum())
             for k, rotation, keep in zip(keys, aligned, better):
                 if keep:  # else the alignment went astray: the chain explains the keyframes better
                     chain = chains[k - 1]

@@ -108,12 +108,17 @@ def _analyse(args: argparse.Namespace):
         ) from err
 
 
+def _close(octaves: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The octaves nearly as strong as the strongest (:data:`OCTAVE_AMBIGUITY`), strongest first."""
+    return [(b, s) for b, s in octaves if s >= OCTAVE_AMBIGUITY * octaves[0][1]]
+
+
 def _ambiguous(tempo: float | None, octaves: list[tuple[float, float]]) -> bool:
-    """Whether another octave of ``tempo`` is nearly as strong as the strongest (:data:`OCTAVE_AMBIGUITY`)."""
+    """Whether another octave of ``tempo`` is nearly as strong as the strongest."""
     if tempo is None or len(octaves) < 2 or octaves[0][1] <= 0:
         return False
-    close = [b for b, s in octaves if s >= OCTAVE_AMBIGUITY * octaves[0][1]]
-    return len(close) > 1 or close[0] != tempo
+    close = _close(octaves)
+    return len(close) > 1 or close[0][0] != tempo
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -158,10 +163,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{args.file}: {analysis.duration_s:.2f} s, {tempo_text}, {len(beats)} beats")
         if _ambiguous(tempo, octaves):
             print(
-                "tempo octaves (onset periodicity, 1 = perfectly periodic): "
-                + ", ".join(
-                    f"{b:.1f} BPM {s:.2f}" for b, s in octaves if s >= OCTAVE_AMBIGUITY * octaves[0][1]
-                )
+                "tempo octaves (onset periodicity weighed by the tempo prior): "
+                + ", ".join(f"{b:.1f} BPM {s:.2f}" for b, s in _close(octaves))
                 + f"; the beat tracker chose {tempo:.1f}: --start-bpm near another one chooses that octave"
             )
         print("beats (s): " + " ".join(f"{t:.3f}" for t in beats))
