@@ -5,10 +5,16 @@ pose's MPJPE on the same window; for the demo's 60 s song, each 5 s segment of t
 segments sampled alone against the mean pose; and how well the head-trajectory estimator sees the head's
 yaw in the song's egocentric video: its yaw over each sampling window against the truth's (after removing
 the slow turn with a 31-frame moving average: the swing of the dance), and its error at the frame where the
-next window starts (what a heading anchor would need). Writes ``benchmarks/long_song_cause.json`` (``--out``),
-from which ``demo_seeds.py tables`` renders the tutorial's table.
+next window starts (what a heading anchor would need), and the song's segments sampled alone half a window
+later than the demo's (the start of every other joined window). Writes its entry (``--as before`` for a run
+trained without the head's turns as a condition, ``--as after`` for the recipe as it is) into
+``benchmarks/long_song_cause.json`` (``--out``), from which ``demo_seeds.py tables`` renders the tutorial's
+table.
 
-    python benchmarks/long_song_cause.py --run runs/egodance_demo/version_0 --data runs/egodance_demo/data
+    sm fit --recipe egodance_demo.yaml --model.init_args.network.heading_condition false   # before
+    python benchmarks/long_song_cause.py --as before --run runs/egodance_demo/version_0
+    sm fit --recipe egodance_demo.yaml                                                      # after
+    python benchmarks/long_song_cause.py --as after --run runs/egodance_demo/version_1
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ from common import machine_info
 
 from skeleton_mamba.tasks.egodance.data import data_module_from_hparams
 from skeleton_mamba.tasks.egodance.head_estimator import estimate_window_trajectories
-from skeleton_mamba.tasks.egodance.long_demo import _segment_starts, score_long_dance
+from skeleton_mamba.tasks.egodance.long_demo import _segment_starts, _windows_alone, score_long_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm
 from skeleton_mamba.tasks.egodance.long_form_scores import segments
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
@@ -83,6 +89,17 @@ def measure(run: Path, data_root: Path) -> dict:
     _, rotations = estimate_window_trajectories(
         module.head_estimator.eval(), inputs.video.head, window_starts, long_form.window
     )
+    # the same segments' length sampled alone half a window later (where the joined song's odd windows start)
+    shifted = [s + long_form.hop for s in starts if s + long_form.hop + long_form.window <= len(inputs.music)]
+    shifted_alone = _windows_alone(
+        module,
+        module.ema.module,
+        inputs,
+        long_form,
+        shifted,
+        torch.Generator().manual_seed(module.evaluation.seed),
+    )
+    shifted_truth = segments(inputs.truth, shifted, long_form.window, long_form.canonical)
     true_windows = segments(inputs.truth, window_starts, long_form.window, long_form.canonical)
     true_yaw = head_heading(head_rotation(true_windows.double()))
     estimated_yaw = head_heading(rotations.double())
@@ -91,11 +108,15 @@ def measure(run: Path, data_root: Path) -> dict:
     return {
         "machine": machine_info(),
         "run": str(run),
+        "heading_condition": bool(module.model.config.heading_condition),
         "held_out_windows": windows,
         "long_song": {
             "sample": folder.name,
             "mpjpe_m": scores["mpjpe_m"],
             "windows_alone_mpjpe_m": scores["windows_alone_mpjpe_m"],
+            "shifted_windows_alone_mpjpe_m": _mpjpe(
+                motion_joints(shifted_alone), motion_joints(shifted_truth)
+            ),
             "mean_pose_mpjpe_m": scores["mean_pose_mpjpe_m"],
             "per_segment_mpjpe_m": per_segment,
             "per_segment_mean_pose_mpjpe_m": mean_segment,
@@ -122,9 +143,28 @@ def main() -> None:
         "--data", type=Path, default=Path("runs/egodance_demo/data"), help="the demo's data root"
     )
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument(
+        "--as",
+        dest="label",
+        choices=("before", "after"),
+        default="after",
+        help="the entry the run's figures replace: before (a run trained with "
+        "--model.init_args.network.heading_condition false, the recipe before the head's turns were a "
+        "condition) or after (the recipe as it is)",
+    )
     args = parser.parse_args()
     result = measure(args.run, args.data)
-    args.out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    expected = args.label == "after"
+    if result["heading_condition"] != expected:
+        parser.error(
+            f"--as {args.label}: {args.run} was trained with heading_condition {result['heading_condition']}"
+        )
+    both = json.loads(args.out.read_text(encoding="utf-8")) if args.out.exists() else {}
+    both = {k: v for k, v in both.items() if k in ("before", "after")}
+    both[args.label] = result
+    tmp = args.out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(both, indent=2) + "\n", encoding="utf-8")
+    tmp.replace(args.out)
     print(json.dumps(result["long_song"] | result["head_estimator_yaw"], indent=2))
 
 

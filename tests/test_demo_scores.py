@@ -14,6 +14,7 @@ from skeleton_mamba.tasks.egodance.demo_scores import (
     score_held_out,
     target_checks,
 )
+from skeleton_mamba.tasks.motion.metrics.beat_align import beat_align_over_chance
 from skeleton_mamba.tasks.motion.metrics.ground import foot_skating_ratio, ground_penetration
 from skeleton_mamba.tasks.motion.metrics.pose_distance import (
     canonical_poses,
@@ -107,6 +108,9 @@ def test_egodance_scores_against_baselines():
     assert scores["dance"] == scores["ground_truth"] and scores["dance"]["mpjpe_m"] == 0.0
     assert scores["random_clip"]["plausibility_m"] == pytest.approx(0.0, abs=1e-12)  # training clips
     assert scores["mean_pose"]["beat_align"] == 0.0  # a still pose has no kinematic beat
+    assert scores["mean_pose"]["beat_margin"] == 0.0  # nor a chance of meeting one
+    score, chance = beat_align_over_chance(truth, beats, "bailando", 30.0)
+    assert scores["ground_truth"]["beat_margin"] == pytest.approx(score - chance)
     poses = torch.cat(train)
     mean = poses.mean(dim=0)
     expected = (mean - truth).norm(dim=-1).mean().item()
@@ -115,6 +119,13 @@ def test_egodance_scores_against_baselines():
     assert scores["random_clip"]["mpjpe_m"] == pytest.approx(expected_clip)
     checks = target_checks(scores)
     assert checks["MPJPE below the mean-pose baseline"] and checks["MPJPE below the random-clip baseline"]
+    margin = "BeatAlign over chance >= half the ground truth's"
+    assert checks[margin]  # the dance is the truth
+    off = {
+        **scores,
+        "dance": {**scores["dance"], "beat_margin": 0.49 * scores["ground_truth"]["beat_margin"]},
+    }
+    assert scores["ground_truth"]["beat_margin"] > 0 and not target_checks(off)[margin]
     table = format_scores(scores, checks)
     assert "pose plausibility" in table and "reached: plausibility <= 0.08 m" in table
 

@@ -70,7 +70,8 @@ def test_tables_are_rendered_from_the_rows_in_a_block():
 
 
 def _egodance_summary(mpjpe: float) -> dict:
-    column = {k: 0.5 for k in ("plausibility_m", "mpjpe_m", "beat_align", "foot_skating", "penetration_m",
+    column = {k: 0.5 for k in ("plausibility_m", "mpjpe_m", "beat_align", "beat_margin", "foot_skating",
+                               "penetration_m",
                                "amplitude_ratio", "jitter_ratio", "high_frequency_ratio")}  # fmt: skip
     scores = {c: dict(column) for c in ("dance", "ground_truth", "mean_pose", "random_clip")}
     scores["dance"]["mpjpe_m"] = mpjpe

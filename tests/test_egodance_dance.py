@@ -202,3 +202,20 @@ def test_a_checkpoint_loads_without_the_random_resnet_warning(inputs, tiny_egoda
     assert isinstance(module, EgoDanceModule)
     random_weights = [str(w.message) for w in caught if issubclass(w.category, RandomWeightsWarning)]
     assert not random_weights
+
+
+def test_a_model_of_the_head_turns_refuses_to_dance_without_them(inputs, tiny_egodance_module, tmp_path):
+    """An EMM conditioned on the head's turns (``heading_condition``) is refused ``--heading none`` in one
+    line,
+    and a video whose frames show no turning scene (the fixture's noise) in one line naming the video."""
+    from skeleton_mamba.tasks.motion.errors import InputError
+
+    tmp, _, wav = inputs
+    ckpt = tmp_path / "turns.ckpt"
+    save_module_checkpoint(tiny_egodance_module(heading_condition=True), ckpt)
+    with pytest.raises(
+        InputError, match="dances to the head's turns read from the video: drop --heading none"
+    ):
+        _dance(tmp, ckpt, wav, tmp_path / "a", "--no-render", "--heading", "none")
+    with pytest.raises(InputError, match=r"ego\.mp4: the head's turns could not be read from this video"):
+        _dance(tmp, ckpt, wav, tmp_path / "b", "--no-render")

@@ -192,10 +192,19 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(
             f"--compile runs the denoiser in fp32 only: drop --compile or --precision {args.precision}"
         )
+    turns = _denoiser(args, module).heading_embedding is not None  # the EMM reads the head's turns
+    if turns and args.heading == "none":
+        raise InputError("this model dances to the head's turns read from the video: drop --heading none")
     try:
         inputs = _inputs(args, module, long_form)
     except ValueError as err:  # the music, video or sample files (their readers name the file)
         raise InputError(str(err)) from err
+    if turns and (inputs.video is None or inputs.video.heading is None):
+        raise InputError(
+            f"{args.video or args.sample}: the head's turns could not be read from this video (frames a "
+            "rotation does not explain), and this model dances to them; try --fov with the camera's field of "
+            "view"
+        )
     seconds = dict(inputs.seconds)
     start = time.perf_counter()
     with inference_precision(args.precision):

@@ -12,6 +12,9 @@ Scores (joint positions from FK, metres, y-up, floor at y = 0, 30 fps), means ov
   (:func:`~skeleton_mamba.tasks.motion.metrics.pose_distance.nearest_pose_distance`);
 - ``mpjpe_m``: MPJPE to the held-out ground truth, in the canonical frame as the module's test;
 - ``beat_align``: BeatAlign with the window's music beats ([Bailando] variant, as the module's test);
+- ``beat_margin``: that BeatAlign less its chance, the same motion against the beat grid shifted by 1/10 ...
+  9/10 of a beat (:func:`~skeleton_mamba.tasks.motion.metrics.beat_align.beat_align_over_chance`): 0 for a
+  motion with no relation to the beat, however regular its own; the target is half the ground truth's;
 - ``foot_skating``: [GMD] foot skating ratio; ``penetration_m``: [PhysDiff] ground penetration, on joints
   (:mod:`~skeleton_mamba.tasks.motion.metrics.ground`);
 - ``amplitude_ratio`` / ``jitter_ratio``: root-relative motion amplitude and mean joint acceleration as ratios
@@ -26,7 +29,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.tasks.egodance.representation import FPS
-from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
+from skeleton_mamba.tasks.motion.metrics.beat_align import beat_align_over_chance
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_checks, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.ground import foot_skating_ratio, ground_penetration
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe, nearest_pose_distance
@@ -47,6 +50,7 @@ METRICS = {  # key -> printed name
     "plausibility_m": "pose plausibility (m, nearest training pose)",
     "mpjpe_m": "MPJPE to the ground truth (m)",
     "beat_align": "BeatAlign with the music",
+    "beat_margin": "BeatAlign over chance (beats shifted off)",
     "foot_skating": "foot skating ratio",
     "penetration_m": "ground penetration (m)",
     **DYNAMICS_METRICS,
@@ -65,10 +69,12 @@ def motion_scores(
     plausibility is 0 by definition (not searched for: the nearest-pose search over every training pose
     is the slow part of these scores)."""
     plausibility = 0.0 if train_poses is None else float(nearest_pose_distance(joints, train_poses))
+    beat_align, chance = beat_align_over_chance(joints, beats, "bailando", fps)
     return {
         "plausibility_m": plausibility,
         "mpjpe_m": float(mpjpe(joints.double(), truth.double())),
-        "beat_align": sequence_beat_align(joints, beats, "bailando", fps),
+        "beat_align": beat_align,
+        "beat_margin": beat_align - chance,
         "foot_skating": float(foot_skating_ratio(joints, fps)),
         "penetration_m": float(ground_penetration(joints)),
         **dynamics_ratios(joints, truth, fps),
@@ -119,6 +125,9 @@ def target_checks(scores: dict[str, dict[str, float]]) -> dict[str, bool]:
         "MPJPE below the mean-pose baseline": dance["mpjpe_m"] < scores["mean_pose"]["mpjpe_m"],
         "MPJPE below the random-clip baseline": dance["mpjpe_m"] < scores["random_clip"]["mpjpe_m"],
         "BeatAlign above the random-clip baseline": dance["beat_align"] > scores["random_clip"]["beat_align"],
+        "BeatAlign over chance >= half the ground truth's": (
+            dance["beat_margin"] >= 0.5 * scores["ground_truth"]["beat_margin"]
+        ),
         **dynamics_checks(dance),
     }
 

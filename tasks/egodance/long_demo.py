@@ -98,6 +98,8 @@ def _windows_alone(
     if module.head_estimator is not None and inputs.video is not None:
         head = estimate_window_trajectories(module.head_estimator.eval(), inputs.video.head, starts, w)[0]
     vision = None if inputs.video is None else torch.stack([inputs.video.vision[s : s + w] for s in starts])
+    headings = None if inputs.video is None else inputs.video.heading
+    heading = None if headings is None else torch.stack([headings[s : s + w] - headings[s] for s in starts])
     return sample_dance(
         model,
         module.diffusion,
@@ -109,6 +111,7 @@ def _windows_alone(
         head_guidance_steps=module.head_guidance.steps,
         generator=generator,
         vision=vision,
+        heading=heading,
     )
 
 

@@ -30,6 +30,7 @@ from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
+from skeleton_mamba.tasks.egodance.window_frames import head_rotation, relative_headings
 from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
@@ -71,6 +72,14 @@ class EMMConfig:
             x0 it can predict band-limited (sigma 2 at 30 fps: 70 % of a 2 Hz swing, 11 % of 5 Hz, nothing
             of 10 Hz), and training sees the filtered x0, so the network learns to drive it to the data.
             Sharp real dance has content above that band: leave it off for long training on real data.
+        heading_condition: also condition on the head's turns within the window, given as (B, T) radians
+            since the window's first frame, taken about their mean over the window (so a swing reads the same
+            wherever the window starts in it), scaled by the training turns' spread, embedded and added to
+            every frame's condition token (ours; off in [EgoMusic]). The egocentric video shows them
+            (:mod:`.video_rotation` reads them at inference; training reads the camera path's), but a small
+            vision encoder trained from scratch on single frames does not learn to compare frames: the
+            demo's dancers turn with the side of their swing, and without the turns the demo's EMM swung its
+            arms to the wrong side on whole songs.
     """
 
     context_dim: int = 256
@@ -85,6 +94,7 @@ class EMMConfig:
     dropout: float = 0.1
     frame_condition: bool = False
     output_smoothing: float = 0.0
+    heading_condition: bool = False
 
     def __post_init__(self) -> None:
         if not (self.output_smoothing >= 0 and math.isfinite(self.output_smoothing)):
@@ -154,6 +164,9 @@ class EMM(PretrainedMixin, nn.Module):
             else None
         )
         self.null_context = nn.Parameter(torch.randn(1, 1, context_dim) * 0.02)
+        self.heading_embedding = nn.Linear(2, context_dim) if c.heading_condition else None
+        if c.heading_condition:  # the training turns' spread (set_data_statistics), as the music's
+            self.register_buffer("heading_scale", torch.ones(()))
         self.frame_condition = nn.Linear(context_dim, d) if c.frame_condition else None
         self.skip_x0 = SkipX0(diffusion_steps, channels=(NUM_JOINTS, NUM_CHANNELS))
 
@@ -176,6 +189,10 @@ class EMM(PretrainedMixin, nn.Module):
         preconditioning) and of their music features (N, T, L) (the music encoder's standardisation)."""
         tokens = motion.reshape(-1, NUM_JOINTS, NUM_CHANNELS)
         self.skip_x0.set_statistics(*channel_statistics(tokens, channel_dims=2, name="motion"))
+        if self.heading_embedding is not None:  # the head's turns in the training windows, from their motion
+            turns = relative_headings(head_rotation(motion.double()))
+            turns = turns - turns.mean(-1, keepdim=True)
+            self.heading_scale.fill_(float(turns.sin().std().clamp_min(1e-3)))
         if music is not None:
             self.music_encoder.set_statistics(music)
 
@@ -208,16 +225,47 @@ class EMM(PretrainedMixin, nn.Module):
             )
         return z_a, self.vision_encoder(frames)
 
-    def fuse(self, z_a: torch.Tensor, z_v: torch.Tensor | None) -> torch.Tensor:
-        """The fusion module (music only: z_a unchanged) -> condition c (B, T, Dc)."""
-        return z_a if z_v is None else self.fusion(z_a, z_v)
+    def fuse(
+        self, z_a: torch.Tensor, z_v: torch.Tensor | None, heading: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """The fusion module (music only: z_a unchanged) -> condition c (B, T, Dc); a model with
+        ``heading_condition`` adds the embedded head turns ``heading`` (B, T) (radians since frame 0)."""
+        context = z_a if z_v is None else self.fusion(z_a, z_v)
+        if self.heading_embedding is None:
+            if heading is not None:
+                raise ValueError("this EMM was not trained on the head's turns (heading_condition=False)")
+            return context
+        if heading is None:
+            raise ValueError(
+                "this EMM reads the head's turns within each window (heading_condition=True): give heading "
+                "(B, T) radians since the window's first frame, read from the egocentric video or the camera "
+                "path"
+            )
+        if heading.shape != context.shape[:2]:
+            raise ValueError(
+                f"heading {tuple(heading.shape)} does not fit the condition {tuple(context.shape[:2])}"
+            )
+        return context + self.heading_embedding(self.heading_features(heading.to(context.dtype)))
+
+    def heading_features(self, heading: torch.Tensor) -> torch.Tensor:
+        """Turns (B, T) since each window's first frame -> (B, T, 2) ``(sin h, 1 - cos h) / s`` of the turns
+        ``h`` about their window mean (the same swing wherever the window starts in it), ``s`` the training
+        turns' standard deviation of ``sin h`` (a swing of a few degrees reads as large as the music does;
+        continuous through a whole spin)."""
+        heading = heading - heading.mean(1, keepdim=True)
+        return torch.stack([heading.sin(), 1 - heading.cos()], -1) / self.heading_scale.to(heading.dtype)
 
     def encode_condition(
-        self, music: torch.Tensor, frames: torch.Tensor | None = None, vision: torch.Tensor | None = None
+        self,
+        music: torch.Tensor,
+        frames: torch.Tensor | None = None,
+        vision: torch.Tensor | None = None,
+        heading: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] (or their z_v ``vision`` (B, T, Dc)) ->
-        fused condition c (B, T, Dc)."""
-        return self.fuse(*self.encode_modalities(music, frames, vision))
+        """Music (B, T, L) and frames (B, T, 3, H, W) in [0, 1] (or their z_v ``vision`` (B, T, Dc)), and for
+        a model with ``heading_condition`` the head's turns ``heading`` (B, T) -> fused condition c
+        (B, T, Dc)."""
+        return self.fuse(*self.encode_modalities(music, frames, vision), heading)
 
     def null_condition(self, context: torch.Tensor) -> torch.Tensor:
         """The learned null condition shaped like ``context`` (B, S, Dc)

@@ -48,6 +48,7 @@ from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.prediction_writer import DancePredictionWriter
 from skeleton_mamba.tasks.egodance.representation import FPS, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
+from skeleton_mamba.tasks.egodance.window_frames import relative_headings
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.music import record_audio_stack
@@ -251,10 +252,25 @@ class EgoDanceModule(BackboneModule):
         for model in (self.model, self.ema.module):
             model.set_data_statistics(statistics.motion, statistics.music)
 
+    @staticmethod
+    def condition_heading(model: EMM, batch: dict, index: int | None = None) -> torch.Tensor | None:
+        """The head's turns since each sequence's first frame, (B, T) radians (or (T,) of sequence ``index``),
+        from the batch's camera path (``head_rotation``), for a model with ``heading_condition``; else
+        None."""
+        if model.heading_embedding is None:
+            return None
+        if batch.get("head_rotation") is None:
+            raise ValueError(
+                "this EMM reads the head's turns (heading_condition=True): the batch needs the camera path's "
+                "head rotations (head_rotation, from the sample's camera.npz)"
+            )
+        rotation = batch["head_rotation"] if index is None else batch["head_rotation"][index]
+        return relative_headings(rotation.to(batch["music"].dtype))
+
     def _losses(self, batch: dict, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
         x0 = batch["motion"]
         z_a, z_v = self.model.encode_modalities(batch["music"], batch.get("frames"))
-        context = self.model.fuse(z_a, z_v)
+        context = self.model.fuse(z_a, z_v, self.condition_heading(self.model, batch))
         b = x0.shape[0]
         u = torch.rand(b, generator=generator).to(x0.device)
         context = self.model.drop_condition(context, u < self.loss_options.cond_drop_prob)
@@ -384,6 +400,7 @@ class EgoDanceModule(BackboneModule):
             head_guidance_weight=self.head_guidance.weight,
             head_guidance_steps=self.head_guidance.steps,
             generator=torch.Generator().manual_seed(self.evaluation.seed + batch_idx),
+            heading=self.condition_heading(model, batch),
         )
 
     def sample_long(
@@ -418,6 +435,7 @@ class EgoDanceModule(BackboneModule):
             head_guidance_weight=self.head_guidance.weight,
             head_guidance_steps=self.head_guidance.steps,
             generator=generator,
+            headings=self.condition_heading(model, batch, index),
         )
 
     def _test_sources(self, batch: dict) -> list[str]:

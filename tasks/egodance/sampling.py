@@ -82,7 +82,9 @@ def sample_dance(
     """Motion tokens (B, T, 24, 10) for music (B, T, L), frames (B, T, 3, S, S) and head targets (B, T, 3).
 
     ``heading``: (B, T) the head's heading in each window's frame, read from the video
-    (:mod:`.video_rotation`), held by :class:`.guidance.HeadingGuidance` with ``heading_weight``.
+    (:mod:`.video_rotation`) or the camera path, held by :class:`.guidance.HeadingGuidance` with
+    ``heading_weight`` (0: not held), and the condition of a model with ``heading_condition`` (required
+    there).
 
     ``vision``: instead of ``frames``, their vision features z_v (B, T, Dc), what the model's vision
     encoder gives them (:func:`.video_features.encode_video` computes them from a decoded stream).
@@ -94,13 +96,14 @@ def sample_dance(
     :class:`CompiledDenoiser` (same samples to float32 rounding; worth it for many steps on a CPU).
     """
     b, t = music.shape[:2]
-    context = model.encode_condition(music, frames, vision)
+    conditioned = model.heading_embedding is not None
+    context = model.encode_condition(music, frames, vision, heading if conditioned else None)
     guidance = []
     if head is not None and head_guidance_weight > 0:
         guidance.append(
             HeadGuidance(head, head_guidance_weight, head_guidance_steps, num_steps=diffusion.num_steps)
         )
-    if heading is not None:
+    if heading is not None and heading_weight > 0:
         guidance.append(HeadingGuidance(heading, heading_weight))
     return sample(
         diffusion,
@@ -163,6 +166,8 @@ def sample_long_dance(
     first frames (the ``anchors`` of :func:`~skeleton_mamba.tasks.training.diffusion.sample_long`), not by
     the sampled motion's, and each window's head is held to the video's heading in that frame
     (:class:`.guidance.HeadingGuidance`), so the dance faces where the dancer faced however long the track.
+    A model with ``heading_condition`` needs ``headings``: each window's turns since its first frame are its
+    condition (a world-yaw model's only use of them).
     """
     if frames is not None and vision is not None:
         raise ValueError("give frames or their vision features, not both")
@@ -174,7 +179,11 @@ def sample_long_dance(
             "window (head_windows), in each window's own frame"
         )
     if headings is not None and not canonical:
-        raise ValueError("heading anchors need a model whose windows face their first heading (canonical)")
+        if model.heading_embedding is None:
+            raise ValueError(
+                "heading anchors need a model whose windows face their first heading (canonical)"
+            )
+        kwargs["heading_weight"] = 0.0  # world-yaw windows: the turns condition the model, nothing is held
     total = music.shape[0]
     starts, _ = window_starts(total, window, overlap)
     if head_windows is not None and head_windows.shape[:2] != (len(starts), window):
@@ -189,8 +198,9 @@ def sample_long_dance(
             raise ValueError(f"headings {tuple(headings.shape)}: expected ({total},), one per frame")
         first = headings[[min(s, total - 1) for s in starts]].to(music.dtype)
         heading_w = split_windows(headings.to(music.dtype), window, overlap) - first[:, None]
-        anchors = torch.full((len(starts), 3), float("nan"), dtype=music.dtype)
-        anchors[1:, 0] = first[1:] - first[:-1]
+        if canonical:
+            anchors = torch.full((len(starts), 3), float("nan"), dtype=music.dtype)
+            anchors[1:, 0] = first[1:] - first[:-1]
     head_w = head_windows
     if head is not None:
         head_w = split_windows(head, window, overlap)

@@ -25,7 +25,14 @@ from skeleton_mamba.tasks.motion.rotations import rotation_6d_to_matrix
 
 Signal = torch.Tensor | float  # a noisy sample's sqrt(alpha_bar): a number or one per window
 
-__all__ = ["HEAD_CHAIN", "HeadingFrames", "head_heading", "head_rotation", "yaw_matrices"]
+__all__ = [
+    "HEAD_CHAIN",
+    "HeadingFrames",
+    "head_heading",
+    "head_rotation",
+    "relative_headings",
+    "yaw_matrices",
+]
 
 HEAD_CHAIN = (0, 3, 6, 9, 12, HEAD_JOINT)
 """SMPL-24 joints from the pelvis to the head (pelvis, spine1-3, neck, head)."""
@@ -44,6 +51,13 @@ def head_heading(rotation: torch.Tensor) -> torch.Tensor:
     local +z): ``yaw_matrices(-heading)`` turns that axis onto +z (the canonical frame's forward)."""
     forward = rotation[..., :, 2]
     return torch.atan2(forward[..., 0], forward[..., 2])
+
+
+def relative_headings(rotation: torch.Tensor) -> torch.Tensor:
+    """(..., T, 3, 3) head-to-world rotations -> (..., T) the head's heading (radians about +y) relative to
+    frame 0's, wrapped to [-pi, pi): how far the head has turned since the first frame."""
+    heading = head_heading(rotation)
+    return torch.remainder(heading - heading[..., :1] + torch.pi, 2 * torch.pi) - torch.pi
 
 
 def head_rotation(tokens: torch.Tensor) -> torch.Tensor:

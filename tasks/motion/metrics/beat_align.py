@@ -36,7 +36,15 @@ from torchmetrics import Metric
 
 from skeleton_mamba.tasks.motion.metrics.common import Positions, as_sequences, beat_indices
 
-__all__ = ["BeatAlign", "alignment_score", "kinematic_beats", "sequence_beat_align"]
+__all__ = [
+    "CHANCE_SHIFTS",
+    "BeatAlign",
+    "alignment_score",
+    "beat_align_over_chance",
+    "kinematic_beats",
+    "sequence_beat_align",
+    "shifted_beats",
+]
 
 Variant = Literal["fact", "bailando"]
 _REFERENCE_FPS = 60.0
@@ -121,11 +129,24 @@ def sequence_beat_align(
         0.6065
     """
     motion = kinematic_beats(positions, variant, fps)
+    return _score(
+        motion, beat_indices(music_beats), variant, fps, len(positions), start_frame, truncate_music
+    )
+
+
+def _score(
+    motion: np.ndarray,
+    beats: np.ndarray,
+    variant: Variant,
+    fps: float,
+    t: int,
+    start_frame: int = 0,
+    truncate_music: bool = True,
+) -> float:
+    """BeatAlign of motion beats against music beats (frames, fractional ones allowed) of a T-frame motion."""
     motion = motion[motion >= start_frame]
-    beats = beat_indices(music_beats)
     beats = beats[beats >= start_frame]
     sigma = 3.0 * fps / _REFERENCE_FPS
-    t = len(positions)
     if variant == "fact":
         if truncate_music:
             beats = beats[beats < t]  # music truncated to the motion length
@@ -133,6 +154,50 @@ def sequence_beat_align(
     if truncate_music:
         beats = beats[beats < t - 1]  # Bailando: truncated to the envelope length T - 1
     return alignment_score(beats, motion, sigma)
+
+
+CHANCE_SHIFTS = tuple(k / 10 for k in range(1, 10))
+"""Fractions of a beat the music's beat grid is shifted by for :func:`beat_align_over_chance`."""
+
+
+def shifted_beats(beats: np.ndarray, fraction: float) -> np.ndarray:
+    """Beat frames (sorted, at least two) moved ``fraction`` of the way to the next beat (the last one by its
+    own interval from the one before): the same grid, off the beat."""
+    beats = np.asarray(beats, dtype=np.float64)
+    period = np.diff(beats)
+    return beats + fraction * np.append(period, period[-1])
+
+
+def beat_align_over_chance(
+    positions: torch.Tensor | np.ndarray,
+    music_beats: torch.Tensor | np.ndarray | Sequence[int],
+    variant: Variant = "bailando",
+    fps: float = 60.0,
+) -> tuple[float, float]:
+    """BeatAlign of one ``(T, J, 3)`` motion and its chance: the mean BeatAlign of the same motion against the
+    music's beat grid shifted by 1/10 ... 9/10 of a beat (:data:`CHANCE_SHIFTS`). Their difference, the margin
+    over chance, is 0 for a motion that has no relation to the beat (however regular its own beats) and the
+    score's distance above its off-beat value for one that moves on it. NaN chance with fewer than 2 beats.
+
+    Examples:
+        A swing that stops every 15 frames, scored against beats on its stops and shifted off them:
+
+        >>> import numpy as np
+        >>> t = np.arange(240)
+        >>> swing = np.zeros((240, 1, 3))
+        >>> swing[:, 0, 0] = np.sin(2 * np.pi * 2 * t / 60)
+        >>> score, chance = beat_align_over_chance(swing, list(range(8, 240, 15)), "fact")
+        >>> round(score, 3), round(chance, 3)
+        (1.0, 0.438)
+    """
+    motion = kinematic_beats(positions, variant, fps)
+    beats = beat_indices(music_beats)
+    t = len(positions)
+    score = _score(motion, beats, variant, fps, t)
+    if beats.size < 2:
+        return score, float("nan")
+    chance = [_score(motion, shifted_beats(beats, f), variant, fps, t) for f in CHANCE_SHIFTS]
+    return score, float(np.mean(chance))
 
 
 class BeatAlign(Metric):
