@@ -89,16 +89,9 @@ def measure(run: Path, data_root: Path) -> dict:
     _, rotations = estimate_window_trajectories(
         module.head_estimator.eval(), inputs.video.head, window_starts, long_form.window
     )
-    # the same segments' length sampled alone half a window later (where the joined song's odd windows start)
+    # the windows half a window later than the segments (the joined song's odd windows), sampled alone
     shifted = [s + long_form.hop for s in starts if s + long_form.hop + long_form.window <= len(inputs.music)]
-    shifted_alone = _windows_alone(
-        module,
-        module.ema.module,
-        inputs,
-        long_form,
-        shifted,
-        torch.Generator().manual_seed(module.evaluation.seed),
-    )
+    shifted_alone = _windows_alone(module, inputs, long_form, shifted)
     shifted_truth = segments(inputs.truth, shifted, long_form.window, long_form.canonical)
     true_windows = segments(inputs.truth, window_starts, long_form.window, long_form.canonical)
     true_yaw = head_heading(head_rotation(true_windows.double()))

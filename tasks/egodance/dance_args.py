@@ -44,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
         "sm dance",
         "Estimate a dance with a trained EMM checkpoint from music (and egocentric video): writes the motion "
         "(.npz, .bvh) and an mp4 of the skeleton with the music. Tracks longer than a window are danced as "
-        "overlapping windows in-painted at every denoising step (EDGE long-form).",
+        "overlapping windows, in-painted at every denoising step (EDGE long-form) or, for a model trained "
+        "with inpaint_overlaps false (the demo's), each from its own conditions, joined by a cross-fade.",
         EXAMPLES,
     )
     p.add_argument(
@@ -120,6 +121,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_option(0, MAX_FRAMES, "a frame count"),
         default=75,
         help="frames shared by consecutive long-form windows",
+    )
+    p.add_argument(
+        "--inpaint",
+        choices=("yes", "no"),
+        default=None,
+        help="in-paint each long-form window's overlap with the window before at every denoising step (EDGE) "
+        "or not (each window from its own conditions, joined by the cross-fade); default: the checkpoint's "
+        "inpaint_overlaps",
     )
     p.add_argument(
         "--batch-windows",

@@ -105,6 +105,7 @@ def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torc
         canonical=long_form.canonical,
         head_windows=head_windows,
         batch_windows=args.batch_windows,
+        inpaint=module.inpaint_overlaps if args.inpaint is None else args.inpaint == "yes",
         **dataclasses.asdict(sampling),
         head_guidance_weight=module.head_guidance.weight if args.head_weight is None else args.head_weight,
         head_guidance_steps=module.head_guidance.steps,

@@ -20,7 +20,6 @@ import torch
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import complete_samples
 from skeleton_mamba.tasks.egodance.dance_inputs import DanceInputs, sample_inputs
-from skeleton_mamba.tasks.egodance.head_estimator import estimate_window_trajectories
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.long_form_scores import (
     drift,
@@ -30,7 +29,7 @@ from skeleton_mamba.tasks.egodance.long_form_scores import (
     segments,
 )
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
+from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.metrics.dynamics import dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance as write_synthetic_dance
@@ -67,10 +66,10 @@ def long_sample(data, source: str, duration_s: float) -> Path:
 
 
 def _segment_starts(total: int, long_form: LongForm) -> list[int]:
-    """Non-overlapping window-long segments, every one that fits, starting where long-form windows start
-    (the video's head features were prepared for those starts)."""
-    step = long_form.hop * -(-long_form.window // long_form.hop)
-    return list(range(0, total - long_form.window + 1, step))
+    """Every window-long segment that fits, starting where a long-form window starts (one every hop: with
+    EDGE's half-window overlap each frame lies in two), so the joined dance and its windows sampled alone are
+    scored over the same windows, wherever they start in the music."""
+    return [s for s in long_form.starts(total) if s + long_form.window <= total]
 
 
 def _mean_mpjpe(dance: torch.Tensor, truth: torch.Tensor) -> float:
@@ -89,30 +88,49 @@ def _mean_dynamics(dance: torch.Tensor, truth: torch.Tensor, fps: float) -> dict
     return {k: sum(r[k] for r in rows) / len(rows) for k in rows[0]}
 
 
-def _windows_alone(
-    module, model, inputs: DanceInputs, long_form: LongForm, starts, generator
-) -> torch.Tensor:
-    """(S, W, 24, 10): the segments starting at ``starts`` sampled each alone, as a held-out window."""
-    w = long_form.window
-    head = None
-    if module.head_estimator is not None and inputs.video is not None:
-        head = estimate_window_trajectories(module.head_estimator.eval(), inputs.video.head, starts, w)[0]
-    vision = None if inputs.video is None else torch.stack([inputs.video.vision[s : s + w] for s in starts])
-    headings = None if inputs.video is None else inputs.video.heading
-    heading = None if headings is None else torch.stack([headings[s : s + w] - headings[s] for s in starts])
-    return sample_dance(
+def _head_source(module) -> str:
+    """``estimate`` (the head from the video) for a module with a head estimator and a vision encoder."""
+    vision = module.ema.module.vision_encoder is not None
+    return "estimate" if module.head_estimator is not None and vision else "none"
+
+
+def _long_windows(module, inputs: DanceInputs, long_form: LongForm, join: bool = True) -> torch.Tensor:
+    """The song danced as ``sm dance --sample`` does (the module's EMA model, the head estimated from the
+    video, the heading read from it), seeded with the module's evaluation seed: tokens (T, 24, 10), or with
+    ``join=False`` the same windows with the same noise sampled each alone, (B, W, 24, 10) in their own
+    frames."""
+    model = module.ema.module
+    total = len(inputs.music)
+    source = _head_source(module)
+    video = None if inputs.video is None else inputs.video.head
+    head, head_windows = head_targets(source, long_form, total, module.head_estimator, video)
+    return sample_long_dance(
         model,
         module.diffusion,
-        torch.stack([inputs.music[s : s + w] for s in starts]),
-        None,
-        head,
+        inputs.music,
+        headings=None if inputs.video is None else inputs.video.heading,
+        head=head,
+        window=long_form.window,
+        overlap=long_form.overlap,
+        vision=None if inputs.video is None else inputs.video.vision,
+        canonical=long_form.canonical,
+        head_windows=head_windows,
+        join=join,
+        inpaint=module.inpaint_overlaps,
         **dataclasses.asdict(module.sampling),
         head_guidance_weight=module.head_guidance.weight,
         head_guidance_steps=module.head_guidance.steps,
-        generator=generator,
-        vision=vision,
-        heading=heading,
+        generator=torch.Generator().manual_seed(module.evaluation.seed),
     )
+
+
+def _windows_alone(module, inputs: DanceInputs, long_form: LongForm, starts) -> torch.Tensor:
+    """(S, W, 24, 10): the long form's windows starting at ``starts`` (multiples of the hop), drawn with the
+    same noise as in the joined song but sampled each alone (nothing in-painted), each in its own frame."""
+    if any(s % long_form.hop for s in starts):
+        raise ValueError(f"segments start where windows start, every {long_form.hop} frames: {starts}")
+    windows = _long_windows(module, inputs, long_form, join=False)
+    return windows[[s // long_form.hop for s in starts]]
 
 
 @torch.no_grad()
@@ -132,34 +150,16 @@ def score_long_dance(
     hp = module.hparams
     long_form = LongForm(hp.window, overlap, bool(hp.canonicalize_init_head))
     model = module.ema.module
-    source = "estimate" if module.head_estimator is not None and model.vision_encoder is not None else "none"
+    source = _head_source(module)
     inputs = sample_inputs(str(folder), module, model, long_form, estimate=source == "estimate")
     total = len(inputs.music)
-    video = None if inputs.video is None else inputs.video.head
-    head, head_windows = head_targets(source, long_form, total, module.head_estimator, video)
-    seed = module.evaluation.seed
+    tokens = _long_windows(module, inputs, long_form)
     headings = None if inputs.video is None else inputs.video.heading
-    tokens = sample_long_dance(
-        model,
-        module.diffusion,
-        inputs.music,
-        headings=headings,
-        head=head,
-        window=long_form.window,
-        overlap=overlap,
-        vision=None if inputs.video is None else inputs.video.vision,
-        canonical=long_form.canonical,
-        head_windows=head_windows,
-        **dataclasses.asdict(module.sampling),
-        head_guidance_weight=module.head_guidance.weight,
-        head_guidance_steps=module.head_guidance.steps,
-        generator=torch.Generator().manual_seed(seed),
-    )
     dance, truth = motion_joints(tokens).double(), motion_joints(inputs.truth).double()
     starts = _segment_starts(total, long_form)
     truth_segments = segments(inputs.truth, starts, long_form.window, long_form.canonical)
     long_segments = segments(tokens, starts, long_form.window, long_form.canonical)
-    alone = _windows_alone(module, model, inputs, long_form, starts, torch.Generator().manual_seed(seed))
+    alone = _windows_alone(module, inputs, long_form, starts)
     true_joints = motion_joints(truth_segments).double()
     seams = seam_frames(long_form.starts(total), overlap, total)
     scores = {

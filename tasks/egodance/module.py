@@ -159,6 +159,10 @@ class EgoDanceModule(BackboneModule):
             sequences are danced long-form in windows of this length (:func:`.sampling.sample_long_dance`).
         canonicalize_init_head: the data's windows face their first frame's head heading. Linked from the
             data module: long-form windows are then sampled each in that frame (:mod:`.window_frames`).
+        inpaint_overlaps: long-form windows in-paint the overlap they share with the window before at every
+            denoising step ([EDGE]); False: each window is sampled from its own conditions and the windows
+            are joined by the cross-fade (:func:`.sampling.sample_long_dance`; the demo's choice, measured in
+            its tutorial).
         diffusion_steps: T (1000).
         loss: :class:`LossOptions`. kinematic: L_kin's weights (:class:`~.losses.KinematicLossWeights`).
         optimizer: :class:`OptimizerOptions`.
@@ -179,6 +183,7 @@ class EgoDanceModule(BackboneModule):
         fps: int = FPS,
         window: int = 150,
         canonicalize_init_head: bool = False,
+        inpaint_overlaps: bool = True,
         diffusion_steps: int = 1000,
         loss: LossOptions = LossOptions(),  # noqa: B008
         kinematic: KinematicLossWeights = KinematicLossWeights(),  # noqa: B008
@@ -342,6 +347,11 @@ class EgoDanceModule(BackboneModule):
                 nn.utils.clip_grad_norm_(grads, gradient_clip_val)
 
     # ------------------------------------------------------------------ sampling
+    @property
+    def inpaint_overlaps(self) -> bool:
+        """Whether long-form windows in-paint their overlaps (a checkpoint from before the option: yes)."""
+        return bool(self.hparams.get("inpaint_overlaps", True))
+
     @torch.no_grad()
     def estimate_head(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Head positions (B, T, 3) and rotations (B, T, 3, 3) estimated from frames (B, T, 3, H, W)."""
@@ -436,6 +446,7 @@ class EgoDanceModule(BackboneModule):
             head_guidance_steps=self.head_guidance.steps,
             generator=generator,
             headings=self.condition_heading(model, batch, index),
+            inpaint=self.inpaint_overlaps,
         )
 
     def _test_sources(self, batch: dict) -> list[str]:

@@ -138,6 +138,8 @@ def sample_long_dance(
     batch_windows: int | None = DEFAULT_BATCH_WINDOWS,
     inpaint_last: bool = False,
     headings: torch.Tensor | None = None,
+    join: bool = True,
+    inpaint: bool = True,
     **kwargs,
 ) -> torch.Tensor:
     """A whole track: music (T, L), frames (T, 3, S, S) or their vision features ``vision`` (T, Dc) (the
@@ -168,6 +170,12 @@ def sample_long_dance(
     (:class:`.guidance.HeadingGuidance`), so the dance faces where the dancer faced however long the track.
     A model with ``heading_condition`` needs ``headings``: each window's turns since its first frame are its
     condition (a world-yaw model's only use of them).
+
+    ``inpaint=False``: the overlaps are not in-painted (each window is sampled from its own conditions, its
+    frame still found from the window before), the windows joined by the cross-fade alone.
+
+    ``join=False``: the same windows with the same noise sampled each alone, (B, window, 24, 10) in their own
+    frames (:func:`~skeleton_mamba.tasks.training.diffusion.sample_long`).
     """
     if frames is not None and vision is not None:
         raise ValueError("give frames or their vision features, not both")
@@ -230,6 +238,8 @@ def sample_long_dance(
         batch_windows=batch_windows,
         inpaint_last=inpaint_last,
         anchors=anchors,
+        join=join,
+        inpaint=inpaint,
     )
 
 

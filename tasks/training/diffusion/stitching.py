@@ -94,6 +94,8 @@ class WindowConsistency:
         base: (1, K) the prefix window's global frame (None: identity).
         inpaint_last: in-paint after the last step too.
         anchors: (B, K) known relative frames, NaN where unknown, or None.
+        inpaint: False: in-paint nothing, only find each window's frame from the one before (the windows are
+            then sampled each alone and joined by :func:`stitch_windows`' cross-fade alone).
     """
 
     def __init__(
@@ -105,6 +107,7 @@ class WindowConsistency:
         base: torch.Tensor | None = None,
         inpaint_last: bool = False,
         anchors: torch.Tensor | None = None,
+        inpaint: bool = True,
     ):
         if relative is not None and frames is not None:
             raise ValueError("give relative channels or window frames, not both")
@@ -118,6 +121,7 @@ class WindowConsistency:
         if anchors is not None and frames is None:
             raise ValueError("anchors are window frames: give the windows' frames too")
         self.anchors = anchors
+        self.inpaint = inpaint
         self.relative_frames: torch.Tensor | None = None  # (B, K) frame of window b in window b - 1's
 
     def _relative_frames(self, x: torch.Tensor, x0: torch.Tensor | None) -> torch.Tensor | None:
@@ -142,6 +146,8 @@ class WindowConsistency:
             self.relative_frames = self._relative_frames(x, None)
             return x
         self.relative_frames = frames = self._relative_frames(x, x0)
+        if not self.inpaint:
+            return x
         scale = torch.as_tensor(signal, dtype=x.dtype, device=x.device).reshape(-1)
         if not self.inpaint_last and bool((scale == 1).all()):  # after the last step: keep the predictions
             return x
@@ -225,6 +231,8 @@ def sample_long(
     batch_windows: int | None = None,
     inpaint_last: bool = False,
     anchors: torch.Tensor | None = None,
+    join: bool = True,
+    inpaint: bool = True,
 ) -> torch.Tensor:
     """Sample a long sequence as windows kept consistent during sampling, then stitch them.
 
@@ -236,6 +244,13 @@ def sample_long(
     (its tail is in-painted as a known ``prefix``). The windows are stitched, in window 0's frame, into
     one sequence of ``total_frames`` frames, their overlaps cross-faded (``inpaint_last``, ``anchors``
     (num_windows, K): as :class:`WindowConsistency`).
+
+    ``inpaint=False``: the overlaps are not in-painted; each window's frame is still found from the one
+    before, and the windows are joined by the cross-fade alone.
+
+    ``join=False``: the same windows, drawn with the same noise (the same batches from the same generator),
+    sampled each alone (nothing in-painted) and returned unjoined, (num_windows, W, ...) each in its own
+    frame: what joining them changes, measured without the noise of another draw.
     """
     if num_windows is None:
         raise ValueError("sample_long needs num_windows (the windows sample_fn can sample)")
@@ -246,11 +261,23 @@ def sample_long(
     prefix = base = None
     for first in range(0, num_windows, step):
         which = slice(first, min(first + step, num_windows))
+        if not join:
+            done.append(sample_fn(_alone, which))
+            continue
         known = None if anchors is None else anchors[which]
-        consistency = WindowConsistency(overlap, relative, frames, prefix, base, inpaint_last, known)
+        consistency = WindowConsistency(
+            overlap, relative, frames, prefix, base, inpaint_last, known, inpaint=inpaint
+        )
         windows = sample_fn(consistency, which)
         done.append(consistency.to_global(windows))
         if overlap > 0 and consistency.frames is not None:
             base = consistency.global_frames(windows.shape[0], windows)[-1:]
         prefix = windows[-1, windows.shape[1] - overlap :] if overlap > 0 else None
-    return stitch_windows(torch.cat(done), overlap, total_frames)
+    return stitch_windows(torch.cat(done), overlap, total_frames) if join else torch.cat(done)
+
+
+def _alone(
+    x: torch.Tensor, x0: torch.Tensor | None = None, signal: torch.Tensor | float = 1.0
+) -> torch.Tensor:
+    """The post-step of windows sampled alone: nothing in-painted."""
+    return x
