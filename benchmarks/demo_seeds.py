@@ -381,13 +381,15 @@ def egodance_cause(results: dict) -> str:
     def song(entry: dict) -> str:
         s = entry["long_song"]
         return (
-            f"sampled alone {_f(s['windows_alone_mpjpe_m'])} m (half a window later "
-            f"{_f(s['shifted_windows_alone_mpjpe_m'])} m), joined {_f(s['mpjpe_m'])} m"
+            f"its windows sampled alone {_f(s['windows_alone_mpjpe_m'])} m (those starting every 5 s "
+            f"{_f(s['even_windows_alone_mpjpe_m'])} m, half a window later "
+            f"{_f(s['odd_windows_alone_mpjpe_m'])} m), joined with the overlaps in-painted "
+            f"{_f(s['inpainted_mpjpe_m'])} m, cross-faded only {_f(s['cross_faded_mpjpe_m'])} m"
         )
 
     return (
-        f"{table}\n\nThe long song's {len(long['per_segment_mpjpe_m'])} segments, the mean pose "
-        f"{_f(long['mean_pose_mpjpe_m'])} m: before, {song(before)}; segment by segment {segments}, ... "
+        f"{table}\n\nThe long song's {len(long['per_segment_mpjpe_m'])} windows, the mean pose "
+        f"{_f(long['mean_pose_mpjpe_m'])} m: before, {song(before)}; window by window {segments}, ... "
         f"against the mean pose's {means}, ...; after, {song(after)}. The head estimator's yaw (before) "
         "swings "
         f"{_f(yaw['estimated_swing_std_deg'], 1)} degrees (standard deviation after removing the slow turn) "

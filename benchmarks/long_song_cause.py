@@ -5,13 +5,15 @@ pose's MPJPE on the same window; for the demo's 60 s song, each 5 s segment of t
 segments sampled alone against the mean pose; and how well the head-trajectory estimator sees the head's
 yaw in the song's egocentric video: its yaw over each sampling window against the truth's (after removing
 the slow turn with a 31-frame moving average: the swing of the dance), and its error at the frame where the
-next window starts (what a heading anchor would need), and the song's segments sampled alone half a window
-later than the demo's (the start of every other joined window). Writes its entry (``--as before`` for a run
+next window starts (what a heading anchor would need), the song's windows sampled alone by where they start
+(every 5 s, as the training windows start in their dances, or half a window later), and the joined song with
+and without in-painting the overlaps. Writes its entry (``--as before`` for a run
 trained without the head's turns as a condition, ``--as after`` for the recipe as it is) into
 ``benchmarks/long_song_cause.json`` (``--out``), from which ``demo_seeds.py tables`` renders the tutorial's
 table.
 
-    sm fit --recipe egodance_demo.yaml --model.init_args.network.heading_condition false   # before
+    sm fit --recipe egodance_demo.yaml --model.init_args.network.heading_condition false \
+        --model.init_args.inpaint_overlaps true                                          # before
     python benchmarks/long_song_cause.py --as before --run runs/egodance_demo/version_0
     sm fit --recipe egodance_demo.yaml                                                      # after
     python benchmarks/long_song_cause.py --as after --run runs/egodance_demo/version_1
@@ -89,10 +91,18 @@ def measure(run: Path, data_root: Path) -> dict:
     _, rotations = estimate_window_trajectories(
         module.head_estimator.eval(), inputs.video.head, window_starts, long_form.window
     )
-    # the windows half a window later than the segments (the joined song's odd windows), sampled alone
-    shifted = [s + long_form.hop for s in starts if s + long_form.hop + long_form.window <= len(inputs.music)]
-    shifted_alone = _windows_alone(module, inputs, long_form, shifted)
-    shifted_truth = segments(inputs.truth, shifted, long_form.window, long_form.canonical)
+    # the windows sampled alone, by where they start: every 5 s (as the training windows in their dances) or
+    # half a window later
+    alone = motion_joints(_windows_alone(module, inputs, long_form, starts))
+    truth = motion_joints(truth_segments)
+    even = [i for i, s in enumerate(starts) if (s // long_form.hop) % 2 == 0]
+    odd = [i for i, s in enumerate(starts) if (s // long_form.hop) % 2 == 1]
+    # the joined song with and without in-painting the overlaps ([EDGE]'s long form and the cross-fade alone)
+    joined = {}
+    for inpaint in (True, False):
+        module.hparams["inpaint_overlaps"] = inpaint
+        joined[inpaint] = score_long_dance(module, folder, mean_pose)[2]["mpjpe_m"]
+    module.hparams["inpaint_overlaps"] = bool(hp.get("inpaint_overlaps", True))
     true_windows = segments(inputs.truth, window_starts, long_form.window, long_form.canonical)
     true_yaw = head_heading(head_rotation(true_windows.double()))
     estimated_yaw = head_heading(rotations.double())
@@ -107,9 +117,11 @@ def measure(run: Path, data_root: Path) -> dict:
             "sample": folder.name,
             "mpjpe_m": scores["mpjpe_m"],
             "windows_alone_mpjpe_m": scores["windows_alone_mpjpe_m"],
-            "shifted_windows_alone_mpjpe_m": _mpjpe(
-                motion_joints(shifted_alone), motion_joints(shifted_truth)
-            ),
+            "even_windows_alone_mpjpe_m": _mpjpe(alone[even], truth[even]),
+            "odd_windows_alone_mpjpe_m": _mpjpe(alone[odd], truth[odd]),
+            "inpainted_mpjpe_m": joined[True],
+            "cross_faded_mpjpe_m": joined[False],
+            "inpaint_overlaps": bool(hp.get("inpaint_overlaps", True)),
             "mean_pose_mpjpe_m": scores["mean_pose_mpjpe_m"],
             "per_segment_mpjpe_m": per_segment,
             "per_segment_mean_pose_mpjpe_m": mean_segment,
@@ -142,8 +154,8 @@ def main() -> None:
         choices=("before", "after"),
         default="after",
         help="the entry the run's figures replace: before (a run trained with "
-        "--model.init_args.network.heading_condition false, the recipe before the head's turns were a "
-        "condition) or after (the recipe as it is)",
+        "--model.init_args.network.heading_condition false --model.init_args.inpaint_overlaps true, the "
+        "recipe before this change) or after (the recipe as it is)",
     )
     args = parser.parse_args()
     result = measure(args.run, args.data)

@@ -18,6 +18,7 @@ from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_t
 from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, WindowConsistency, sample_long
 from skeleton_mamba.tasks.training.diffusion.samplers import ddim_sample, ddpm_sample
+from skeleton_mamba.tasks.training.diffusion.stitching import stitch_windows
 
 SMPL_PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21)
 
@@ -178,6 +179,42 @@ def test_overlaps_agree_under_a_denoiser_that_ignores_them():
     assert not math.isclose(float(windows[1, 0, 0, 6]), float(world[1, 0, 0, 6]), abs_tol=1e-3)
 
 
+def test_windows_not_inpainted_are_the_windows_sampled_alone_then_joined():
+    """``inpaint=False``: the windows are sampled as with no constraint (``join=False`` gives them, drawn with
+    the same noise), each one's frame is read from the window before at the last step, and the cross-fade
+    joins them; in-painting (the default) changes the windows."""
+    diffusion, overlap, window, count = GaussianDiffusion(25), 4, 12, 5
+    total = window + (count - 1) * (window - overlap)
+    weights = torch.randn(10, 10, generator=torch.Generator().manual_seed(1)) * 0.3
+
+    def denoiser(x_t, t, cond):
+        out = torch.tanh(x_t @ weights + cond[:, None, None, None])
+        out[..., 6:9] = out[..., 6:9] + torch.arange(x_t.shape[1])[:, None, None] * 0.05  # a walk
+        return out
+
+    cond = torch.randn(count)
+
+    def run(post, which):
+        return ddim_sample(diffusion, denoiser, (which.stop - which.start, window, 24, 10), cond[which], 6,
+                           post_step=post, generator=torch.Generator().manual_seed(which.start))  # fmt: skip
+
+    frames = HeadingFrames(True)
+    for batch in (None, 2):
+        alone = sample_long(
+            run, overlap, total, frames=frames, num_windows=count, batch_windows=batch, join=False
+        )
+        assert alone.shape == (count, window, 24, 10)
+        joined = sample_long(run, overlap, total, frames=frames, num_windows=count, batch_windows=batch,
+                             inpaint=False)  # fmt: skip
+        if batch is None:
+            reference = WindowConsistency(overlap, frames=frames, inpaint=False)
+            assert reference(alone, alone, 1.0) is alone  # nothing in-painted, the frames read
+            expected = stitch_windows(reference.to_global(alone), overlap, total)
+            torch.testing.assert_close(joined, expected, rtol=0, atol=1e-6)
+        inpainted = sample_long(run, overlap, total, frames=frames, num_windows=count, batch_windows=batch)
+        assert (inpainted - joined).abs().max() > 1e-2
+
+
 # ------------------------------------------------------------------ scores of a long dance
 def test_seam_frames_by_hand():
     from skeleton_mamba.tasks.egodance.long_form_scores import seam_frames
@@ -224,3 +261,13 @@ def test_segments_start_canonical_and_drift_measures_a_turned_dance():
     assert moved["end_root_distance_m"] > 0.5 and moved["world_mpjpe_m"] > 0.5
     assert drift(tokens, tokens, 40) == pytest.approx({"world_mpjpe_m": 0, "end_heading_error_deg": 0,
                                                       "end_root_distance_m": 0}, abs=1e-9)  # fmt: skip
+
+
+def test_the_long_song_is_scored_over_every_window_that_fits():
+    """Segments start where windows start, one every hop (each frame in two), the last ending in the song."""
+    from skeleton_mamba.tasks.egodance.long_demo import _segment_starts
+    from skeleton_mamba.tasks.egodance.long_form import LongForm
+
+    assert _segment_starts(1800, LongForm(150, 75, True)) == list(range(0, 1651, 75))
+    assert _segment_starts(400, LongForm(150, 50, True)) == [0, 100, 200]
+    assert _segment_starts(100, LongForm(150, 75, True)) == []

@@ -5,9 +5,10 @@ held-out demo dance, so the model never saw it), its music, and builds it as one
 the set's builder settings (a procedural room, the egocentric video). :func:`score_long_dance` dances it
 as ``sm dance --sample`` does (long-form windows, head targets estimated from the video, the heading read
 from it: :mod:`.video_rotation`) and scores it
-(:mod:`.long_form_scores`): MPJPE over the whole sequence beside the mean-pose baseline and beside the same
-frames' 5 s windows sampled alone (each segment in its own first frame, :mod:`.long_form_scores`), the
-dance's dynamics against the truth's, the seams, and the drift over the song.
+(:mod:`.long_form_scores`): MPJPE over every window-long span where a window starts (each in its own first
+frame) beside the mean-pose baseline and beside the same windows sampled alone (drawn with the same noise,
+nothing in-painted: what joining them changes, without the noise of another draw), the dance's dynamics
+against the truth's, the seams, and the drift over the song.
 """
 
 from __future__ import annotations

@@ -9,11 +9,13 @@ Two things can go wrong where the windows meet, and one over the whole length:
   and the root's horizontal step ``|r_{t+1} - r_t|`` are divided by their means over every other frame:
   a seamless dance scores about 1. :data:`SEAM_TARGETS` holds them to 1.5, 1.5 and 2.
 - :func:`long_form_checks`: the windows after the first dance worse than windows sampled afresh, because
-  each continues the dance before it. The whole sequence is cut into window-long segments, and each segment of
+  each continues the dance before it. The whole sequence is cut into window-long segments (the demo: one
+  where each window starts, :func:`.long_demo.score_long_dance`), and each segment of
   the dance and of the ground truth is put in its own first frame's canonical frame (:func:`segments`: root
   at x = z = 0, facing +z when the model's windows do), exactly as a window sampled alone is scored; their
   MPJPE over the whole length must stay below the mean-pose baseline's and within
-  :data:`WHOLE_TO_WINDOWS_TARGET` (10 %) of the mean MPJPE of the same segments sampled alone.
+  :data:`WHOLE_TO_WINDOWS_TARGET` (10 %) of the mean MPJPE of the same segments sampled alone (the demo: the
+  same windows with the same noise, nothing in-painted).
 
 Where the whole dance goes over the minute is reported beside them (:func:`drift`): the world-frame MPJPE,
 the head's heading error over the last window and the root's distance from the truth's. Each window's frame
