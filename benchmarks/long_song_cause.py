@@ -98,11 +98,11 @@ def measure(run: Path, data_root: Path) -> dict:
     even = [i for i, s in enumerate(starts) if (s // long_form.hop) % 2 == 0]
     odd = [i for i, s in enumerate(starts) if (s // long_form.hop) % 2 == 1]
     # the joined song with and without in-painting the overlaps ([EDGE]'s long form and the cross-fade alone)
-    joined = {}
+    joined, own = {}, module.inpaint_overlaps
     for inpaint in (True, False):
         module.hparams["inpaint_overlaps"] = inpaint
         joined[inpaint] = score_long_dance(module, folder, mean_pose)[2]["mpjpe_m"]
-    module.hparams["inpaint_overlaps"] = bool(hp.get("inpaint_overlaps", True))
+    module.hparams["inpaint_overlaps"] = own
     true_windows = segments(inputs.truth, window_starts, long_form.window, long_form.canonical)
     true_yaw = head_heading(head_rotation(true_windows.double()))
     estimated_yaw = head_heading(rotations.double())
@@ -110,7 +110,7 @@ def measure(run: Path, data_root: Path) -> dict:
     at_next = _wrap_deg(estimated_yaw[:, long_form.hop] - true_yaw[:, long_form.hop]).abs()
     return {
         "machine": machine_info(),
-        "run": str(run),
+        "run": "/".join(run.parts[-3:]),  # runs/egodance_demo/version_N
         "heading_condition": bool(module.model.config.heading_condition),
         "held_out_windows": windows,
         "long_song": {
@@ -121,7 +121,7 @@ def measure(run: Path, data_root: Path) -> dict:
             "odd_windows_alone_mpjpe_m": _mpjpe(alone[odd], truth[odd]),
             "inpainted_mpjpe_m": joined[True],
             "cross_faded_mpjpe_m": joined[False],
-            "inpaint_overlaps": bool(hp.get("inpaint_overlaps", True)),
+            "inpaint_overlaps": own,
             "mean_pose_mpjpe_m": scores["mean_pose_mpjpe_m"],
             "per_segment_mpjpe_m": per_segment,
             "per_segment_mean_pose_mpjpe_m": mean_segment,
