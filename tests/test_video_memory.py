@@ -22,6 +22,7 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     long_window_starts,
 )
 from skeleton_mamba.tasks.egodance.representation import motion_joints
+from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import encode_video
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import extract_music_features
@@ -124,7 +125,7 @@ def test_sm_dance_from_streamed_features_equals_the_all_frames_dance(dance_input
     assert n == 100
     music, frames = music[:n], frames[:n]
     head = _old_estimate_long_trajectory(module.head_estimator, frames, 40)[0]
-    old = dance_cli.sample_long_dance(
+    old = sample_long_dance(
         module.ema.module, module.diffusion, music, frames, head, window=40, overlap=20,
         **dataclasses.asdict(module.sampling.override(sampling_steps=2)),
         head_guidance_weight=0.5, head_guidance_steps=module.head_guidance.steps,
@@ -147,16 +148,16 @@ def test_video_features_are_those_of_the_held_frames(dance_inputs):
         torch.testing.assert_close(features.vision, held, rtol=1e-5, atol=1e-6)
         music = torch.randn(100, model.config.music_dim)
         kwargs = dict(window=40, overlap=20, sampling_steps=2, head_guidance_weight=0.0)
-        old = dance_cli.sample_long_dance(
+        old = sample_long_dance(
             model, module.diffusion, music, frames, generator=torch.Generator().manual_seed(1), **kwargs
         )
-        new = dance_cli.sample_long_dance(
+        new = sample_long_dance(
             model, module.diffusion, music, vision=features.vision,
             generator=torch.Generator().manual_seed(1), **kwargs,
         )  # fmt: skip
         torch.testing.assert_close(new, old, rtol=1e-4, atol=1e-5)
     with pytest.raises(ValueError, match="not both"):
-        dance_cli.sample_long_dance(model, module.diffusion, music, frames, vision=features.vision, **kwargs)
+        sample_long_dance(model, module.diffusion, music, frames, vision=features.vision, **kwargs)
     with pytest.raises(ValueError, match="eval mode"):
         encode_video(video, size, module.model.vision_encoder.train())
     module.eval()

@@ -41,7 +41,6 @@ from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.export import dance_files
@@ -93,16 +92,11 @@ def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torc
         source, long_form, len(inputs.music), estimator, video, inputs.truth, inputs.head
     )
     sampling = module.sampling.override(**sampling_overrides(args))
-    tokens = sample_long_dance(
+    tokens = inputs.dance(
         _denoiser(args, module),
         module.diffusion,
-        inputs.music,
-        headings=None if inputs.video is None else inputs.video.heading,
+        long_form,
         head=head,
-        window=long_form.window,
-        overlap=long_form.overlap,
-        vision=None if inputs.video is None else inputs.video.vision,
-        canonical=long_form.canonical,
         head_windows=head_windows,
         batch_windows=args.batch_windows,
         inpaint=module.inpaint_overlaps if args.inpaint is None else args.inpaint == "yes",

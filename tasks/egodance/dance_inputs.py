@@ -24,6 +24,7 @@ import torch
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 from skeleton_mamba.tasks.egodance.frames import video_header
 from skeleton_mamba.tasks.egodance.long_form import LongForm
+from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for, scale_intrinsics
 from skeleton_mamba.tasks.motion.errors import InputError
@@ -52,6 +53,22 @@ class DanceInputs:
     music_path: str | None = None
     music_start_s: float = 0.0
     seconds: dict[str, float] = field(default_factory=dict)
+
+    def dance(self, model: torch.nn.Module, diffusion, long_form: LongForm, **kwargs) -> torch.Tensor:
+        """:func:`.sampling.sample_long_dance` of these inputs (the music, the video's features and the
+        head's turns read from it) in ``long_form``'s windows; ``kwargs``: its other arguments."""
+        video = self.video
+        return sample_long_dance(
+            model,
+            diffusion,
+            self.music,
+            headings=None if video is None else video.heading,
+            vision=None if video is None else video.vision,
+            window=long_form.window,
+            overlap=long_form.overlap,
+            canonical=long_form.canonical,
+            **kwargs,
+        )
 
 
 ROTATION_SIZE = 64

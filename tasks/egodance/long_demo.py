@@ -30,7 +30,6 @@ from skeleton_mamba.tasks.egodance.long_form_scores import (
     segments,
 )
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.motion.metrics.dynamics import dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance as write_synthetic_dance
@@ -105,16 +104,11 @@ def _long_windows(module, inputs: DanceInputs, long_form: LongForm, join: bool =
     source = _head_source(module)
     video = None if inputs.video is None else inputs.video.head
     head, head_windows = head_targets(source, long_form, total, module.head_estimator, video)
-    return sample_long_dance(
+    return inputs.dance(
         model,
         module.diffusion,
-        inputs.music,
-        headings=None if inputs.video is None else inputs.video.heading,
+        long_form,
         head=head,
-        window=long_form.window,
-        overlap=long_form.overlap,
-        vision=None if inputs.video is None else inputs.video.vision,
-        canonical=long_form.canonical,
         head_windows=head_windows,
         join=join,
         inpaint=module.inpaint_overlaps,
