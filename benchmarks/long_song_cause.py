@@ -84,12 +84,9 @@ def measure(run: Path, data_root: Path) -> dict:
     mean_segment = [
         _mpjpe(mean_pose.expand(long_form.window, 24, 3), motion_joints(b)) for b in truth_segments
     ]
-    # the head estimator's yaw over the sampling windows that fit in the song
-    window_starts = [
-        s for s in long_form.starts(len(inputs.music)) if s + long_form.window <= len(inputs.music)
-    ]
+    # the head estimator's yaw over the windows that fit in the song (the segments)
     _, rotations = estimate_window_trajectories(
-        module.head_estimator.eval(), inputs.video.head, window_starts, long_form.window
+        module.head_estimator.eval(), inputs.video.head, starts, long_form.window
     )
     # the windows sampled alone, by where they start: every 5 s (as the training windows in their dances) or
     # half a window later
@@ -98,13 +95,12 @@ def measure(run: Path, data_root: Path) -> dict:
     even = [i for i, s in enumerate(starts) if (s // long_form.hop) % 2 == 0]
     odd = [i for i, s in enumerate(starts) if (s // long_form.hop) % 2 == 1]
     # the joined song with and without in-painting the overlaps ([EDGE]'s long form and the cross-fade alone)
-    joined, own = {}, module.inpaint_overlaps
-    for inpaint in (True, False):
-        module.hparams["inpaint_overlaps"] = inpaint
-        joined[inpaint] = score_long_dance(module, folder, mean_pose)[2]["mpjpe_m"]
-    module.hparams["inpaint_overlaps"] = own
-    true_windows = segments(inputs.truth, window_starts, long_form.window, long_form.canonical)
-    true_yaw = head_heading(head_rotation(true_windows.double()))
+    own = module.inpaint_overlaps
+    joined = {
+        own: scores["mpjpe_m"],
+        not own: score_long_dance(module, folder, mean_pose, inpaint=not own)[2]["mpjpe_m"],
+    }
+    true_yaw = head_heading(head_rotation(truth_segments.double()))
     estimated_yaw = head_heading(rotations.double())
     true_swing, estimated_swing = _swing(true_yaw), _swing(estimated_yaw)
     at_next = _wrap_deg(estimated_yaw[:, long_form.hop] - true_yaw[:, long_form.hop]).abs()

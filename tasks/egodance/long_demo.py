@@ -94,11 +94,13 @@ def _head_source(module) -> str:
     return "estimate" if module.head_estimator is not None and vision else "none"
 
 
-def _long_windows(module, inputs: DanceInputs, long_form: LongForm, join: bool = True) -> torch.Tensor:
+def _long_windows(
+    module, inputs: DanceInputs, long_form: LongForm, join: bool = True, inpaint: bool | None = None
+) -> torch.Tensor:
     """The song danced as ``sm dance --sample`` does (the module's EMA model, the head estimated from the
     video, the heading read from it), seeded with the module's evaluation seed: tokens (T, 24, 10), or with
     ``join=False`` the same windows with the same noise sampled each alone, (B, W, 24, 10) in their own
-    frames."""
+    frames. ``inpaint``: in-paint the overlaps (None: as the module's ``inpaint_overlaps``)."""
     model = module.ema.module
     total = len(inputs.music)
     source = _head_source(module)
@@ -111,7 +113,7 @@ def _long_windows(module, inputs: DanceInputs, long_form: LongForm, join: bool =
         head=head,
         head_windows=head_windows,
         join=join,
-        inpaint=module.inpaint_overlaps,
+        inpaint=module.inpaint_overlaps if inpaint is None else inpaint,
         **dataclasses.asdict(module.sampling),
         head_guidance_weight=module.head_guidance.weight,
         head_guidance_steps=module.head_guidance.steps,
@@ -130,7 +132,7 @@ def _windows_alone(module, inputs: DanceInputs, long_form: LongForm, starts) -> 
 
 @torch.no_grad()
 def score_long_dance(
-    module, folder: Path, mean_pose: torch.Tensor, overlap: int = 75
+    module, folder: Path, mean_pose: torch.Tensor, overlap: int = 75, inpaint: bool | None = None
 ) -> tuple[torch.Tensor, DanceInputs, dict]:
     """Dance the sample ``folder`` long-form with the module's EMA model and score it (module docstring).
 
@@ -138,6 +140,7 @@ def score_long_dance(
         module (EgoDanceModule): a trained :class:`~.module.EgoDanceModule` (eval mode).
         mean_pose: (24, 3) the training poses' mean joint positions (the baseline held still).
         overlap: frames shared by consecutive windows.
+        inpaint: in-paint the overlaps (None: as the module's ``inpaint_overlaps``).
 
     Returns:
         The dance tokens (T, 24, 10), its inputs (music, truth), and the scores with their ``checks``.
@@ -148,7 +151,7 @@ def score_long_dance(
     source = _head_source(module)
     inputs = sample_inputs(str(folder), module, model, long_form, estimate=source == "estimate")
     total = len(inputs.music)
-    tokens = _long_windows(module, inputs, long_form)
+    tokens = _long_windows(module, inputs, long_form, inpaint=inpaint)
     headings = None if inputs.video is None else inputs.video.heading
     dance, truth = motion_joints(tokens).double(), motion_joints(inputs.truth).double()
     starts = _segment_starts(total, long_form)
