@@ -2,9 +2,57 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 from skeleton_mamba.ssd.discretize import NO_DT_LIMIT
+
+__all__ = ["ConfigValueError", "MixerConfig", "SkeletonMambaConfig"]
+
+
+class ConfigValueError(ValueError):
+    """A config field outside its range, raised when the config is made: ``owner.field = value: rule``.
+
+    ``owner`` (the dataclass), ``field``, ``value`` and ``rule`` are kept so that a reader of a file (a
+    pretrained folder's ``config.json``, :mod:`skeleton_mamba.pretrained_codec`) names the field by its
+    place in the file instead.
+    """
+
+    def __init__(self, owner: str, field: str, value: Any, rule: str) -> None:
+        self.owner, self.field, self.value, self.rule = owner, field, value, rule
+        super().__init__(f"{owner}.{field} = {value!r}: {rule}")
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_real(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _check_counts(config: Any, names: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
+    """Each field of ``names`` (and of ``optional``, unless None) an integer >= 1."""
+    owner = type(config).__name__
+    for name in (*names, *optional):
+        value = getattr(config, name)
+        if value is None and name in optional:
+            continue
+        if not _is_int(value) or value < 1:
+            rule = "must be an integer >= 1" + (" or null" if name in optional else "")
+            raise ConfigValueError(owner, name, value, rule)
+
+
+def _pair(config: Any, name: str) -> tuple[float, float]:
+    value = getattr(config, name)
+    if (
+        not isinstance(value, (tuple, list))
+        or len(value) != 2
+        or not all(_is_real(v) and not math.isnan(v) for v in value)
+    ):
+        raise ConfigValueError(type(config).__name__, name, value, "must be a pair of numbers (min, max)")
+    return float(value[0]), float(value[1])
 
 
 @dataclass
@@ -48,6 +96,30 @@ class MixerConfig:
     bias: bool = False
     conv_bias: bool = True
     use_kernel: bool = True  # use mamba-ssm's Triton kernel on CUDA when installed
+
+    def __post_init__(self) -> None:
+        """The ranges ``mamba_ssm.Mamba2`` assumes, checked when the config is made (a ``config.json``, a
+        recipe, a checkpoint's hyper-parameters), not at the first forward: every size an integer >= 1,
+        ``0 < dt_min <= dt_max``, ``dt_init_floor >= 0``, ``0 < A_init_range[0] <= A_init_range[1]``,
+        ``0 <= dt_limit[0] < dt_limit[1]`` (finite, except an infinite max)."""
+        _check_counts(self, ("d_state", "d_conv", "expand", "headdim", "ngroups", "chunk_size"), ("d_ssm",))
+        owner = type(self).__name__
+        for name, floor in (("dt_min", False), ("dt_max", False), ("dt_init_floor", True)):
+            value = getattr(self, name)
+            if not _is_real(value) or not math.isfinite(value) or not (value >= 0 if floor else value > 0):
+                raise ConfigValueError(
+                    owner, name, value, f"must be a finite number {'>=' if floor else '>'} 0"
+                )
+        if self.dt_max < self.dt_min:
+            raise ConfigValueError(owner, "dt_max", self.dt_max, f"must be >= dt_min ({self.dt_min!r})")
+        low, high = _pair(self, "A_init_range")
+        if not (0 < low <= high < math.inf):
+            rule = "must satisfy 0 < min <= max, both finite (A = -exp(A_log) is drawn from it)"
+            raise ConfigValueError(owner, "A_init_range", self.A_init_range, rule)
+        low, high = _pair(self, "dt_limit")
+        if not (0 <= low < high and math.isfinite(low)):
+            rule = "must satisfy 0 <= min < max (min finite, max may be inf)"
+            raise ConfigValueError(owner, "dt_limit", self.dt_limit, rule)
 
 
 @dataclass
@@ -104,3 +176,20 @@ class SkeletonMambaConfig:
     mixer: MixerConfig | None = None
     causal: bool = False
     cpu_slice_elements: int | None = 4_194_304
+
+    def __post_init__(self) -> None:
+        """Checked when made (a ``config.json``, a recipe, a checkpoint's hyper-parameters), not at the first
+        forward: ``dim``, ``depth``, ``heads``, ``mlp_dim`` integers >= 1; ``in_channels``,
+        ``out_channels``, ``context_dim``, ``cpu_slice_elements`` null or integers >= 1; ``0 <= dropout < 1``;
+        ``dim`` a multiple of ``heads`` when cross-attention is on (``context_dim``)."""
+        _check_counts(
+            self,
+            ("dim", "depth", "heads", "mlp_dim"),
+            ("in_channels", "out_channels", "context_dim", "cpu_slice_elements"),
+        )
+        owner = type(self).__name__
+        if not _is_real(self.dropout) or not 0 <= self.dropout < 1:
+            raise ConfigValueError(owner, "dropout", self.dropout, "must be a number from 0 to below 1")
+        if self.context_dim is not None and self.dim % self.heads:
+            rule = f"must be a multiple of heads ({self.heads}) for the cross-attention (context_dim is set)"
+            raise ConfigValueError(owner, "dim", self.dim, rule)

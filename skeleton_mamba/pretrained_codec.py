@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.config import ConfigValueError
 from skeleton_mamba.pretrained_checks import MAX_CONFIG_BYTES
 
 __all__ = [
@@ -153,7 +154,12 @@ def decode_value(value: Any, hint: Any, where: str) -> Any:
             for name, item in value.items()
             if name != "_type"
         }
-        return hint(**kwargs)
+        try:
+            return hint(**kwargs)
+        except ConfigValueError as err:  # a field out of its range, named by its place in the file
+            raise PretrainedError(f"{where}.{err.field} = {err.value!r}: {err.rule}") from err
+        except (TypeError, ValueError) as err:  # another check of the dataclass on its fields
+            raise PretrainedError(f"{where}: {hint.__name__} refused its fields ({err})") from err
     if origin in (list, tuple):
         if not isinstance(value, list):
             raise PretrainedError(f"{where}: expected a list, got {value!r}")

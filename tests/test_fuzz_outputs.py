@@ -2,7 +2,7 @@
 
 Every command writing into a folder (``sm export-pretrained``, ``export-onnx``, ``dance``, ``stream``,
 ``generate``, ``make-ego``) refuses, before any work, a non-empty folder that is not its own earlier output
-(recognised by its marker and exact file set, or by the manifest it wrote), unless ``--overwrite``; files
+(proven by the signed manifest it wrote: ``test_output_proof.py``), unless ``--overwrite``; files
 beside a named output (``sm dance --out FILE.npz``, ``sm export --music``) are not replaced unasked; every
 file is written atomically with the mode the umask gives.
 """
@@ -20,7 +20,7 @@ import torch
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.motion.output_folder import MANIFEST, claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.output_folder import MANIFEST, claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.cli import main as sm
 
 MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)
@@ -104,10 +104,10 @@ def test_export_onnx_refuses_a_users_folder_before_any_work(user_folder, capsys,
     _untouched(user_folder)
     onnx = tmp_path / "onnx"
     onnx.mkdir()
-    (onnx / "export.json").write_text("{}")  # an earlier export: recognised by export.json
+    (onnx / "export.json").write_text("{}")  # looks like an export, but no manifest proves it
     (onnx / "sequence.onnx").write_bytes(b"old")
-    assert claim_output_folder(onnx, "sm export-onnx", ["sequence.onnx", "export.json"],
-                               marker=lambda f: (f / "export.json").is_file()) == onnx  # fmt: skip
+    with pytest.raises(InputError, match="not an earlier output of sm export-onnx"):
+        claim_output_folder(onnx, "sm export-onnx", ["sequence.onnx", "export.json"])
 
 
 def test_sm_dance_never_replaces_a_file_beside_its_named_output(tmp_path, capsys):
@@ -165,10 +165,11 @@ def test_the_manifest_recognises_a_commands_own_files_only(tmp_path):
     out = tmp_path / "live"
     claim_output_folder(out, "sm stream", ["song.npz"])
     assert not out.exists()  # claiming creates nothing: recording does, before the first file
-    record_outputs(out, "sm stream", ["song.npz", "song.bvh"])
-    (out / "song.npz").write_bytes(b"1")
+    with writing_outputs(out, "sm stream", ["song.npz", "song.bvh"]):
+        (out / "song.npz").write_bytes(b"1")
     claim_output_folder(out, "sm stream", ["other.npz"])  # its own earlier output
-    record_outputs(out, "sm stream", ["other.npz"])
+    with writing_outputs(out, "sm stream", ["other.npz"]):
+        pass
     with pytest.raises(InputError, match="not an earlier output of sm dance"):
         claim_output_folder(out, "sm dance", ["dance.npz"])  # another command's folder
     (out / "photo.jpg").write_bytes(b"2")

@@ -315,7 +315,13 @@ def test_export_writes_the_inference_network_and_the_module(dance_inputs):
     tmp, module, ckpt, _ = dance_inputs
     folder = tmp / "emm"
     names = sorted(p.name for p in folder.iterdir())
-    assert names == ["README.md", CONFIG_NAME, WEIGHTS_NAME, "module.safetensors"]
+    assert names == [
+        ".sm-output.json",
+        "README.md",
+        CONFIG_NAME,
+        WEIGHTS_NAME,
+        "module.safetensors",
+    ]  # + the manifest
     _assert_same_state(module.ema.module, EMM.from_pretrained(folder))  # the network it samples with
     rebuilt, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, folder)
     _assert_same_state(module, rebuilt)  # raw weights, EMA, its counter, the head estimator

@@ -114,6 +114,18 @@ def test_parse_length():
         parse_length("six")
 
 
+@pytest.mark.parametrize("options", [["--length", "1000000"], ["--length", "6s", "--num", "51"]])
+def test_generate_bounds_the_frames_of_a_run_before_any_work(tmp_path, capsys, options):
+    from skeleton_mamba.tasks.text2motion.generate_cli import MAX_FRAMES_PER_RUN
+    from skeleton_mamba.tasks.training.cli import main as sm
+
+    argv = ["generate", "--checkpoint", str(tmp_path / "none.ckpt"), "--text", "a person jumps"]
+    assert sm([*argv, *options, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"at most {MAX_FRAMES_PER_RUN} frames per run" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()  # refused before the checkpoint, the encoder, the folder
+
+
 def test_the_text_encoder_is_used_but_not_part_of_the_module_state():
     """The frozen encoder is reachable as ``text_encoder`` but stays out of the state dict, the parameters
     and the submodules (checkpoints hold the denoiser and the statistics only)."""

@@ -96,3 +96,22 @@ def test_the_onnxruntime_web_tarball_is_checked(tmp_path):
     other.write_bytes(b"not the release")
     with pytest.raises(InputError, match=f"{other}: not the npm tarball of onnxruntime-web {VERSION}"):
         read_ort_web(other)
+
+
+def test_a_huge_or_forged_onnxruntime_web_tarball_is_refused_without_reading_it_whole(tmp_path, monkeypatch):
+    from skeleton_mamba.tasks.stream import ort_web
+
+    huge = tmp_path / "huge.tgz"
+    with huge.open("wb") as f:  # a sparse 5 GB file: refused by its size, before a byte is read
+        f.truncate(5 << 30)
+    opened = []
+    monkeypatch.setattr(ort_web, "_read_hashed", lambda path, chunk=0: opened.append(path))
+    with pytest.raises(InputError, match=rf"huge.tgz: not the npm tarball .*\({5 << 30} bytes, not "):
+        read_ort_web(huge)
+    assert opened == []
+    monkeypatch.undo()
+    forged = tmp_path / "forged.tgz"
+    with forged.open("wb") as f:  # the right size, other bytes: hashed as it is read, then refused
+        f.truncate(ort_web.TARBALL_BYTES)
+    with pytest.raises(InputError, match="forged.tgz: not the npm tarball .*SHA-512 differs"):
+        read_ort_web(forged)

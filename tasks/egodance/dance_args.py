@@ -13,6 +13,7 @@ from skeleton_mamba.tasks.motion.cli_options import (
 )
 from skeleton_mamba.tasks.motion.option_types import (
     MAX_FRAMES,
+    file_name_option,
     image_size_option,
     int_option,
     real_option,
@@ -20,7 +21,7 @@ from skeleton_mamba.tasks.motion.option_types import (
 )
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 
-__all__ = ["DANCE_BF16_ERROR", "DEFAULT_BATCH_WINDOWS", "build_parser"]
+__all__ = ["DANCE_BF16_ERROR", "DEFAULT_BATCH_WINDOWS", "build_parser", "overlap_problem"]
 
 # The bf16 dance against the fp32 one of the same seed (measured; the bound is tested).
 DANCE_BF16_ERROR = (
@@ -72,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
         )
     )
     p.add_argument("--out", help="output folder (or FILE.npz: files named after FILE); required to dance")
-    p.add_argument("--name", default="dance", help="file stem inside an output folder")
+    p.add_argument("--name", type=file_name_option, default="dance", help="file stem inside an output folder")
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
     p.add_argument(
@@ -147,4 +148,16 @@ def build_parser() -> argparse.ArgumentParser:
         "1000 steps); same dance to float32 rounding",
     )
     add_precision_argument(p, DANCE_BF16_ERROR)
+    p.check(overlap_problem)
     return p
+
+
+def overlap_problem(args: argparse.Namespace) -> str | None:
+    """Why ``--overlap`` does not fit ``--window``: consecutive long-form windows share at most half a window
+    (the stitching's rule, ``tasks/training/diffusion/stitching.py``), so each frame lies in at most two."""
+    if args.overlap > args.window // 2:
+        return (
+            f"--overlap {args.overlap}: consecutive windows share at most half of --window {args.window} "
+            f"(at most {args.window // 2} frames)"
+        )
+    return None

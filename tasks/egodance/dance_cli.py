@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 import torch
@@ -41,15 +42,16 @@ from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
+from skeleton_mamba.tasks.motion.cli_options import checked_sampling
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.export import dance_files
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.motion.music import BEAT
-from skeleton_mamba.tasks.motion.output_folder import claim_output_files, claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.output_folder import claim_output_files, claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.training.diffusion.sampling import SamplingOptions
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
 __all__ = ["main", "build_parser"]
@@ -83,7 +85,9 @@ def _inputs(args, module, long_form: LongForm) -> DanceInputs:
         return track_inputs(args.music, args.video, module, model, long_form, estimate, args.progress, fov)
 
 
-def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torch.Tensor, str]:
+def _dance(
+    args, module, inputs: DanceInputs, long_form: LongForm, sampling: SamplingOptions
+) -> tuple[torch.Tensor, str]:
     """The dance tokens (T, 24, C) in fp32 and the head source, in the caller's precision region."""
     source = _head_source(args, module)
     video = None if inputs.video is None else inputs.video.head
@@ -91,7 +95,6 @@ def _dance(args, module, inputs: DanceInputs, long_form: LongForm) -> tuple[torc
     head, head_windows = head_targets(
         source, long_form, len(inputs.music), estimator, video, inputs.truth, inputs.head
     )
-    sampling = module.sampling.override(**sampling_overrides(args))
     tokens = inputs.dance(
         _denoiser(args, module),
         module.diffusion,
@@ -181,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.list_samples:
         return _list_samples(args.ckpt, checkpoint)
     module.eval()
+    # the settings against the loaded model, before any input is read
+    sampling = checked_sampling(args, module.sampling, module.diffusion.num_steps, args.ckpt)
     fps = module.hparams.fps  # the frame rate the model was trained at (linked from its data module)
     long_form = _long_form(args, module, checkpoint)
     if args.compile and args.precision != "fp32":
@@ -203,26 +208,30 @@ def main(argv: list[str] | None = None) -> int:
     seconds = dict(inputs.seconds)
     start = time.perf_counter()
     with inference_precision(args.precision):
-        tokens, head_source = _dance(args, module, inputs, long_form)
+        tokens, head_source = _dance(args, module, inputs, long_form, sampling)
     seconds["sampling"] = time.perf_counter() - start
     start = time.perf_counter()
     out = Path(args.out)
     out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
     width, height = args.render_size
-    if out.suffix.lower() != ".npz":
-        record_outputs(out_dir, "sm dance", dance_files(name, not args.no_render))
-    files = write_dance(
-        tokens,
-        out_dir,
-        name,
-        music=inputs.music_path,
-        music_start_s=inputs.music_start_s,
-        render=not args.no_render,
-        style=RenderStyle(width=width, height=height),
-        title=f"EMM {Path(args.ckpt).name}",
-        progress=args.progress,
-        fps=fps,
-    )
+    into_folder = out.suffix.lower() != ".npz"
+    with (
+        writing_outputs(out_dir, "sm dance", dance_files(name, not args.no_render))
+        if into_folder
+        else nullcontext()
+    ):
+        files = write_dance(
+            tokens,
+            out_dir,
+            name,
+            music=inputs.music_path,
+            music_start_s=inputs.music_start_s,
+            render=not args.no_render,
+            style=RenderStyle(width=width, height=height),
+            title=f"EMM {Path(args.ckpt).name}",
+            progress=args.progress,
+            fps=fps,
+        )
     seconds["writing"] = time.perf_counter() - start
     duration = tokens.shape[0] / fps
     guidance = {

@@ -13,6 +13,7 @@ The head targets are then chosen by :func:`.long_form.head_targets`.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ from skeleton_mamba.tasks.egodance.long_form import LongForm
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for, scale_intrinsics
+from skeleton_mamba.tasks.motion.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.value_checks import load_npz
@@ -128,22 +130,28 @@ def track_inputs(
     the video's part, and a warning says so before the decoding starts.
     """
     fps = float(module.hparams.fps)
-    start = time.perf_counter()
-    features = torch.from_numpy(extract_music_features(music, fps=fps).features.astype(np.float32))
-    seconds = {"music features": time.perf_counter() - start}
-    if model.vision_encoder is None:
-        return DanceInputs(features, None, music_path=music, seconds=seconds)
-    if not video:
+    music_s = probe_audio(music).duration_s  # the header's checks first; nan: a stream of unknown length
+    if model.vision_encoder is not None and not video:
         raise InputError(f"the model conditions on egocentric video: pass --video with --music {music}")
-    header = video_header(video)
-    covered = header.frames_at(fps)
+    header = video_header(video) if model.vision_encoder is not None else None
+    covered = None if header is None else header.frames_at(fps)
+    music_frames = None if math.isnan(music_s) else 1 + int(music_s * fps)  # centred frames, as analysed
+    start = time.perf_counter()
+    # only the music the video covers is analysed (a second more: a header can be off by a frame)
+    longer = covered is not None and music_frames is not None and music_frames - covered > 1
+    duration = covered / fps + 1.0 if longer else None
+    analysis = extract_music_features(music, fps=fps, duration_s=duration)
+    features = torch.from_numpy(analysis.features.astype(np.float32))
+    seconds = {"music features": time.perf_counter() - start}
+    if header is None:
+        return DanceInputs(features, None, music_path=music, seconds=seconds)
     if header.fps is not None and abs(header.fps - fps) > 1e-3 * fps:
         print(f"sm dance: {video}: a {header.fps:g} fps video, taken at the model's {fps:g} fps "
               "(frames dropped or repeated)", file=sys.stderr)  # fmt: skip
-    if covered is not None and len(features) - covered > 1:  # one frame of rounding is no news
+    if longer:  # one frame of rounding is no news
         print(
             f"sm dance: warning: the video has {covered} frames ({covered / fps:.1f} s at {fps:g} fps), the "
-            f"music {len(features)} ({len(features) / fps:.1f} s); the dance covers the first "
+            f"music {music_frames} ({music_frames / fps:.1f} s); the dance covers the first "
             f"{covered / fps:.1f} s, where both are (pass a video as long as the music for the whole track)",
             file=sys.stderr,
         )

@@ -49,6 +49,8 @@ __all__ = [
 
 MAX_IMAGE_PIXELS = 40_000_000  # an image or video frame: 8K UHD (7680x4320 = 33.2 MP) fits
 DECODE_CHUNK = 16  # frames decoded at the source resolution before they are resized
+CHUNK_PIXELS = 16 * 1280 * 720  # at most this many source pixels per chunk (16 HD frames; one 8K frame):
+# a chunk is held as uint8 and as float before it is resized, 13 bytes a pixel (about 190 MB here)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 
 
@@ -95,8 +97,8 @@ def read_image(path: str | Path) -> np.ndarray:
 
 
 def _to_chunk(images: list[np.ndarray], size: int | tuple[int, int]) -> torch.Tensor:
-    rgb = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2)
-    return resize_frames(rgb.float() / 255.0, size)
+    rgb = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2).contiguous()  # uint8: the cheap copy
+    return resize_frames(rgb.float().div_(255.0), size)  # one float copy of the chunk, scaled in place
 
 
 @dataclass(frozen=True)
@@ -203,6 +205,8 @@ def iter_video_frames(
 ) -> Iterator[torch.Tensor]:
     """Chunks (n <= ``chunk``, 3, S_h, S_w) float in [0, 1] of a video file or a folder of images
     (sorted by name), resized with :func:`resize_frames` as they are read; at most ``max_frames`` frames.
+    A chunk holds at most :data:`CHUNK_PIXELS` source pixels (fewer frames of a large video), so memory
+    does not grow with the frame size beyond one frame.
     ``fps``: take a video file at this rate (frames dropped or repeated, :func:`_at_rate`, when its header
     says another; an image folder's frames are taken as they are).
 
@@ -230,6 +234,7 @@ def iter_video_frames(
             break
         if shape is None:
             shape = frame.shape
+            chunk = max(1, min(chunk, CHUNK_PIXELS // (shape[0] * shape[1])))
         elif frame.shape != shape:
             raise InputError(f"{path}: frame {count} is {frame.shape[1]}x{frame.shape[0]}, the first "
                              f"{shape[1]}x{shape[0]}")  # fmt: skip

@@ -200,6 +200,7 @@ class EgoDanceModule(BackboneModule):
         self.weights = config_from(KinematicLossWeights, kinematic)
         self.optimizer_options = config_from(OptimizerOptions, optimizer)
         self.sampling = config_from(DanceSampling, sampling)
+        self.sampling.check_steps(diffusion_steps)  # the step count against T, when the module is made
         self.head_guidance = config_from(HeadGuidance, head_guidance)
         estimator_config = config_from(HeadEstimatorConfig, head_estimator)
         self.evaluation = config_from(EvaluationOptions, evaluation)

@@ -28,6 +28,7 @@ import numpy as np
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
 from skeleton_mamba.tasks.motion.music import (
     DANCE_BPM_RANGE,
     ENVELOPE,
@@ -86,8 +87,8 @@ def _analyse(args: argparse.Namespace):
     Raises:
         InputError: the audio cannot be analysed (the one-line message names the file).
     """
-    import librosa  # lazy: librosa's import is slow (numba)
-
+    with librosa_calls() as librosa:  # its exception class (and the import under the compile lock)
+        parameter_error = librosa.util.exceptions.ParameterError
     try:
         with warnings.catch_warnings():  # librosa's CQT notes, overflow warnings: errors are one line
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -101,7 +102,7 @@ def _analyse(args: argparse.Namespace):
             )
     except (FileNotFoundError, ValueError) as err:  # messages name the file
         raise InputError(str(err)) from err
-    except librosa.util.exceptions.ParameterError as err:
+    except parameter_error as err:
         # decoded, then overflowed inside the analysis: samples far outside [-1, 1] (e.g. 1e30)
         raise InputError(
             f"{args.file}: samples out of range, the analysis overflows ({err}); audio lies in [-1, 1]"

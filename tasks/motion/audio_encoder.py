@@ -27,6 +27,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
+from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
 from skeleton_mamba.tasks.motion.music import load_audio
 
 __all__ = ["PretrainedAudioEncoder", "resample_frames"]
@@ -149,11 +150,10 @@ class PretrainedAudioEncoder(nn.Module):
 
     def encode(self, audio: np.ndarray, sr: int, num_frames: int | None = None) -> torch.Tensor:
         """Embed ``(N,)`` audio at any sample rate (resampled with librosa first)."""
-        import librosa  # lazy: librosa's import is slow (numba)
-
         audio = np.asarray(audio, dtype=np.float32)
         if sr != self.sampling_rate:
-            audio = librosa.resample(audio, orig_sr=sr, target_sr=self.sampling_rate)
+            with librosa_calls() as librosa:
+                audio = librosa.resample(audio, orig_sr=sr, target_sr=self.sampling_rate)
         return self(audio, num_frames)
 
     def encode_file(

@@ -11,25 +11,31 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Callable
 
 from skeleton_mamba.precision_names import PRECISION_HELP, PRECISIONS
+from skeleton_mamba.size_bounds import SIZE_BOUNDS
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import real_option
 
 __all__ = [
     "SAMPLERS",
+    "SOLVER_NAMES",
     "CommandParser",
     "ExamplesHelpFormatter",
     "SmHelpFormatter",
     "add_precision_argument",
     "add_quiet_argument",
     "add_sampling_arguments",
+    "checked_sampling",
     "command_parser",
     "progress_default",
     "sampling_overrides",
 ]
 
 SAMPLERS = ("ddim", "ddpm", "dpmpp", "unipc")  # the diffusion samplers (tasks/training/diffusion/sampling.py)
+MAX_SAMPLING_STEPS = SIZE_BOUNDS["sampling_steps"]
+SOLVER_NAMES = ("dpmpp", "unipc")  # those of them that are multistep ODE solvers (diffusion/solvers.py)
 
 
 class SmHelpFormatter(argparse.HelpFormatter):
@@ -74,14 +80,25 @@ class CommandParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.input_paths: list[argparse.Action] = []
+        self.checks: list[Callable[[argparse.Namespace], str | None]] = []
 
     def input_path(self, action: argparse.Action) -> argparse.Action:
         """Mark ``action`` (what ``add_argument`` returned) as an input file or folder that must exist."""
         self.input_paths.append(action)
         return action
 
+    def check(self, problem: Callable[[argparse.Namespace], str | None]) -> None:
+        """Add a check of options against each other (``--overlap`` against ``--window``): ``problem``
+        returns why the parsed options do not go together, or None; refused once the command line is parsed,
+        before the input files are checked (an :class:`~.errors.InputError`, exit 2)."""
+        self.checks.append(problem)
+
     def parse_known_args(self, args=None, namespace=None):
         namespace, extras = super().parse_known_args(args, namespace)
+        for problem in self.checks:
+            message = problem(namespace)
+            if message is not None:
+                raise InputError(message)
         for action in self.input_paths:
             value = getattr(namespace, action.dest, None)
             if value is not None and value != "-" and not os.path.exists(value):
@@ -156,6 +173,9 @@ def _steps(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a number of sampling steps, got {text!r}") from None
     if steps < 1:
         raise argparse.ArgumentTypeError(f"expected at least 1 sampling step, got {steps}")
+    if steps > MAX_SAMPLING_STEPS:  # no model has more diffusion steps (the loaded model's: checked_sampling)
+        limit = f"{MAX_SAMPLING_STEPS:,}"
+        raise argparse.ArgumentTypeError(f"expected at most {limit} sampling steps, got {steps}")
     return steps
 
 
@@ -188,6 +208,28 @@ def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
 def sampling_overrides(args: argparse.Namespace) -> dict:
     """The keyword arguments of ``SamplingOptions.override`` that ``args`` gives."""
     return dict(sampler=args.sampler, sampling_steps=args.steps, eta=args.eta, guidance_weight=args.guidance)
+
+
+def checked_sampling(args: argparse.Namespace, stored, num_steps: int, source: str):
+    """The sampling a command runs: the checkpoint's ``stored`` ``SamplingOptions`` with the options of
+    ``args`` (:func:`sampling_overrides`), checked against the loaded model's ``num_steps`` diffusion steps
+    (``SamplingOptions.steps_problem``) right after the checkpoint loads, before any input is read.
+
+    Raises:
+        InputError: naming the option at fault (``--steps``, or ``--sampler`` with its default step count)
+            or, when no option set the step count, the checkpoint ``source`` and its ``sampling_steps``.
+    """
+    sampling = stored.override(**sampling_overrides(args))
+    problem = sampling.steps_problem(num_steps)
+    if problem is None:
+        return sampling
+    if args.steps is not None:
+        raise InputError(f"--steps {args.steps}: {problem}")
+    if args.sampler is not None and sampling.sampling_steps != stored.sampling_steps:
+        where = f"--sampler {args.sampler} (its default {sampling.sampling_steps} steps)"
+    else:
+        where = f"{source}: its sampling_steps {sampling.sampling_steps}"
+    raise InputError(f"{where}: {problem}; choose the count with --steps")
 
 
 def add_precision_argument(parser: argparse.ArgumentParser, measured: str) -> None:

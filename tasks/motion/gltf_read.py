@@ -7,9 +7,10 @@ channels, one key per frame (``LINEAR`` or ``STEP``; every channel on the same k
 which give the frame rate). glTF lengths are metres.
 
 Everything is checked before use, naming the file: the file size (:data:`MAX_GLB_BYTES`), that every index
-points inside its table, that accessors lie inside their buffer views and the binary chunk, float32 values,
-finite numbers, a joint tree without cycles, and a frame rate in the toolkit's range. Anything else (a
-cubic-spline or morph-target animation, a node matrix or scale, a skin-less file) is refused on one line.
+points inside its table, the layout of every accessor and buffer view by glTF 2.0's rules as the Khronos
+validator applies them (:func:`check_layout`), float32 values, finite numbers, a joint tree without cycles,
+and a frame rate in the toolkit's range. Anything else (a cubic-spline or morph-target animation, a node
+matrix or scale, a skin-less file) is refused on one line.
 """
 
 from __future__ import annotations
@@ -28,10 +29,14 @@ from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
 from skeleton_mamba.tasks.motion.units import METRES
 from skeleton_mamba.tasks.motion.value_checks import check_fps, non_finite_message
 
-__all__ = ["GltfError", "MAX_GLB_BYTES", "read_glb"]
+__all__ = ["GltfError", "MAX_GLB_BYTES", "check_layout", "read_glb"]
 
 MAX_GLB_BYTES = 1 << 30
 _WIDTH = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+# glTF 2.0's accessor types (components per element) and component types (bytes per component)
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_MAX_STRIDE = 252  # bufferView.byteStride: 4 to 252, a multiple of 4
 _DEFAULT_FPS = 30.0  # a single-key animation carries no spacing: ``asset.extras.fps`` or this
 
 
@@ -52,24 +57,122 @@ class _Reader:
         return value
 
     def accessor(self, index, kind: str) -> np.ndarray:
-        """(count, width) float64 values of float32 accessor ``index`` of type ``kind``."""
+        """(count, width) float64 values of float32 accessor ``index`` of type ``kind`` (its layout checked
+        by :func:`check_layout` before anything is read)."""
         acc = self.gltf.accessors[self.index(index, self.gltf.accessors, "accessor")]
         if acc.type != kind or acc.componentType != pygltflib.FLOAT or acc.sparse is not None:
             found = f"{acc.componentType} {acc.type}"
             raise self.fail(f"accessor {index}: expected dense float {kind}, got {found}")
-        view = self.gltf.bufferViews[self.index(acc.bufferView, self.gltf.bufferViews, "bufferView")]
+        view = self.gltf.bufferViews[acc.bufferView]
         width = _WIDTH[kind]
-        if view.byteStride not in (None, 4 * width) or view.buffer != 0:
-            raise self.fail(f"accessor {index}: interleaved or external buffer views are not read")
+        if view.byteStride not in (None, 4 * width):
+            raise self.fail(f"accessor {index}: interleaved buffer views (byteStride) are not read")
         start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-        size = 4 * width * int(acc.count)
-        if acc.count < 1 or (acc.byteOffset or 0) + size > view.byteLength or start + size > len(self.blob):
-            raise self.fail(f"accessor {index}: {acc.count} values do not fit in the binary chunk")
         values = np.frombuffer(self.blob, "<f4", acc.count * width, start).reshape(acc.count, width)
         message = non_finite_message(values, f"accessor {index}")
         if message is not None:
             raise self.fail(message)
         return values.astype(np.float64)
+
+
+def _natural(value, low: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= low
+
+
+def _element_bytes(kind: str, component: int) -> int:
+    """Bytes of one element; a matrix's columns start on 4-byte boundaries (MAT2 / MAT3 of 1- or 2-byte
+    components are padded)."""
+    size = _COMPONENT_BYTES[component]
+    if kind in ("MAT2", "MAT3"):
+        rows = 2 if kind == "MAT2" else 3
+        return rows * -(-rows * size // 4) * 4
+    return _COMPONENTS[kind] * size
+
+
+def check_layout(r: _Reader) -> None:
+    """glTF 2.0's layout rules, as the Khronos glTF validator applies them, for every buffer, buffer view and
+    accessor of the file, before any value is read (a refusal names the file and the accessor, or the
+    buffer view no accessor uses):
+
+    - a buffer: ``byteLength >= 1``; the GLB's own buffer (no ``uri``) within its BIN chunk, which is at most
+      3 bytes of padding longer; a buffer with a ``uri`` (an external file) is not read;
+    - a buffer view: ``byteOffset >= 0``, ``byteLength >= 1``, inside its buffer; ``byteStride``, when
+      given, 4 to 252 and a multiple of 4;
+    - an accessor: a known ``type`` and ``componentType``; ``count >= 1``; ``byteOffset >= 0`` and a
+      multiple of the component size, as is its total offset in the buffer; a view's ``byteStride`` at
+      least one element; its elements inside its buffer view (``byteOffset + stride * (count - 1) +
+      element size <= byteLength``).
+    """
+    gltf = r.gltf
+    for b, buffer in enumerate(gltf.buffers):
+        if not _natural(buffer.byteLength, 1):
+            raise r.fail(f"buffer {b}: byteLength {buffer.byteLength!r} must be an integer >= 1")
+        if buffer.uri is not None:
+            raise r.fail(f"buffer {b}: an external buffer ({buffer.uri!r}) is not read (the GLB's own only)")
+        if b == 0 and not buffer.byteLength <= len(r.blob) <= buffer.byteLength + 3:
+            raise r.fail(f"buffer 0: byteLength {buffer.byteLength:,} does not match the binary chunk's "
+                         f"{len(r.blob):,} bytes (at most 3 bytes of padding)")  # fmt: skip
+    if len(gltf.buffers) > 1:
+        raise r.fail(
+            f"{len(gltf.buffers)} buffers: a GLB holds one without a uri (buffer 0), and no other is read"
+        )
+    used: set[int] = set()
+    for a, acc in enumerate(gltf.accessors):
+        if acc.bufferView is None:
+            raise r.fail(f"accessor {a}: no bufferView (its values would all be zeros): not read")
+        view = r.index(acc.bufferView, gltf.bufferViews, f"accessor {a}: bufferView")
+        used.add(view)
+        _check_view(r, view, f"accessor {a}: bufferView {view}")
+        _check_accessor(r, a, acc, gltf.bufferViews[view])
+    for v in range(len(gltf.bufferViews)):
+        if v not in used:
+            _check_view(r, v, f"bufferView {v}")
+
+
+def _check_view(r: _Reader, index: int, where: str) -> None:
+    view = r.gltf.bufferViews[index]
+    buffer = r.index(view.buffer, r.gltf.buffers, f"{where}: buffer")
+    offset = 0 if view.byteOffset is None else view.byteOffset
+    if not _natural(offset, 0):
+        raise r.fail(f"{where}: byteOffset {offset!r} must be an integer >= 0")
+    if not _natural(view.byteLength, 1):
+        raise r.fail(f"{where}: byteLength {view.byteLength!r} must be an integer >= 1")
+    size = r.gltf.buffers[buffer].byteLength
+    if offset + view.byteLength > size:
+        raise r.fail(f"{where}: bytes {offset:,} to {offset + view.byteLength:,} lie outside buffer {buffer} "
+                     f"({size:,} bytes)")  # fmt: skip
+    stride = view.byteStride
+    if stride is not None and (not _natural(stride, 4) or stride > _MAX_STRIDE or stride % 4):
+        raise r.fail(f"{where}: byteStride {stride!r} must be a multiple of 4 from 4 to {_MAX_STRIDE}")
+
+
+def _check_accessor(r: _Reader, index: int, acc, view) -> None:
+    where = f"accessor {index}"
+    if acc.type not in _COMPONENTS or acc.componentType not in _COMPONENT_BYTES:
+        raise r.fail(f"{where}: type {acc.type!r} of componentType {acc.componentType!r} is not glTF 2.0's")
+    if not _natural(acc.count, 1):
+        raise r.fail(f"{where}: count {acc.count!r} must be an integer >= 1")
+    offset = 0 if acc.byteOffset is None else acc.byteOffset
+    if not _natural(offset, 0):
+        raise r.fail(f"{where}: byteOffset {offset!r} must be an integer >= 0")
+    component = _COMPONENT_BYTES[acc.componentType]
+    if offset % component:
+        raise r.fail(
+            f"{where}: byteOffset {offset} is not a multiple of its component size ({component} bytes)"
+        )
+    total = (view.byteOffset or 0) + offset
+    if total % component:
+        raise r.fail(f"{where}: its offset in the buffer ({total}: bufferView {acc.bufferView}'s byteOffset "
+                     f"+ its own) is not a multiple of its component size ({component} bytes)")  # fmt: skip
+    element = _element_bytes(acc.type, acc.componentType)
+    stride = element if view.byteStride is None else view.byteStride
+    if stride < element:
+        raise r.fail(f"{where}: bufferView {acc.bufferView}'s byteStride {stride} is less than one element "
+                     f"({element} bytes)")  # fmt: skip
+    needed = offset + stride * (acc.count - 1) + element
+    if needed > view.byteLength:
+        raise r.fail(f"{where}: {acc.count} values do not fit in bufferView {acc.bufferView} (they need "
+                     f"bytes {offset:,} to {needed:,} of its {view.byteLength:,})")  # fmt: skip
 
 
 def _load(path: Path) -> tuple[pygltflib.GLTF2, bytes]:
@@ -108,6 +211,7 @@ def read_glb(path: str | PathLike[str]) -> SkeletonMotion:
     path = Path(path)
     gltf, blob = _load(path)
     r = _Reader(path, gltf, blob)
+    check_layout(r)  # every accessor and buffer view, before any value is read
     if not gltf.skins:
         raise r.fail("holds no skin: not a skeleton motion (sm export writes one skinned skeleton)")
     joints = [r.index(n, gltf.nodes, "skin joint node") for n in gltf.skins[0].joints or []]

@@ -1,38 +1,110 @@
-"""An inter-process lock around librosa analyses.
+"""librosa's numba kernels: a cache folder of the project's own, compiled one process at a time.
 
-librosa compiles its numba kernels on first use, per argument types, and caches them next to its own
-code (``cache=True``). Two processes compiling at once (pytest-xdist workers, DataLoader workers,
-several ``sm`` runs on a fresh install) can read each other's half-written cache and crash with a
-segmentation fault (reproduced here with two processes on a fresh virtual environment). Which kernels
-a call compiles depends on its path (the tempo estimate runs only without a tempo prior), so every
-analysis runs under an exclusive file lock: analyses of different processes are serialized (an
-analysis' time: ``benchmarks/README.md``, "Toolkit"; results are cached on disk by :mod:`.cache`). Where
-``fcntl`` is missing (Windows) the lock is a no-op.
+librosa compiles its numba kernels (at import for those with explicit signatures, else on first use, per
+argument types) and caches them on disk (``cache=True``), by default next to its own code, where every
+program of the environment shares them. Two processes compiling at once (two ``sm`` runs, pytest-xdist
+or DataLoader workers, ``sm`` beside another program using librosa) can read each other's half-written
+cache files; the cache they leave can make every later analysis in that environment die with a
+segmentation fault and no message (``peak_pick``, ``piptrack``) until the files are deleted. So:
+
+- :func:`librosa_calls` points numba's cache at :func:`numba_cache_dir` (``<cache root>/numba``, see
+  :func:`~.cache.default_cache_root`), unless the user set ``NUMBA_CACHE_DIR``, before librosa (and numba)
+  is first imported; no other program writes there;
+- it imports librosa and runs the block holding an exclusive file lock (:func:`lock_path`, in that
+  folder), so the project's analyses in different processes compile, load and run their kernels one at a
+  time (an analysis' time: ``benchmarks/README.md``, "Toolkit"; results are cached on disk by
+  :mod:`.cache`). Every librosa call of the project runs inside it. Where ``fcntl`` is missing (Windows)
+  the lock is a no-op.
 """
 
 from __future__ import annotations
 
-import tempfile
+import os
+import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib import metadata
 from pathlib import Path
+from types import ModuleType
 
-__all__ = ["LOCK_PATH", "librosa_lock"]
+from skeleton_mamba.tasks.motion.cache import default_cache_root
 
-LOCK_PATH = Path(tempfile.gettempdir()) / "skeleton_mamba_librosa_jit.lock"
+__all__ = [
+    "NUMBA_CACHE_ENV",
+    "librosa_calls",
+    "librosa_lock",
+    "librosa_version",
+    "lock_path",
+    "numba_cache_dir",
+]
+
+NUMBA_CACHE_ENV = "NUMBA_CACHE_DIR"
+_LOCK_NAME = ".skeleton_mamba_compile.lock"
+_held = threading.local()  # this thread's depth of nested librosa_lock blocks
+
+
+def numba_cache_dir() -> Path:
+    """The folder numba caches librosa's kernels in: the user's ``NUMBA_CACHE_DIR`` if set, else the
+    project's own ``<cache root>/numba``."""
+    env = os.environ.get(NUMBA_CACHE_ENV)
+    return Path(env).expanduser() if env else default_cache_root() / "numba"
+
+
+def lock_path() -> Path:
+    """The lock file every librosa call of the project holds (inside :func:`numba_cache_dir`)."""
+    return numba_cache_dir() / _LOCK_NAME
+
+
+def _point_numba_cache() -> None:
+    """Set ``NUMBA_CACHE_DIR`` to :func:`numba_cache_dir` unless the user set it (numba reads it when
+    imported; an already imported numba is told to read it again)."""
+    if os.environ.get(NUMBA_CACHE_ENV):
+        return
+    os.environ[NUMBA_CACHE_ENV] = str(numba_cache_dir())
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
+        config.reload_config()
 
 
 @contextmanager
 def librosa_lock() -> Iterator[None]:
-    """Hold :data:`LOCK_PATH` exclusively for the duration of the block."""
+    """Hold :func:`lock_path` exclusively for the duration of the block (numba's cache pointed at the
+    project's folder first); a block inside another of the same thread holds it already."""
+    _point_numba_cache()
+    depth = getattr(_held, "depth", 0)
     try:
         import fcntl  # lazy: POSIX only
     except ImportError:  # not POSIX
-        yield
-        return
-    with LOCK_PATH.open("a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+        fcntl = None
+    if depth or fcntl is None:
+        _held.depth = depth + 1
         try:
             yield
         finally:
+            _held.depth = depth
+        return
+    path = lock_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        _held.depth = 1
+        try:
+            yield
+        finally:
+            _held.depth = 0
             fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+@contextmanager
+def librosa_calls() -> Iterator[ModuleType]:
+    """``with librosa_calls() as librosa: ...``: librosa, imported and used under :func:`librosa_lock`."""
+    with librosa_lock():
+        import librosa  # lazy: librosa's import is slow (numba), and compiles kernels
+
+        yield librosa
+
+
+def librosa_version() -> str:
+    """The installed librosa's version (for cache keys), read without importing it."""
+    return metadata.version("librosa")

@@ -48,7 +48,7 @@ import soundfile
 
 from skeleton_mamba.tasks.motion.audio_io import probe_audio, read_audio
 from skeleton_mamba.tasks.motion.cache import FeatureCache
-from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
+from skeleton_mamba.tasks.motion.jit_lock import librosa_calls, librosa_version
 
 __all__ = [
     "BEAT",
@@ -66,7 +66,9 @@ __all__ = [
     "compute_music_features",
     "describe_audio_stack",
     "extract_music_features",
+    "features_from_frames",
     "fold_tempo",
+    "frame_features",
     "load_audio",
     "record_audio_stack",
     "tempo_from_beats",
@@ -184,16 +186,15 @@ def audio_stack() -> dict[str, str]:
     package behind it, ``"name version"``).
     """
 
-    import librosa  # lazy: librosa's import is slow (numba)
-
-    res_type = str(inspect.signature(librosa.resample).parameters["res_type"].default)
+    with librosa_calls() as librosa:
+        res_type = str(inspect.signature(librosa.resample).parameters["res_type"].default)
     package = _RESAMPLER_PACKAGES.get(res_type.split("_")[0], "unknown")
     try:
         package_version = metadata.version(package)
     except metadata.PackageNotFoundError:
         package_version = "not installed"
     return {
-        "librosa": librosa.__version__,
+        "librosa": librosa_version(),
         "numpy": np.__version__,
         "soundfile": soundfile.__version__,
         "libsndfile": str(soundfile.__libsndfile_version__),
@@ -217,12 +218,12 @@ def record_audio_stack(loggers) -> None:
         logger.log_hyperparams({"audio_stack": stack})
 
 
-def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
+def load_audio(path: str | os.PathLike, sr: int, duration_s: float | None = None) -> np.ndarray:
     """Mono float32 audio resampled to ``sr``, read by the one checked reader (:func:`.audio_io.read_audio`).
 
     Rates, channels and duration are checked against the bounds of :mod:`.audio_io` before decoding; the
     channels are averaged (as ``librosa.to_mono``) and the result resampled with librosa's default
-    resampler, as ``librosa.load(path, sr=sr)`` does.
+    resampler, as ``librosa.load(path, sr=sr)`` does. ``duration_s``: only the first seconds.
 
     Raises:
         FileNotFoundError: the file does not exist.
@@ -230,10 +231,11 @@ def load_audio(path: str | os.PathLike, sr: int) -> np.ndarray:
             bounds, holds no samples, or a sample is NaN, Inf or out of range (the message names the file
             and the time).
     """
-    import librosa  # lazy: librosa's import is slow (numba)
-
-    y, native_sr = read_audio(path, mono=True)
-    return y if native_sr == sr else librosa.resample(y, orig_sr=native_sr, target_sr=sr)  # as librosa.load
+    y, native_sr = read_audio(path, duration_s=duration_s, mono=True)
+    if native_sr == sr:
+        return y
+    with librosa_calls() as librosa:
+        return librosa.resample(y, orig_sr=native_sr, target_sr=sr)  # as librosa.load
 
 
 @dataclass
@@ -300,34 +302,75 @@ def compute_music_features(
     Returns:
         A :class:`MusicAnalysis` whose ``features`` are ``(1 + N // 512, 35)``.
     """
-    import librosa  # lazy: librosa's import is slow (numba)
-
     sr = int(fps) * HOP_LENGTH
     y = np.asarray(y, dtype=np.float32)
-    with librosa_lock():  # numba compiles on first use: see jit_lock.py
+    envelope, mfcc, chroma = frame_features(y, sr)
+    features = features_from_frames(envelope, mfcc, chroma, fps, start_bpm, tightness, bpm_range)
+    return MusicAnalysis.from_features(features, int(fps), len(y) / sr)
+
+
+def frame_features(y: np.ndarray, sr: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-frame parts of the feature of mono ``y`` at ``sr`` Hz (hop :data:`HOP_LENGTH`, centred):
+    onset envelope ``(T,)``, 20 MFCC ``(T, 20)``, 12 CENS chroma ``(T, 12)``."""
+    with librosa_calls() as librosa:  # numba compiles on first use: see jit_lock.py
         envelope = librosa.onset.onset_strength(y=y, sr=sr)  # (T,)
         mfcc = librosa.feature.mfcc(y=y, sr=sr, n_mfcc=20).T  # (T, 20)
         chroma = librosa.feature.chroma_cens(y=y, sr=sr, hop_length=HOP_LENGTH, n_chroma=12).T  # (T, 12)
+    t = min(len(envelope), len(mfcc), len(chroma))  # equal for centred frames; guard anyway
+    return envelope[:t], mfcc[:t], chroma[:t]
+
+
+def features_from_frames(
+    envelope: np.ndarray,
+    mfcc: np.ndarray,
+    chroma: np.ndarray,
+    fps: int,
+    start_bpm: float | None = None,
+    tightness: float = TIGHTNESS,
+    bpm_range: tuple[float, float] | None = None,
+    tempogram: np.ndarray | None = None,
+) -> np.ndarray:
+    """The ``(T, 35)`` feature from the per-frame parts (:func:`frame_features`): the onset peaks, the tempo
+    prior (when ``start_bpm`` is None) and the beats are found on the whole ``envelope``.
+
+    ``tempogram``: the envelope's tempogram averaged over time, ``(win, 1)``, when already computed
+    (:func:`~.music_windows.mean_tempogram`, in windows); librosa's tempo estimates then read it instead
+    of computing the whole ``(win, T)`` tempogram.
+    """
+    sr = int(fps) * HOP_LENGTH
+    with librosa_calls() as librosa:
+
+        def tempo(prior: float) -> float | None:
+            if tempogram is None:
+                return None  # beat_track estimates it from the envelope
+            found = librosa.feature.tempo(
+                tg=tempogram, sr=sr, hop_length=HOP_LENGTH, start_bpm=prior, aggregate=None
+            )
+            return float(found[0])
+
         peak_idxs = librosa.onset.onset_detect(
             onset_envelope=envelope.flatten(), sr=sr, hop_length=HOP_LENGTH
         )
-        peak_onehot = np.zeros_like(envelope, dtype=np.float32)
-        peak_onehot[peak_idxs] = 1.0
         if start_bpm is None:
-            estimate = float(librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0])
+            estimate = tempo(120.0)
+            if estimate is None:
+                estimate = float(
+                    librosa.feature.tempo(onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH)[0]
+                )
             if not estimate > 0:  # no periodicity at all (silence): librosa's default prior
                 estimate = 120.0
             start_bpm = estimate if bpm_range is None else fold_tempo(estimate, bpm_range)
         _, beat_idxs = librosa.beat.beat_track(
-            onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH, start_bpm=start_bpm, tightness=tightness
-        )
+            onset_envelope=envelope, sr=sr, hop_length=HOP_LENGTH, start_bpm=start_bpm, tightness=tightness,
+            bpm=tempo(start_bpm),
+        )  # fmt: skip
+    peak_onehot = np.zeros_like(envelope, dtype=np.float32)
+    peak_onehot[peak_idxs] = 1.0
     beat_onehot = np.zeros_like(envelope, dtype=np.float32)
     beat_onehot[beat_idxs] = 1.0
-    t = min(len(envelope), len(mfcc), len(chroma))  # equal for centred frames; guard anyway
-    features = np.concatenate(
-        [envelope[:t, None], mfcc[:t], chroma[:t], peak_onehot[:t, None], beat_onehot[:t, None]], axis=-1
+    return np.concatenate(
+        [envelope[:, None], mfcc, chroma, peak_onehot[:, None], beat_onehot[:, None]], axis=-1
     ).astype(np.float32)
-    return MusicAnalysis.from_features(features, int(fps), len(y) / sr)
 
 
 def extract_music_features(
@@ -338,8 +381,13 @@ def extract_music_features(
     bpm_range: tuple[float, float] | None = None,
     cache_dir: str | os.PathLike | None = None,
     use_cache: bool = True,
+    duration_s: float | None = None,
 ) -> MusicAnalysis:
     """Load an audio file and compute (or fetch from the cache) its 35-d features.
+
+    A track (or its first ``duration_s`` seconds) longer than
+    :data:`~.music_windows.LONG_TRACK_S` is analysed in windows (:mod:`.music_windows`): memory does
+    not grow with its length.
 
     Args:
         path: audio file.
@@ -350,8 +398,13 @@ def extract_music_features(
         bpm_range: fold an estimated prior into this octave (``None``, default: as detected).
         cache_dir: cache folder (default ``~/.cache/skeleton_mamba/music``).
         use_cache: ``False`` always recomputes and writes nothing.
+        duration_s: analyse only the first seconds (``None``: the whole track).
     """
-    import librosa  # lazy: librosa's import is slow (numba)
+    from skeleton_mamba.tasks.motion.music_windows import (
+        LONG_TRACK_S,
+        mean_tempogram,
+        windowed_frame_features,
+    )
 
     if fps <= 0 or int(fps) != fps:
         raise ValueError(f"fps must be a positive integer, got {fps}")
@@ -363,6 +416,10 @@ def extract_music_features(
     info = probe_audio(path)
     if start_bpm is None:
         start_bpm = aist_start_bpm(path.name)
+    if duration_s is not None and not duration_s > 0:
+        raise ValueError(f"duration_s must be positive, got {duration_s}")
+    length_s = info.duration_s if duration_s is None else min(info.duration_s, duration_s)
+    windowed = length_s > LONG_TRACK_S
     settings = {
         "kind": "fact35",
         "version": _CACHE_VERSION,
@@ -370,14 +427,21 @@ def extract_music_features(
         "start_bpm": start_bpm,
         "tightness": tightness,
         "bpm_range": None if bpm_range is None else list(bpm_range),
-        "librosa": librosa.__version__,
+        "librosa": librosa_version(),
+        **({} if duration_s is None else {"duration_s": float(duration_s)}),
+        **({"windows": "music_windows-1"} if windowed else {}),
     }
     cache = FeatureCache("music", cache_dir, enabled=use_cache)
     key = cache.key(path, settings)
     features = cache.load(key)
     if features is None or features.ndim != 2 or features.shape[1] != NUM_MUSIC_FEATURES:
-        y = load_audio(path, fps * HOP_LENGTH)
-        features = compute_music_features(y, fps, start_bpm, tightness, bpm_range).features
+        if windowed:
+            frames = windowed_frame_features(path, fps, duration_s)
+            tempogram = mean_tempogram(frames[0], fps)
+            features = features_from_frames(*frames, fps, start_bpm, tightness, bpm_range, tempogram)
+        else:
+            y = load_audio(path, fps * HOP_LENGTH, duration_s)
+            features = compute_music_features(y, fps, start_bpm, tightness, bpm_range).features
         cache.store(key, features)
     # The header duration, identical on hits and misses (the decoded length can differ by a few samples).
-    return MusicAnalysis.from_features(features, fps, info.duration_s)
+    return MusicAnalysis.from_features(features, fps, length_s)

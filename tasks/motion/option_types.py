@@ -20,9 +20,11 @@ __all__ = [
     "MAX_IMAGE_SIZE",
     "MAX_SEED",
     "MAX_WORKERS",
+    "file_name_option",
     "fps_option",
     "image_size_option",
     "int_option",
+    "is_plain_name",
     "real_option",
     "seed_option",
 ]
@@ -90,3 +92,19 @@ def image_size_option(text: str) -> tuple[int, int]:
             f"expected sides of 1 to {MAX_IMAGE_SIZE} pixels, got {width}x{height}"
         )
     return width, height
+
+
+def is_plain_name(name: str) -> bool:
+    """Whether ``name`` names an entry inside a folder: not empty, not ``.`` or ``..``, no folder separator
+    (``/``, ``\\``) and no NUL."""
+    return bool(name) and name not in (".", "..") and not any(c in name for c in ("/", "\\", "\0"))
+
+
+def file_name_option(text: str) -> str:
+    """An argparse ``type`` for a file name (``--name``): a plain name (:func:`is_plain_name`), so what a
+    command writes stays inside its output folder."""
+    if not is_plain_name(text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: must be a plain file name (no '/', '\\' or '..'); choose the folder with --out"
+        )
+    return text

@@ -29,7 +29,7 @@ import numpy as np
 import soundfile as sf
 
 from skeleton_mamba.tasks.motion.cache import FeatureCache
-from skeleton_mamba.tasks.motion.jit_lock import librosa_lock
+from skeleton_mamba.tasks.motion.jit_lock import librosa_calls, librosa_version
 from skeleton_mamba.tasks.motion.music import (
     BEAT,
     HOP_LENGTH,
@@ -69,15 +69,13 @@ def bailando_beats(
     path: str | os.PathLike, cache_dir: str | os.PathLike | None = None, use_cache: bool = True
 ) -> np.ndarray:
     """Beat frames (60 fps) of the whole track from the HPSS-percussive onset envelope (Bailando's recipe)."""
-    import librosa  # lazy: librosa's import is slow (numba)
-
     cache = FeatureCache("music", cache_dir, enabled=use_cache)
-    key = cache.key(path, {"kind": "bailando_beats", "version": _VERSION, "librosa": librosa.__version__})
+    key = cache.key(path, {"kind": "bailando_beats", "version": _VERSION, "librosa": librosa_version()})
     onehot = cache.load(key)
     if onehot is None or onehot.ndim != 1:
         sr = BAILANDO_FPS * HOP_LENGTH
         y = load_audio(path, sr)
-        with librosa_lock():
+        with librosa_calls() as librosa:
             _, percussive = librosa.effects.hpss(y)
             envelope = librosa.onset.onset_strength(y=percussive, aggregate=np.median, sr=sr)
             _, beats = librosa.beat.beat_track(onset_envelope=envelope, sr=sr)
@@ -112,12 +110,11 @@ def edge_start_bpm(slice_name: str) -> float | None:
 
 def _wav16_roundtrip(audio: np.ndarray, sr: int, target_sr: int) -> np.ndarray:
     """``sf.write`` of a slice as a (16-bit PCM) wav, then ``librosa.load(..., sr=target_sr)``, in memory."""
-    import librosa  # lazy: librosa's import is slow (numba)
-
     buffer = io.BytesIO()
     sf.write(buffer, audio, sr, format="WAV")  # soundfile's default wav subtype is PCM_16, as in EDGE
     buffer.seek(0)
-    y, _ = librosa.load(buffer, sr=target_sr)
+    with librosa_calls() as librosa:
+        y, _ = librosa.load(buffer, sr=target_sr)
     return y
 
 
@@ -133,19 +130,18 @@ def edge_slice_features(
     Slice ``i`` covers ``[start_s + 2.5 i, start_s + 2.5 i + 5)`` seconds; ``S = 0`` when less than 5 s of
     audio remains.
     """
-    import librosa  # lazy: librosa's import is slow (numba)
-
     path = Path(path)
     settings = {"kind": "edge_slices", "version": _VERSION, "start_s": float(start_s),
                 "duration_s": None if duration_s is None else float(duration_s),
-                "librosa": librosa.__version__}  # fmt: skip
+                "librosa": librosa_version()}  # fmt: skip
     cache = FeatureCache("music", cache_dir, enabled=use_cache)
     key = cache.key(path, settings)
     cached = cache.load(key)
     slice_shape = (EDGE_SLICE_FRAMES, NUM_MUSIC_FEATURES)
     if cached is not None and cached.ndim == 3 and cached.shape[1:] == slice_shape:
         return cached
-    native_sr = int(librosa.get_samplerate(path))
+    with librosa_calls() as librosa:
+        native_sr = int(librosa.get_samplerate(path))
     audio = load_audio(path, native_sr)
     audio = audio[int(start_s * native_sr) :]
     if duration_s is not None:
@@ -157,7 +153,7 @@ def edge_slice_features(
         y = _wav16_roundtrip(piece, native_sr, EDGE_FPS * HOP_LENGTH)
         bpm = edge_start_bpm(f"{path.stem}_slice{i}")
         if bpm is None:
-            with librosa_lock():
+            with librosa_calls() as librosa:
                 fallback = _wav16_roundtrip(piece, native_sr, _EDGE_FALLBACK_SR)
                 bpm = float(librosa.feature.tempo(y=fallback, sr=_EDGE_FALLBACK_SR)[0])
         features = compute_music_features(y, EDGE_FPS, start_bpm=bpm, bpm_range=None).features

@@ -30,7 +30,7 @@ from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.atomic import atomic_open, atomic_path
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
@@ -169,14 +169,14 @@ def stream_recognition(args: argparse.Namespace) -> int:
             probs.append(online.push(frame)[0].numpy())
             latency.append(1e3 * (time.perf_counter() - start))
     prob = np.stack(probs)
-    out = record_outputs(args.out, COMMAND, produced)
-    table = out / f"{name}_online.csv"
-    with atomic_open(table, "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(["frame", "top_class", *names])
-        for i, row in enumerate(prob):
-            writer.writerow([i, names[int(row.argmax())], *(f"{v:.6f}" for v in row)])
-    _plot(prob, names, out / f"{name}_online.png")
+    with writing_outputs(args.out, COMMAND, produced) as out:
+        table = out / f"{name}_online.csv"
+        with atomic_open(table, "w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f)
+            writer.writerow(["frame", "top_class", *names])
+            for i, row in enumerate(prob):
+                writer.writerow([i, names[int(row.argmax())], *(f"{v:.6f}" for v in row)])
+        _plot(prob, names, out / f"{name}_online.png")
     top = int(prob[-1].argmax())
     first = int(np.argmax(prob.argmax(axis=1) == top))
     lat = latency_summary(np.asarray(latency))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import add_precision_argument, command_parser
-from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, int_option
+from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, file_name_option, int_option
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.training.threads import THREADS_HELP
 
@@ -30,7 +30,9 @@ def build_parser() -> argparse.ArgumentParser:
         "(M, T, J, C) already in the model's input convention",
     )
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--name", default=None, help="file stem (default: the skeleton file's stem)")
+    p.add_argument(
+        "--name", type=file_name_option, default=None, help="file stem (default: the skeleton file's stem)"
+    )
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument(
         "--threads", type=int_option(1, MAX_WORKERS, "a thread count"), default=None, help=THREADS_HELP

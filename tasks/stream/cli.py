@@ -36,7 +36,7 @@ from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import dance_files, write_motion
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.stream.cli_args import build_parser
@@ -74,7 +74,14 @@ def stream_dance(args: argparse.Namespace) -> int:
     with inference_precision(args.precision):  # the warm-up frame too
         dancer = LiveDancer(model, source.sample_rate, compile=announce_compile(args.compile))
     report_compile(dancer.compile_seconds, args.compile)
-    record_outputs(out, "sm stream", produced)
+    with writing_outputs(out, "sm stream", produced):
+        return _dance_into(args, out, name, source, dancer)
+
+
+def _dance_into(
+    args: argparse.Namespace, out: Path, name: str, source: AudioSource, dancer: LiveDancer
+) -> int:
+    """Stream ``source`` through ``dancer``; write the dance, its video and report as ``name`` in ``out``."""
     # The music as received, for the video (a live input has no file of its own).
     recording = None if args.music != "-" else Path(tempfile.mkstemp(suffix=".wav", dir=out)[1])
     writer = None if recording is None else sf.SoundFile(recording, "w", source.sample_rate, 1, "PCM_16")

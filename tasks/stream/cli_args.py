@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import add_precision_argument, command_parser
-from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, image_size_option, int_option, real_option
+from skeleton_mamba.tasks.motion.option_types import (
+    MAX_WORKERS,
+    file_name_option,
+    image_size_option,
+    int_option,
+    real_option,
+)
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.training.threads import THREADS_HELP
 
@@ -43,7 +49,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
-    p.add_argument("--name", default=None, help="file stem (default: the music's / skeleton file's stem)")
+    p.add_argument(
+        "--name",
+        type=file_name_option,
+        default=None,
+        help="file stem (default: the music's / skeleton file's stem)",
+    )
     p.add_argument("--music", help="dance: audio file, or - for a WAV stream on standard input")
     p.add_argument(
         "--raw-rate",

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 import soxr
 
+from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
+
 __all__ = ["FPS", "HOP", "N_FFT", "NUM_FEATURES", "SR", "CausalMusicFeatures", "music_features"]
 
 FPS = 30
@@ -55,14 +57,13 @@ class CausalMusicFeatures:
     """
 
     def __init__(self, sample_rate: int = SR):
-        import librosa  # lazy: librosa's import is slow (numba)
-
         if sample_rate <= 0:
             raise ValueError(f"sample rate must be positive, got {sample_rate}")
         self.sample_rate = int(sample_rate)
-        self.window = librosa.filters.get_window("hann", N_FFT, fftbins=True).astype(np.float64)
-        self.mel = librosa.filters.mel(sr=SR, n_fft=N_FFT, n_mels=N_MELS)
-        self.chroma = librosa.filters.chroma(sr=SR, n_fft=N_FFT, tuning=0.0)
+        with librosa_calls() as librosa:
+            self.window = librosa.filters.get_window("hann", N_FFT, fftbins=True).astype(np.float64)
+            self.mel = librosa.filters.mel(sr=SR, n_fft=N_FFT, n_mels=N_MELS)
+            self.chroma = librosa.filters.chroma(sr=SR, n_fft=N_FFT, tuning=0.0)
         self.resampler = None
         if self.sample_rate != SR:
             self.resampler = soxr.ResampleStream(self.sample_rate, SR, 1, dtype="float32", quality="LQ")
@@ -94,15 +95,14 @@ class CausalMusicFeatures:
 
     def _features(self, frames: np.ndarray) -> np.ndarray:
         """(n, N_FFT) windows -> (n, 34) features; keeps the last log-mel frame for the onset flux."""
-        import librosa  # lazy: librosa's import is slow (numba)
-
         power = np.abs(np.fft.rfft(frames.astype(np.float64) * self.window, axis=1)) ** 2  # (n, 1025)
-        logmel = librosa.power_to_db(power @ self.mel.T, ref=1.0, top_db=None)  # (n, 128)
+        with librosa_calls() as librosa:
+            logmel = librosa.power_to_db(power @ self.mel.T, ref=1.0, top_db=None)  # (n, 128)
+            mfcc = librosa.feature.mfcc(S=logmel.T, n_mfcc=20).T  # (n, 20)
+            chroma = librosa.util.normalize(power @ self.chroma.T, norm=np.inf, axis=1)  # (n, 12)
         previous = logmel[:1] if self.previous_logmel is None else self.previous_logmel[None]
         flux = np.maximum(0.0, np.diff(np.concatenate([previous, logmel]), axis=0)).mean(axis=1)
         self.previous_logmel = logmel[-1]
-        mfcc = librosa.feature.mfcc(S=logmel.T, n_mfcc=20).T  # (n, 20)
-        chroma = librosa.util.normalize(power @ self.chroma.T, norm=np.inf, axis=1)  # (n, 12)
         rms = np.log(np.sqrt(np.mean(frames.astype(np.float64) ** 2, axis=1)) + 1e-5)
         return np.concatenate([flux[:, None], mfcc, chroma, rms[:, None]], axis=1).astype(np.float32)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import io
 import os
 import shutil
 import subprocess
@@ -31,6 +32,7 @@ __all__ = ["INTEGRITY", "LICENCE_FILE", "VERSION", "OrtWeb", "cache_dir", "read_
 VERSION = "1.31.1"
 INTEGRITY = "sha512-5GeH+bWQ+HxM10z7erGlsWqryrwMbSvm/1tkIsKTT48g0fI19VXVVC435t4t7VsPdSQeS7NmuZPXrQ73k82URw=="
 TARBALL = f"onnxruntime-web-{VERSION}.tgz"
+TARBALL_BYTES = 34_586_352  # the pinned tarball's size: anything else is refused before it is read
 MODULE = "package/dist/ort.wasm.bundle.min.mjs"
 WASM = "package/dist/ort-wasm-simd-threaded.wasm"
 GLUE = "package/dist/ort-wasm-simd-threaded.mjs"
@@ -55,8 +57,21 @@ def cache_dir() -> Path:
     return Path(root) / "onnxruntime-web"
 
 
-def _integrity(data: bytes) -> str:
-    return "sha512-" + base64.b64encode(hashlib.sha512(data).digest()).decode("ascii")
+def _integrity(digest: bytes) -> str:
+    """npm's integrity string of a SHA-512 ``digest``."""
+    return "sha512-" + base64.b64encode(digest).decode("ascii")
+
+
+def _read_hashed(path: Path, chunk: int = 1 << 20) -> tuple[bytes, bytes]:
+    """The bytes of ``path`` and their SHA-512 digest, hashed as they are read in chunks, never more than
+    :data:`TARBALL_BYTES` + one chunk (a file that grew after its size was checked is not read whole)."""
+    digest, parts, size = hashlib.sha512(), [], 0
+    with path.open("rb") as f:
+        while size <= TARBALL_BYTES and (part := f.read(chunk)):
+            digest.update(part)
+            parts.append(part)
+            size += len(part)
+    return b"".join(parts), digest.digest()
 
 
 def _npm_pack(folder: Path) -> Path:
@@ -87,11 +102,16 @@ def read_ort_web(tarball: str | os.PathLike[str] | None = None) -> OrtWeb:
         path = _npm_pack(path.parent)
     if not path.is_file():
         raise InputError(f"{path}: no such file (the npm tarball {TARBALL})")
-    data = path.read_bytes()
-    if _integrity(data) != INTEGRITY:
+    if path.stat().st_size != TARBALL_BYTES:
+        raise InputError(
+            f"{path}: not the npm tarball of onnxruntime-web {VERSION} ({path.stat().st_size} bytes, not "
+            f"{TARBALL_BYTES})"
+        )
+    data, digest = _read_hashed(path)
+    if len(data) != TARBALL_BYTES or _integrity(digest) != INTEGRITY:
         raise InputError(f"{path}: not the npm tarball of onnxruntime-web {VERSION} (its SHA-512 differs)")
     try:
-        with tarfile.open(path, "r:gz") as archive:
+        with tarfile.open(fileobj=io.BytesIO(data), mode="r:gz") as archive:
             module, wasm, glue = (archive.extractfile(archive.getmember(n)).read() for n in PAGE_FILES)
     except (KeyError, tarfile.TarError, OSError) as err:
         raise InputError(f"{path}: cannot read {MODULE}, {WASM} and {GLUE} from it ({err})") from err

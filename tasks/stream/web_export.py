@@ -30,7 +30,7 @@ from pathlib import Path
 
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.view import script_json
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
@@ -99,9 +99,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = claim_output_folder(args.out, "sm export-web", produced, overwrite=args.overwrite)
     dancer = load_module_from(StreamDanceModule, args.ckpt).model.eval()
     ort = read_ort_web(args.ort_web)  # checked before the export (a minute at the paper width)
-    record_outputs(out, "sm export-web", produced)
     print("sm export-web: exporting the dancer's step with its music front end ...", flush=True)
-    page, diff = write_web_page(dancer, out, ort, f"Skeleton Mamba dancer: {Path(args.ckpt).name}")
+    with writing_outputs(out, "sm export-web", produced, replaces=True):
+        page, diff = write_web_page(dancer, out, ort, f"Skeleton Mamba dancer: {Path(args.ckpt).name}")
     print(f"sm export-web: wrote {page} ({page.stat().st_size / 1e6:.1f} MB; onnxruntime vs eager max |diff| "
           f"{diff:.1e}); open it from disk or serve {out} (python -m http.server -d {out})")  # fmt: skip
     return 0

@@ -29,12 +29,12 @@ SVD), then the SMPL forward kinematics.
 
 from __future__ import annotations
 
-import librosa
 import numpy as np
 import onnxruntime
 import torch
 from torch import nn
 
+from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
 from skeleton_mamba.tasks.stream.features import HOP, N_FFT, N_MELS, SR, CausalMusicFeatures
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer, tokens_to_features
@@ -73,7 +73,8 @@ class MusicFrontEnd(nn.Module):
     def __init__(self) -> None:
         super().__init__()
         reference = CausalMusicFeatures(SR)  # the window and the filterbanks of the Python extractor
-        mfcc = librosa.feature.mfcc(S=np.eye(N_MELS), n_mfcc=NUM_MFCC)  # (20, 128): mfcc = M @ logmel
+        with librosa_calls() as librosa:
+            mfcc = librosa.feature.mfcc(S=np.eye(N_MELS), n_mfcc=NUM_MFCC)  # (20, 128): mfcc = M @ logmel
         self.register_buffer("hann", torch.tensor(reference.window, dtype=torch.float32))
         self.register_buffer("mel_basis", torch.tensor(reference.mel.T, dtype=torch.float32))
         self.register_buffer("chroma_basis", torch.tensor(reference.chroma.T, dtype=torch.float32))

@@ -26,18 +26,23 @@ import torch
 
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.cli_options import sampling_overrides
+from skeleton_mamba.tasks.motion.cli_options import checked_sampling, sampling_overrides
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, record_outputs
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.value_checks import non_finite_message
 from skeleton_mamba.tasks.text2motion.generate_args import build_parser
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from
 
-__all__ = ["parse_length", "slug", "save_generated", "main"]
+__all__ = ["MAX_FRAMES_PER_RUN", "parse_length", "slug", "save_generated", "main"]
+
+MAX_FRAMES_PER_RUN = 6000
+"""Frames one ``sm generate`` run makes in all (captions x samples x length): 5 min at 20 fps. Sampling
+holds every frame's activations (the demo model: about 190 KB per frame on top of 0.7 GB, measured on a
+2-core CPU), so an unbounded ``--length`` exhausts memory before it writes anything."""
 
 
 def parse_length(text: str) -> int:
@@ -125,6 +130,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:
         raise InputError(str(e)) from e  # names the text given
     captions = [c for c in args.text for _ in range(args.num)]
+    if frames * len(captions) > MAX_FRAMES_PER_RUN:
+        raise InputError(
+            f"--length {args.length} x {len(captions)} motion(s) = {frames * len(captions)} frames; "
+            f"sm generate makes at most {MAX_FRAMES_PER_RUN} frames per run "
+            f"({MAX_FRAMES_PER_RUN / FPS / 60:g} min at {FPS:g} fps; memory grows with every frame): shorten "
+            "--length or generate fewer at a time"
+        )
     stems = [f"{i:03d}_{slug(caption)}" for i, caption in enumerate(captions)]
     suffixes = (".npy", "_features.npy", ".glb", *((f".{args.render}",) if args.render else ()))
     produced = [stem + suffix for stem in stems for suffix in suffixes]
@@ -134,6 +146,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     with _no_loading_bar():  # a refused checkpoint leaves one line on stderr, not a bar above it
         module = load_module_from(TextToMotionModule, args.checkpoint).eval()
+    # the sampling against the loaded model's step count, before any caption is encoded
+    used = checked_sampling(args, module.sampling, module.diffusion.num_steps, args.checkpoint)
     features, _ = module.generate(
         captions,
         [frames] * len(captions),
@@ -148,11 +162,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{args.checkpoint}: the model generated non-finite motion for {caption!r} ({message}); "
                 "nothing written"
             )
-    out = record_outputs(args.out, "sm generate", produced)
-    used = module.sampling.override(**overrides).describe()  # what module.generate sampled with
-    print("sampled with " + ", ".join(f"{k} {v}" for k, v in used.items()))
-    for i, caption in enumerate(captions):
-        paths = save_generated(features[i], caption, out / stems[i], args.render)
-        print(f"{caption!r}: {frames} frames at {FPS:g} fps")
-        print("\n".join(f"  {kind:8s} {path}" for kind, path in paths.items()))
+    described = used.describe()  # what module.generate sampled with
+    print("sampled with " + ", ".join(f"{k} {v}" for k, v in described.items()))
+    with writing_outputs(args.out, "sm generate", produced) as out:
+        for i, caption in enumerate(captions):
+            paths = save_generated(features[i], caption, out / stems[i], args.render)
+            print(f"{caption!r}: {frames} frames at {FPS:g} fps")
+            print("\n".join(f"  {kind:8s} {path}" for kind, path in paths.items()))
     return 0

@@ -106,9 +106,14 @@ class TextToMotionModule(BackboneModule):
         temporal_prior: bool = False,
     ) -> None:
         super().__init__()
-        SamplingOptions(sampler, sampling_steps, eta, guidance_weight).override(
-            eval_sampler, eval_sampling_steps
-        )  # checks both
+        options = SamplingOptions(sampler, sampling_steps, eta, guidance_weight)
+        options.check_steps(diffusion_steps)  # the step counts against T, when the module is made
+        try:
+            options.override(eval_sampler, eval_sampling_steps).check_steps(diffusion_steps)
+        except ValueError as err:
+            raise ValueError(
+                f"the evaluation's sampling (eval_sampler, eval_sampling_steps): {err}"
+            ) from None
         # Evaluation settings are test-time options kept out of the checkpoint's hyperparameters: LightningCLI
         # lets a checkpoint's hyperparameters override the command line, which would freeze them at training
         # time.
@@ -258,6 +263,7 @@ class TextToMotionModule(BackboneModule):
             De-normalised features (B, T_max, 263) (zeros past each length) and the mask (B, T_max).
         """
         options = self.sampling.override(sampler, sampling_steps, eta, guidance_weight)
+        options.check_steps(self.diffusion.num_steps)  # before the captions are encoded
         lengths_t = torch.tensor(lengths, device=self.device)
         mask = torch.arange(int(lengths_t.max()), device=self.device)[None] < lengths_t[:, None]
         cond = self.encode_text(captions)

@@ -4,8 +4,10 @@
 commands (``sm analyze-music``, ``sm render``, ...) live beside the toolkit or machinery code that
 implements them and are named here as strings; a task's commands (``sm prepare``, ``sm dance``, ...) and its
 variants of shared ones come from its registration (:mod:`.registry`: the task's ``TaskSpec``, found by its
-entry point), so this module names no task. A command is imported only when it runs, and its
-parser comes from a module that imports no torch (``*_args.py`` beside it, with the shared options of
+entry point), so this module names no task. The registry is read when :func:`main` first needs the command
+table, not when this module is imported: a plugin that is broken or takes a built-in's name is left out
+with one warning line, and the built-in commands keep working. A command is imported only when it runs,
+and its parser comes from a module that imports no torch (``*_args.py`` beside it, with the shared options of
 :mod:`~skeleton_mamba.tasks.motion.cli_options`): ``sm`` parses the command line with it first, so
 ``sm --help``, ``sm CMD --help``, a bad argument or a missing input file answer before torch, Lightning or
 a checkpoint loads (``benchmarks/bench_startup.py`` times them).
@@ -18,6 +20,7 @@ print no error line of their own.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import os
@@ -28,7 +31,7 @@ from skeleton_mamba import __version__
 from skeleton_mamba.allocator import keep_freed_memory
 from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
 from skeleton_mamba.tasks.training.library_noise import silence_library_noise
-from skeleton_mamba.tasks.training.registry import Command, RegistryError, registered_tasks
+from skeleton_mamba.tasks.training.registry import Command, registered_tasks
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults
 
 _PKG = "skeleton_mamba.tasks"
@@ -82,23 +85,34 @@ MACHINERY_COMMANDS: dict[str, Command] = {
 """The commands of the machinery and the toolkit; the tasks' own come from their registrations."""
 
 
-def _task_commands() -> tuple[dict[str, Command], dict[str, dict[str, Command]]]:
-    """Every registered task's commands (after the machinery's), and its variants of shared commands."""
+@functools.cache
+def command_table() -> tuple[dict[str, Command], dict[str, dict[str, Command]]]:
+    """Every ``sm`` command (the machinery's, then the registered tasks'), and command -> {value of its
+    ``--task`` option: Command}, the tasks' variants of shared commands (:attr:`.registry.TaskSpec.variants`).
+
+    Read on first use, not when this module is imported, so that reading the registry happens inside
+    :func:`main`; a task that is broken or collides with another's command, variant or network is left out
+    there with a warning (:func:`~.registry.registered_tasks`).
+    """
     commands: dict[str, Command] = dict(MACHINERY_COMMANDS)
     variants: dict[str, dict[str, Command]] = {}
     for spec in registered_tasks():
-        for name, command in spec.commands.items():
-            if name in MACHINERY_COMMANDS:
-                raise RegistryError(f"task {spec.name!r}: command {name!r} is the machinery's")
-            commands[name] = command
+        commands.update(spec.commands)
         for name, by_task in spec.variants.items():
             variants.setdefault(name, {}).update(by_task)
     return commands, variants
 
 
-COMMANDS, TASK_VARIANTS = _task_commands()
-"""``COMMANDS``: every ``sm`` command. ``TASK_VARIANTS``: command -> {value of its ``--task`` option:
-Command}, a task's own variant of a shared command (:attr:`~.registry.TaskSpec.variants`)."""
+def __getattr__(name: str) -> dict:
+    """``COMMANDS``: every ``sm`` command; ``TASK_VARIANTS``: the tasks' variants (:func:`command_table`,
+    read on first use)."""
+    if name == "COMMANDS":
+        return command_table()[0]
+    if name == "TASK_VARIANTS":
+        return command_table()[1]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 LIGHTNING_SUBCOMMANDS = ("fit", "validate", "test", "predict")
 # What ``pip install skeleton-mamba`` leaves out (pyproject.toml's extras): the import names ``sm`` checks
 # (without importing them) before any command, and those of the commands that need another extra.
@@ -146,7 +160,7 @@ def missing_extra(extra: str, modules: Sequence[str]) -> str | None:
 
 def available_commands() -> dict[str, Command]:
     """The commands whose implementation is installed."""
-    return {name: command for name, command in COMMANDS.items() if _module_available(command.run)}
+    return {name: command for name, command in command_table()[0].items() if _module_available(command.run)}
 
 
 def _usage() -> str:
@@ -180,11 +194,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if hint is not None:
         print(f"sm: {hint}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    try:
+        commands = available_commands()  # reads the task registry (a broken plugin: a warning, left out)
+    except KeyboardInterrupt:
+        print("sm: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if not args or args[0] in ("-h", "--help"):
         print(_usage())
         return 0
     command_name, rest = args[0], args[1:]
-    commands = available_commands()
     if command_name not in commands:
         print(f"sm: unknown command {command_name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
@@ -223,8 +241,8 @@ def error_line(command: str, message: str) -> str:
 
 
 def _variant(name: str, args: list[str], default: Command) -> Command:
-    """The command that runs ``name``: its ``--task`` variant when it has one (:data:`TASK_VARIANTS`)."""
-    variants = TASK_VARIANTS.get(name, {})
+    """The command that runs ``name``: its ``--task`` variant when it has one (:func:`command_table`)."""
+    variants = command_table()[1].get(name, {})
     for i, arg in enumerate(args):
         value = arg.split("=", 1)[1] if arg.startswith("--task=") else None
         if arg == "--task" and i + 1 < len(args):

@@ -30,14 +30,13 @@ from skeleton_mamba.pretrained import (
     CARD_NAME,
     CONFIG_NAME,
     WEIGHTS_NAME,
-    PretrainedError,
     PretrainedMixin,
     push_folder_to_hub,
     read_pretrained_config,
 )
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.export_pretrained_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import MODULE_WEIGHTS_NAME, import_project_class, module_record
@@ -81,15 +80,6 @@ def test_metrics(checkpoint_path: Path) -> dict[str, float]:
     return metrics
 
 
-def is_pretrained_folder(folder: Path) -> bool:
-    """Whether ``folder`` holds a pretrained folder's ``config.json`` (this command's earlier output)."""
-    try:
-        read_pretrained_config(folder)
-    except (PretrainedError, OSError):
-        return False
-    return True
-
-
 def export_pretrained(
     ckpt: str | Path,
     out: str | Path,
@@ -99,7 +89,7 @@ def export_pretrained(
 ) -> Path:
     """Write the folder of the checkpoint ``ckpt`` into ``out``; returns ``out``.
 
-    ``out`` must be missing, empty or an earlier export (its four files and nothing else), unless
+    ``out`` must be missing, empty or this command's earlier export (its four files and nothing else), unless
     ``overwrite`` (:func:`~skeleton_mamba.tasks.motion.output_folder.claim_output_folder`).
 
     Raises:
@@ -107,7 +97,7 @@ def export_pretrained(
         InputError: ``out`` holds other files.
     """
     names = (CONFIG_NAME, WEIGHTS_NAME, CARD_NAME, MODULE_WEIGHTS_NAME)
-    claim_output_folder(out, "sm export-pretrained", names, overwrite=overwrite, marker=is_pretrained_folder)
+    claim_output_folder(out, "sm export-pretrained", names, overwrite=overwrite)
     checkpoint = load_checkpoint(ckpt)
     hparams = checkpoint.get("hyper_parameters") or {}
     class_path = module_class or (hparams.get("_class_path") if isinstance(hparams, dict) else None)
@@ -133,10 +123,10 @@ def export_pretrained(
         "metrics": test_metrics(Path(ckpt)),
         "trained": {k: record[k] for k in ("epoch", "global_step") if k in record},
     }
-    folder = Path(out)
-    with atomic_path(folder / MODULE_WEIGHTS_NAME) as tmp:
-        tmp.write_bytes(save(rest, metadata={"format": "pt", "module": record["class_path"]}))
-    network.save_pretrained(folder, card_info=card, extra_config={"module": record})
+    with writing_outputs(out, "sm export-pretrained", names, replaces=True) as folder:
+        with atomic_path(folder / MODULE_WEIGHTS_NAME) as tmp:
+            tmp.write_bytes(save(rest, metadata={"format": "pt", "module": record["class_path"]}))
+        network.save_pretrained(folder, card_info=card, extra_config={"module": record})
     return folder
 
 

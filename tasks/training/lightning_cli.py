@@ -33,7 +33,8 @@ from lightning.pytorch import LightningDataModule, LightningModule
 from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCLI
 
 from skeleton_mamba import __version__
-from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
+from skeleton_mamba.config import ConfigValueError
+from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError, expected_failure
 from skeleton_mamba.tasks.training.base_data import LINK_PREFIX
 from skeleton_mamba.tasks.training.checkpoints import (
     check_state_fits,
@@ -58,7 +59,7 @@ from skeleton_mamba.tasks.training.recipe_resolution import (
     RecipeConfigAction,
     install_bounded_yaml_loader,
 )
-from skeleton_mamba.tasks.training.registry import registered_tasks
+from skeleton_mamba.tasks.training.registry import describe_error, registered_tasks
 from skeleton_mamba.tasks.training.run_folders import (
     find_last_checkpoint,
     open_csv_logs,
@@ -100,11 +101,25 @@ def registered_links() -> list[tuple[str, str]]:
 def import_task_modules() -> list[str]:
     """Import every registered task's module and data-module modules (:attr:`.registry.TaskSpec.modules`),
     so that recipes may use short class names (``class_path: ActionRecognitionModule``); returns their
-    names."""
+    names. A plugin's module that fails to import (anything but Ctrl-C, a ``SystemExit`` included) is
+    skipped with one warning line naming the task and the module: the built-in recipes keep working."""
     imported = []
     for spec in registered_tasks():
+        builtin = spec.package == "skeleton_mamba" or spec.package.startswith("skeleton_mamba.")
         for name in spec.modules:
-            importlib.import_module(name)
+            try:
+                importlib.import_module(name)
+            except KeyboardInterrupt:
+                raise
+            except BaseException as err:
+                if builtin:
+                    raise
+                print(
+                    f"sm: warning: task plugin {spec.name!r}: its module {name} does not import "
+                    f"({describe_error(err)}); recipes cannot name its classes",
+                    file=sys.stderr,
+                )
+                continue
             imported.append(name)
     return imported
 
@@ -292,6 +307,23 @@ class SkeletonMambaCLI(LightningCLI):
         install_accepted_links(self)
         self.link_data_contract()
 
+    def instantiate_classes(self) -> None:
+        """Lightning's instantiation, a class refusing its settings as one line.
+
+        jsonargparse wraps the refusal of a nested config (``MixerConfig(chunk_size=0)``,
+        ``DanceSampling(sampler="evil")``) in a dump of the whole model namespace; the refusal it wraps (the
+        first error of its chain) is what the message says, naming the option where the refused value
+        is found in the parsed config (:func:`refused_setting_message`).
+        """
+        try:
+            super().instantiate_classes()
+        except ValueError as err:
+            if expected_failure(err) is not None:  # the project's own error (missing data): sm prints it
+                raise
+            config = _subcommand_config(self.config, self.subcommand)
+            sources = [str(p) for p in (config.get("config") or []) if p is not None]
+            raise InputError(refused_setting_message(err, config.as_dict(), sources)) from err
+
     def instantiate_trainer(self, **kwargs) -> pl.Trainer:
         """The trainer, with every logger's version fixed before any of them creates its folder.
 
@@ -317,6 +349,48 @@ class SkeletonMambaCLI(LightningCLI):
             recorder.new_run_dirs = sorted(set(new), key=lambda p: -len(p.parts))
         open_csv_logs(trainer.loggers)
         return trainer
+
+
+def _first_error(err: BaseException) -> BaseException:
+    """The error a chain of wrappers started from (``__cause__``, else ``__context__``, to its end)."""
+    seen = {id(err)}
+    while True:
+        inner = err.__cause__ or err.__context__
+        if inner is None or id(inner) in seen:
+            return err
+        seen.add(id(inner))
+        err = inner
+
+
+def _options_holding(config: dict, name: str, value) -> list[str]:
+    """The dotted options of ``config`` whose last key is ``name`` and whose value is ``value``."""
+    found, stack = [], [("", config)]
+    while stack:
+        where, node = stack.pop()
+        items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+        for key, item in items:
+            path = f"{where}.{key}" if isinstance(key, str) else f"{where}[{key}]"
+            path = path.lstrip(".")
+            if key == name and (item == value or (isinstance(item, list) and tuple(item) == value)):
+                found.append(path)
+            elif isinstance(item, (dict, list)):
+                stack.append((path, item))
+    return found
+
+
+def refused_setting_message(err: BaseException, config: dict, sources: list[str]) -> str:
+    """One line for a class refusing its settings while a recipe is instantiated: the first error of
+    ``err``'s chain; a :class:`~skeleton_mamba.config.ConfigValueError` names the one option of the parsed
+    ``config`` holding the refused value (``--model.init_args.backbone.mixer.chunk_size = 0: ...``)."""
+    first = _first_error(err)
+    origin = f" (from {', '.join(sources)} or the command line)" if sources else ""
+    if isinstance(first, ConfigValueError):
+        options = _options_holding(config, first.field, first.value)
+        if len(options) == 1:
+            return f"--{options[0]} = {first.value!r}: {first.rule}{origin}"
+    lines = str(first).strip().splitlines()
+    text = lines[0] if lines else type(first).__name__
+    return one_line_parse_message(f"{text}{origin}")
 
 
 def _class_of(component) -> type | None:

@@ -35,7 +35,7 @@ from skeleton_mamba.pretrained import PretrainedError, decode_value
 from skeleton_mamba.pretrained_checks import check_sizes
 from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.onnx_export_args import build_parser
 from skeleton_mamba.tasks.training.onnx_graphs import (
@@ -206,8 +206,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-onnx``; returns the exit code."""
     args = build_parser().parse_args(list(argv) if argv is not None else None)
     graphs = [f"{g}.onnx{data}" for g in ("sequence", "step", "denoiser") for data in ("", ".data")]
-    claim_output_folder(args.out, "sm export-onnx", [*graphs, "export.json"], overwrite=args.overwrite,
-                        marker=lambda folder: (folder / "export.json").is_file())  # fmt: skip
+    produced = [*graphs, "export.json"]
+    claim_output_folder(args.out, "sm export-onnx", produced, overwrite=args.overwrite)
     if args.ckpt is not None:
         network, source = network_from_checkpoint(args.ckpt), args.ckpt
     elif args.pretrained is not None:
@@ -218,28 +218,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.part == "backbone":
         network = backbone_of(network, source)
     out = Path(args.out)
-    specs = network_specs(network, frames=args.frames)
-    backbone = backbone_of(network, source)
-    record = {
-        "network": type(network).__name__,
-        "skeleton": backbone.skeleton.name,
-        "num_joints": backbone.skeleton.num_joints,
-        "graphs": {},
-    }
-    for name, spec in specs.items():
-        print(f"sm export-onnx: exporting {name} ...", flush=True)
-        path = export_onnx(spec, out / f"{name}.onnx")
-        entry = {
-            "file": path.name,
-            "inputs": {n: {"shape": list(a.shape), "dtype": str(a.dtype).removeprefix("torch."),
-                           "dynamic": spec.dynamic.get(n, {})} for n, a in zip(spec.input_names, spec.args)},
-            "outputs": spec.output_names,
-        }  # fmt: skip
-        if args.check:
-            diff = entry["max_abs_diff_vs_eager"] = max_difference_from_eager(spec, path)
-            print(f"sm export-onnx: {name}: onnxruntime vs eager max |diff| {diff:.2e}")
-        record["graphs"][name] = entry
-    with atomic_path(out / "export.json") as tmp:
-        tmp.write_text(json.dumps(record, indent=2) + "\n")
+    with writing_outputs(out, "sm export-onnx", produced, replaces=True):
+        specs = network_specs(network, frames=args.frames)
+        backbone = backbone_of(network, source)
+        record = {
+            "network": type(network).__name__,
+            "skeleton": backbone.skeleton.name,
+            "num_joints": backbone.skeleton.num_joints,
+            "graphs": {},
+        }
+        for name, spec in specs.items():
+            print(f"sm export-onnx: exporting {name} ...", flush=True)
+            path = export_onnx(spec, out / f"{name}.onnx")
+            entry = {
+                "file": path.name,
+                "inputs": {n: {"shape": list(a.shape), "dtype": str(a.dtype).removeprefix("torch."),
+                               "dynamic": spec.dynamic.get(n, {})}
+                           for n, a in zip(spec.input_names, spec.args)},
+                "outputs": spec.output_names,
+            }  # fmt: skip
+            if args.check:
+                diff = entry["max_abs_diff_vs_eager"] = max_difference_from_eager(spec, path)
+                print(f"sm export-onnx: {name}: onnxruntime vs eager max |diff| {diff:.2e}")
+            record["graphs"][name] = entry
+        with atomic_path(out / "export.json") as tmp:
+            tmp.write_text(json.dumps(record, indent=2) + "\n")
     print(f"sm export-onnx: wrote {', '.join(f'{n}.onnx' for n in specs)} and export.json to {out}")
     return 0

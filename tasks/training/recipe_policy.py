@@ -15,7 +15,11 @@ which looks at the path before the import and at the imported object's defining 
 anything uses them (:func:`check_config_values`): a 24-digit seed, ``--trainer.max_epochs 1e30``, a batch
 size of 0 or a frame count of 1e14 are one-line :class:`~skeleton_mamba.tasks.motion.errors.InputError`\\ s
 naming the option and the recipes it may come from, instead of a numpy ``ValueError``, an ``OverflowError`` or
-a 728 TiB allocation.
+a 728 TiB allocation. Every float is finite (a ``guidance_weight: .nan`` or an ``eta: .inf`` is refused at
+once, not after minutes of training by the demo that samples with it; only a mixer's ``dt_limit`` max may be
+``inf``), every diffusion sampler named (``sampler``, ``eval_sampler``) is one of
+:data:`~skeleton_mamba.tasks.motion.cli_options.SAMPLERS`, and every sampling step count fits the model's
+``diffusion_steps``.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ from typing import Any
 
 from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 
+from skeleton_mamba.size_bounds import SIZE_BOUNDS
+from skeleton_mamba.tasks.motion.cli_options import SAMPLERS, SOLVER_NAMES
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
 from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
@@ -58,6 +64,11 @@ MAX_CLASSES = 100_000
 MAX_OPTION_DURATION_S = 86_400.0  # durations given in seconds (generated tracks, offsets): one day
 MAX_TIME_DAYS = 3650  # --trainer.max_time: ten years
 _INT64 = 2**63 - 1
+INFINITE_ALLOWED = frozenset({"dt_limit[1]"})
+"""The floats that may be ``inf`` (by their last key): a mixer's ``dt_limit = (0, inf)`` (no clamp). No float
+may be NaN, and no other may be infinite."""
+SAMPLER_KEYS = frozenset({"sampler", "eval_sampler"})  # diffusion samplers (tasks/training/diffusion)
+STEP_KEYS = {"sampling_steps": "sampler", "eval_sampling_steps": "eval_sampler"}  # steps -> their sampler
 
 
 def split_allow_import(args: Sequence[str]) -> tuple[list[str], tuple[str, ...]]:
@@ -174,6 +185,8 @@ def _init_arg_rule(name: str) -> tuple | None:
         return _count(1, MAX_IMAGE_SIZE)
     if name == "num_classes":
         return _count(1, MAX_CLASSES)
+    if name in ("diffusion_steps", *STEP_KEYS):
+        return _count(1, SIZE_BOUNDS[name if name == "diffusion_steps" else "sampling_steps"])
     if name.endswith("_s") and not name.endswith("_steps"):  # a duration or offset in seconds
         return _real(0.0, MAX_OPTION_DURATION_S)
     if name == "lr" or name.endswith("_lr"):
@@ -286,3 +299,60 @@ def check_config_values(config: Mapping[str, Any], sources: Sequence[str] = ()) 
                 refuse(option, number, _describe(rule))
             if isinstance(number, int) and abs(number) > _INT64:
                 refuse(option, number, f"an integer within ±{_INT64:,}")
+            if isinstance(number, float) and not math.isfinite(number):
+                if not (number == math.inf and name in INFINITE_ALLOWED):
+                    raise InputError(f"--{option} = {number}: must be a finite number{origin}")
+    _check_sampling(config, origin)
+
+
+def _mappings(value: Any, where: str) -> Iterator[tuple[str, Mapping]]:
+    """``(dotted option, mapping)`` of every mapping under ``value`` (itself included)."""
+    if isinstance(value, Mapping):
+        yield where, value
+        for key, item in value.items():
+            if isinstance(key, str) and not key.startswith("__"):
+                yield from _mappings(item, f"{where}.{key}" if where else key)
+    elif isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            yield from _mappings(item, f"{where}[{i}]")
+
+
+def _check_sampling(config: Mapping[str, Any], origin: str) -> None:
+    """The diffusion samplers and step counts of a parsed config (the model's and its callbacks'): every
+    ``sampler`` / ``eval_sampler`` one of :data:`SAMPLERS`, every step count within what its sampler takes on
+    the model's ``model.init_args.diffusion_steps`` T (DDIM 1 to T, the solvers 2 to T; DDPM runs all T and
+    takes none). A step count given without a sampler (a callback's, ``eval_sampling_steps``) samples DDIM.
+
+    Raises:
+        InputError: ``--<option> = value: ...`` naming the sampler names or the range.
+    """
+    model = config.get("model")
+    init = model.get("init_args") if isinstance(model, Mapping) else None
+    steps = init.get("diffusion_steps") if isinstance(init, Mapping) else None
+    total = steps if isinstance(steps, int) and not isinstance(steps, bool) and steps >= 1 else None
+    for section, value in config.items():
+        if section == "data":
+            continue
+        for where, mapping in _mappings(value, section):
+            for key, item in mapping.items():
+                if key in SAMPLER_KEYS and item is not None and item not in SAMPLERS:
+                    names = ", ".join(SAMPLERS)
+                    raise InputError(
+                        f"--{where}.{key} = {item!r}: expected a sampler, one of {names}{origin}"
+                    )
+            if total is None:
+                continue
+            for key, sampler_key in STEP_KEYS.items():
+                count = mapping.get(key)
+                if not isinstance(count, int) or isinstance(count, bool):
+                    continue
+                sampler = mapping.get(sampler_key)
+                if sampler == "ddpm":
+                    continue  # runs all T steps
+                low = 2 if sampler in SOLVER_NAMES else 1
+                if not low <= count <= total:
+                    name = sampler or "ddim"
+                    raise InputError(
+                        f"--{where}.{key} = {count}: {name} takes {low} to {total} steps on this model "
+                        f"(--model.init_args.diffusion_steps = {total}){origin}"
+                    )

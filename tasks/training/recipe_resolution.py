@@ -276,6 +276,9 @@ class RecipeConfigAction(ActionConfigFile):
             self._apply_named(parser, cfg, yaml.safe_dump(content), option_string, str(path))
         finally:
             os.chdir(cwd)
+        applied = cfg.get(self.dest)
+        if isinstance(applied, list) and applied and applied[-1] is None:  # applied as text: name its file
+            applied[-1] = jsonargparse.Path(str(path), mode="fr")
 
     def _apply_named(self, parser, cfg, value: str, option_string, source: str) -> None:
         """jsonargparse's config action on ``value``, its refusal (a ``TypeError``) naming ``source``."""

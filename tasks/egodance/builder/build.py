@@ -411,17 +411,19 @@ def _check_settings(cfg: BuildConfig) -> None:
         layout.write_json(path, settings)
 
 
-def run_build(cfg: BuildConfig, motion: str | Path) -> BuildSummary:
+def run_build(cfg: BuildConfig, motion: str | Path, created: bool | None = None) -> BuildSummary:
     """Build (or resume) a dataset; returns the counts also written to ``summary.json``.
 
     Every scene file's declared size is checked before anything is written or loaded; a build that stops
-    before it wrote a sample removes the output folder it created (a bad scene found when it is loaded).
+    before it wrote a sample removes the output folder it created (a bad scene found when it is loaded;
+    ``created``: whether the caller created ``cfg.out`` for this build, by default whether it is missing).
     """
     out = Path(cfg.out)
     for key in scene_keys(cfg):
         if not key.startswith("procedural:"):
             check_scene_file(key, cfg.max_faces)
-    created = not out.exists()
+    layout.check_real_folders(out)
+    created = not out.exists() if created is None else created
     try:
         return _run_build(cfg, motion, out)
     except BaseException:
@@ -451,10 +453,13 @@ def _run_build(cfg: BuildConfig, motion: str | Path, out: Path) -> BuildSummary:
     for task in tasks:
         folder = layout.sample_dir(out, task.sample_id)
         problem = layout.sample_problem(folder) if layout.is_complete(folder) else None
-        if problem is not None:
+        if problem is not None and layout.remove_sample_folder(folder):
             log.warning("rebuilding %s: %s", task.sample_id, problem)
-            shutil.rmtree(folder)
             summary.rebuilt += 1
+        elif problem is not None:
+            raise DataFileError(
+                f"{folder}: {problem}, and it holds files a build does not write; move it out of the build"
+            )
         if layout.is_complete(folder):
             summary.already_complete += 1
         elif (out / layout.SKIPPED / f"{task.sample_id}.json").is_file():

@@ -21,13 +21,9 @@ from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import run_build
 from skeleton_mamba.tasks.egodance.builder.cli_args import build_parser
 from skeleton_mamba.tasks.egodance.builder.config import BuildConfig
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder
+from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 
 __all__ = ["main", "build_parser"]
-
-
-def _is_build(folder: Path) -> bool:
-    return (folder / "build.json").is_file()
 
 
 def main(argv: list[str]) -> int:
@@ -40,10 +36,13 @@ def main(argv: list[str]) -> int:
     )
     overwrite = args.pop("overwrite")
     cfg = BuildConfig(**args)
-    # an earlier build (its build.json) is resumed; any other non-empty folder is the user's
+    # an earlier build (proven by the manifest sm make-ego signed) is resumed; any other folder is the user's
     own = ("build.json", "summary.json", layout.SAMPLES, layout.SKIPPED)
-    claim_output_folder(cfg.out, "sm make-ego", own, overwrite=overwrite, marker=_is_build)
-    summary = run_build(cfg, motion)
+    claim_output_folder(cfg.out, "sm make-ego", own, overwrite=overwrite)
+    layout.check_real_folders(cfg.out)
+    created = not Path(cfg.out).exists()
+    with writing_outputs(cfg.out, "sm make-ego", own):
+        summary = run_build(cfg, motion, created=created)
     print(
         f"make-ego: {summary.planned} windows planned; this run placed {summary.placed}, "
         f"rejected {summary.rejected} placements, skipped {summary.skipped} windows; "

@@ -42,8 +42,10 @@ there, else as written (the samples of earlier builds, which have no relative fo
 Atomicity: a sample is written into ``samples/.tmp-<id>-<pid>/``, the ``COMPLETE`` marker is written
 last, then the folder is renamed to ``samples/<id>`` (``os.replace``, atomic on one file system). A
 reader lists only folders holding ``COMPLETE`` (:func:`complete_samples`), so an interrupted build never
-yields a half-written sample; :func:`clean_incomplete` removes leftovers before a build resumes
-(so run one build per output folder at a time).
+yields a half-written sample; :func:`clean_incomplete` removes the temporary folders an interrupted
+build left before it resumes (so run one build per output folder at a time). A build removes only folders
+holding nothing but a sample's files, never follows a symbolic link, and refuses a ``samples/`` or
+``skipped/`` that is a link (:func:`check_real_folders`).
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ import numpy as np
 
 from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.tasks.motion.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.tasks.motion.errors import DataFileError, InputError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header
@@ -162,14 +164,57 @@ def complete_samples(root: str | Path) -> list[Path]:
     return sorted(p for p in base.iterdir() if p.is_dir() and not p.name.startswith(".") and is_complete(p))
 
 
+SAMPLE_FILES = frozenset({"meta.json", "motion.npz", "camera.npz", "depth.npz", "rgb.mp4", "rgb", COMPLETE})
+"""The names a sample folder may hold (module docstring); ``rgb/`` holds ``%06d.png`` frames only."""
+
+
+def check_real_folders(root: str | Path) -> None:
+    """Refuse a build folder whose ``samples/`` or ``skipped/`` is a symbolic link or a file: a build
+    writes, and cleans up, inside real folders of its own only.
+
+    Raises:
+        InputError: naming the entry.
+    """
+    for name in (SAMPLES, SKIPPED):
+        path = Path(root) / name
+        if path.is_symlink() or (path.exists() and not path.is_dir()):
+            what = "a symbolic link" if path.is_symlink() else "not a folder"
+            raise InputError(f"{path}: is {what}; a build writes into real folders of its own only")
+
+
+def _is_sample_folder(path: Path) -> bool:
+    """Whether ``path`` is a real folder holding only what :func:`write_sample` writes (so removing it
+    removes nothing else)."""
+    if path.is_symlink() or not path.is_dir():
+        return False
+    entries = list(path.iterdir())
+    if any(e.name not in SAMPLE_FILES or e.is_symlink() for e in entries):
+        return False
+    rgb = path / "rgb"
+    return not rgb.exists() or (
+        rgb.is_dir() and all(f.suffix == ".png" and f.is_file() and not f.is_symlink() for f in rgb.iterdir())
+    )
+
+
+def remove_sample_folder(path: Path) -> bool:
+    """Remove ``path`` when it is a sample folder a build wrote (:func:`_is_sample_folder`); returns whether
+    it was removed."""
+    if not _is_sample_folder(path):
+        return False
+    shutil.rmtree(path)
+    return True
+
+
 def clean_incomplete(root: str | Path) -> list[str]:
-    """Remove temporary folders and sample folders without a completion marker; returns their names."""
+    """Remove the temporary sample folders an interrupted build left (``samples/.tmp-*`` holding only a
+    sample's files); returns their names. Nothing else is removed: any other folder without a completion
+    marker is not a build's (a build renames a complete folder into place) and is left as it is."""
     base = Path(root) / SAMPLES
+    check_real_folders(root)
     removed: list[str] = []
     if base.is_dir():
         for p in sorted(base.iterdir()):
-            if p.is_dir() and (p.name.startswith(TMP_PREFIX) or not is_complete(p)):
-                shutil.rmtree(p)
+            if p.name.startswith(TMP_PREFIX) and remove_sample_folder(p):
                 removed.append(p.name)
     return removed
 
@@ -275,8 +320,9 @@ def write_sample(root: str | Path, sample: EgoSample, frame_format: str = "mp4")
     (tmp / "meta.json").write_text(json.dumps(meta, indent=2, sort_keys=True), encoding="utf-8")
     (tmp / COMPLETE).write_text("ok\n", encoding="utf-8")
     final = base / sample_id
-    if final.exists():  # an incomplete leftover (complete samples are never rebuilt)
-        shutil.rmtree(final)
+    if (final.exists() or final.is_symlink()) and not remove_sample_folder(final):  # a damaged sample's
+        shutil.rmtree(tmp)
+        raise InputError(f"{final}: holds files a build does not write; move it out of the build folder")
     os.replace(tmp, final)
     return final
 

@@ -12,6 +12,7 @@ the multistep ODE solvers DPM-Solver++ and UniPC over ``sampling_steps`` timeste
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -55,8 +56,40 @@ class SamplingOptions:
             raise ValueError(f"sampling_steps must be an integer, got {self.sampling_steps!r}")
         if self.sampling_steps < 1:
             raise ValueError(f"sampling_steps must be >= 1, got {self.sampling_steps}")
-        if not self.eta >= 0:
+        for name in ("eta", "guidance_weight"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+        if self.eta < 0:
             raise ValueError(f"eta must be >= 0, got {self.eta}")
+
+    def step_range(self, num_steps: int) -> tuple[int, int] | None:
+        """The step counts this sampler takes on a diffusion of T = ``num_steps`` steps: DDIM 1 to T, the
+        solvers 2 to T (their last evaluation is x0 at t = 0); None for DDPM, which runs all T."""
+        if self.sampler == "ddpm":
+            return None
+        return (2 if self.sampler in SOLVERS else 1), num_steps
+
+    def steps_problem(self, num_steps: int) -> str | None:
+        """Why ``sampling_steps`` does not fit a diffusion of ``num_steps`` steps (one phrase), or None."""
+        span = self.step_range(num_steps)
+        if span is None or span[0] <= self.sampling_steps <= span[1]:
+            return None
+        low, high = span
+        if low > high:
+            return f"{self.sampler} needs a model of at least {low} diffusion steps, this one has {num_steps}"
+        takes = f"{low} to {high} steps" if low < high else f"{low} step{'s' if low > 1 else ''}"
+        takes = f"{takes} on a model of {num_steps} diffusion steps"
+        if self.sampling_steps < low:  # a solver's last evaluation is x0 at t = 0, after at least one step
+            needs = f"{self.sampler} needs at least {low} sampling steps (the last is x0 at t = 0)"
+            return f"{needs}; it takes {takes}"
+        return f"{self.sampler} takes {takes}"
+
+    def check_steps(self, num_steps: int) -> None:
+        """Refuse a ``sampling_steps`` outside :meth:`step_range` (ValueError naming it and the range)."""
+        problem = self.steps_problem(num_steps)
+        if problem is not None:
+            raise ValueError(f"sampling_steps = {self.sampling_steps}: {problem}")
 
     @classmethod
     def from_hparams(cls, hparams) -> SamplingOptions:
@@ -120,7 +153,7 @@ def sample(
             ``post_step`` (e.g. window consistency); ``x_T``; ``generator``; ``device``, ``dtype``;
             ``progress``.
     """
-    SamplingOptions(sampler, sampling_steps, eta)  # checks them
+    SamplingOptions(sampler, sampling_steps, eta).check_steps(diffusion.num_steps)  # checks them
     if sampler == "ddpm":
         return ddpm_sample(diffusion, denoiser, shape, cond, **kwargs)
     if sampler in SOLVERS:
