@@ -78,3 +78,20 @@ def test_the_lock_excludes_other_threads_and_nests_in_one(tmp_path, monkeypatch)
 def _locked(order: list[str]) -> None:
     with jit_lock.librosa_lock():
         order.append("worker")
+
+
+def test_a_warm_path_takes_the_lock_on_its_first_run_only(tmp_path, monkeypatch):
+    """A live stream's per-frame features: locked the first time (librosa imported, kernels compiled), then
+    never held, so another process' long analysis cannot stall the stream."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setattr(jit_lock, "_warm_paths", set())
+    held = []
+    real = jit_lock.librosa_lock
+    monkeypatch.setattr(jit_lock, "librosa_lock", lambda: held.append(1) or real())
+    for _ in range(3):
+        with jit_lock.librosa_calls(warm_path="frames") as librosa:
+            assert librosa.__name__ == "librosa"
+    assert held == [1]
+    with jit_lock.librosa_calls():  # any other call: every time
+        pass
+    assert held == [1, 1]

@@ -42,6 +42,7 @@ __all__ = [
 NUMBA_CACHE_ENV = "NUMBA_CACHE_DIR"
 _LOCK_NAME = ".skeleton_mamba_compile.lock"
 _held = threading.local()  # this thread's depth of nested librosa_lock blocks
+_warm_paths: set[str] = set()  # librosa_calls' warm paths that ran once in this process
 
 
 def numba_cache_dir() -> Path:
@@ -97,12 +98,25 @@ def librosa_lock() -> Iterator[None]:
 
 
 @contextmanager
-def librosa_calls() -> Iterator[ModuleType]:
-    """``with librosa_calls() as librosa: ...``: librosa, imported and used under :func:`librosa_lock`."""
+def librosa_calls(warm_path: str | None = None) -> Iterator[ModuleType]:
+    """``with librosa_calls() as librosa: ...``: librosa, imported and used under :func:`librosa_lock`.
+
+    ``warm_path``: a name for a call path that runs the same librosa calls on the same types every time (a
+    live stream's per-frame features): it holds the lock on its first run in a process, which imports librosa
+    and compiles whatever those calls compile, and not after, so a long analysis in another process never
+    stalls a live stream.
+    """
+    if warm_path is not None and warm_path in _warm_paths:
+        import librosa  # imported (under the lock) on the path's first run
+
+        yield librosa
+        return
     with librosa_lock():
         import librosa  # lazy: librosa's import is slow (numba), and compiles kernels
 
         yield librosa
+    if warm_path is not None:
+        _warm_paths.add(warm_path)
 
 
 def librosa_version() -> str:

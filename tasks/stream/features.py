@@ -96,7 +96,7 @@ class CausalMusicFeatures:
     def _features(self, frames: np.ndarray) -> np.ndarray:
         """(n, N_FFT) windows -> (n, 34) features; keeps the last log-mel frame for the onset flux."""
         power = np.abs(np.fft.rfft(frames.astype(np.float64) * self.window, axis=1)) ** 2  # (n, 1025)
-        with librosa_calls() as librosa:
+        with librosa_calls(warm_path="stream features") as librosa:  # locked on the first frame only
             logmel = librosa.power_to_db(power @ self.mel.T, ref=1.0, top_db=None)  # (n, 128)
             mfcc = librosa.feature.mfcc(S=logmel.T, n_mfcc=20).T  # (n, 20)
             chroma = librosa.util.normalize(power @ self.chroma.T, norm=np.inf, axis=1)  # (n, 12)
