@@ -168,8 +168,12 @@ def _reconstructor(cls: Any, base: Any, state: Any) -> Any:
 def _numpy_core_attr(module: str, name: str) -> Any:
     # numpy 2 keeps its internals in numpy._core; numpy.core is a deprecated alias. Resolve the
     # object directly so that reading a numpy-1 pickle neither imports numpy.core nor warns.
-    import numpy._core.multiarray as multiarray  # lazy: numpy 2 only
-    import numpy._core.numeric as numeric  # lazy: numpy 2 only
+    try:
+        import numpy._core.multiarray as multiarray  # lazy: numpy 2
+        import numpy._core.numeric as numeric
+    except ImportError:  # numpy 1.x (pyproject admits >= 1.24; Blender's bpy pins 1.26): numpy.core
+        import numpy.core.multiarray as multiarray
+        import numpy.core.numeric as numeric
 
     return {"multiarray": multiarray, "numeric": numeric}[module].__dict__[name]
 
