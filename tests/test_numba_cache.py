@@ -21,12 +21,18 @@ PROCESSES = 3
 
 def _analyse_at_once(song, out, env) -> list[np.ndarray]:
     """Start :data:`PROCESSES` ``sm analyze-music`` processes together; their features."""
+    command = [
+        sys.executable,
+        "-m",
+        "skeleton_mamba.tasks",
+        "analyze-music",
+        str(song),
+        "--no-cache",
+        "--out",
+    ]
+    pipes = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True}
     runs = [
-        subprocess.Popen(
-            [sys.executable, "-m", "skeleton_mamba.tasks", "analyze-music", str(song), "--no-cache",
-             "--out", str(out / f"features{i}.npy")],
-            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+        subprocess.Popen([*command, str(out / f"features{i}.npy")], env=env, **pipes)
         for i in range(PROCESSES)
     ]
     for i, run in enumerate(runs):

@@ -26,7 +26,9 @@ from skeleton_mamba.tasks.motion.output_folder import (
 )
 from skeleton_mamba.tasks.training.cli import main as sm
 
-EGO_OPTIONS = "--scenes procedural --num-rooms 1 --fps 10 --window 1 --width 16 --height 16 --workers 1 --quiet"
+EGO_OPTIONS = (
+    "--scenes procedural --num-rooms 1 --fps 10 --window 1 --width 16 --height 16 --workers 1 --quiet"
+)
 
 
 @pytest.fixture(autouse=True)

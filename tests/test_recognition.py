@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -21,7 +22,8 @@ from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.data import RecognitionDataModule
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, body_presence
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
-from skeleton_mamba.tasks.recognition.pyskl import save_annotations
+from skeleton_mamba.tasks.recognition.pyskl import load_annotations, save_annotations
+from skeleton_mamba.tasks.recognition.scores import load_scores
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.training.backbone_config import backbone_config
 
@@ -273,6 +275,17 @@ def test_sm_fit_learns_separable_classes_then_sm_test_from_its_checkpoint(tmp_pa
     (row,) = [r for r in read_metrics(test_dir / "metrics.csv") if r.get("test/top1")]
     assert float(row["test/top1"]) == pytest.approx(np.trace(counts) / counts.sum(), abs=1e-6)
     assert float(row["test/top1"]) > 0.6
+    scores = load_scores(test_dir)  # every sample's class scores, named, in the split's order
+    assert list(scores.samples) == load_annotations(ann_file)["split"]["xsub_val"]
+    assert (scores.split, scores.feats, scores.checkpoint) == ("xsub_val", "j", str(checkpoint))
+    np.testing.assert_allclose(scores.prob.sum(axis=1), 1.0, atol=1e-5)
+    predicted = np.zeros((3, 3), dtype=np.int64)
+    np.add.at(predicted, (scores.labels, scores.prob.argmax(axis=1)), 1)
+    np.testing.assert_array_equal(predicted, counts)
+    fused = run_sm(["ensemble", str(test_dir), str(test_dir), "--weights", "1", "3", "--out", "e"], tmp_path)
+    assert fused.returncode == 0, fused.stderr[-3000:]
+    report = json.loads((tmp_path / "e" / "ensemble.json").read_text())
+    assert report["ensemble"]["top1"] == pytest.approx(float(row["test/top1"]), abs=1e-6)
 
     predict = run_sm(["predict", "--recipe", "recipe.yaml", "--ckpt_path", str(checkpoint)], tmp_path)
     assert predict.returncode == 0, predict.stderr[-3000:]

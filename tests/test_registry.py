@@ -77,7 +77,7 @@ def test_sm_takes_its_task_commands_and_variants_from_the_registrations():
     assert {t: by_task[t] for t in KNOWN} == {
         "egodance": {"make-ego", "dance"},
         "qean": set(),
-        "recognition": {"prepare"},
+        "recognition": {"prepare", "ensemble"},
         "stream": {"stream", "export-web"},
         "text2motion": {"generate", "convert"},
     }

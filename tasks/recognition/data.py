@@ -6,33 +6,42 @@ holds every sample and the named splits; the data module picks ``train_split`` /
 
 - training: 1 random clip of ``clip_len`` frames, optional PYSKL ``RandomScale`` / ``RandomRot`` (by
   default on the whole sequence before sampling, as PYSKL's configs order them);
-- validation: ``num_clips_val`` deterministic clips; test: ``num_clips_test`` (PYSKL: 10, seed 255).
+- validation: ``num_clips_val`` deterministic clips; test: ``num_clips_test`` (PYSKL: 10, seed 255);
+- every stage: the [PYSKL] ``GenSkeFeat`` features ``feats`` (``[j]`` joints by default; ``[b]`` bones,
+  ``[jm]`` joint motion, ``[bm]`` bone motion, or several concatenated, ``[j, b, jm, bm]``), computed on the
+  whole sequence before sampling (:func:`.transforms.skeleton_features`). One model per stream and
+  ``sm ensemble`` over their ``sm test`` scores is PYSKL's multi-stream protocol.
 
 A batch is ``(keypoint (B, N, M, T, V, C) float32, label (B,) int64)`` with N clips and M bodies.
 
 ``num_classes``, ``skeleton``, ``in_channels`` and ``batch_size`` are its :class:`RecognitionContract`, which
 ``sm`` links to the model's arguments of those names (``in_channels`` is read off the pipeline output: x y z
-for 3D, x y score for 2D). ``batch_size`` is the per-device batch; the model scales its learning rate by the
-global batch.
+for 3D, x y score for 2D, times the number of ``feats``). ``batch_size`` is the per-device batch; the model
+scales its learning rate by the global batch.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import torch
 from torch.utils.data import Dataset
 
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
-from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline
+from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline, check_features
 from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule
 
-__all__ = ["RecognitionDataModule", "SkeletonClipDataset", "SyntheticRecognitionDataModule"]
+__all__ = ["Feature", "RecognitionDataModule", "SkeletonClipDataset", "SyntheticRecognitionDataModule"]
+
+Feature = Literal["j", "b", "jm", "bm"]
+"""A [PYSKL] ``GenSkeFeat`` feature: joint, bone, joint motion, bone motion (:data:`.transforms.FEATURES`)."""
 
 
 class SkeletonClipDataset(Dataset):
@@ -73,6 +82,10 @@ class RecognitionDataModule(SplitDataModule):
         ann_file: the annotation pickle.
         num_classes: classes of the data set (NTU60 60, NTU120 120, Kinetics 400).
         skeleton: joint layout of the keypoints (``ntu25`` or ``openpose18``).
+        feats: the input stream: PYSKL ``GenSkeFeat`` features, concatenated on the channel axis in this
+            order: ``[j]`` joints, ``[b]`` bones (each joint minus its PYSKL pair), ``[jm]`` / ``[bm]`` joint
+            / bone motion (next frame minus this one, zero at the last), or several (``[j, b, jm, bm]``);
+            ``in_channels`` follows. On the command line: ``--data.init_args.feats '[b]'``.
         train_split: split name for training (PYSKL names, e.g. ``xsub_train``).
         val_split: split name for validation.
         test_split: split name for testing (``None``: the validation split, as PYSKL does).
@@ -95,6 +108,7 @@ class RecognitionDataModule(SplitDataModule):
         ann_file: str,
         num_classes: int,
         skeleton: str = "ntu25",
+        feats: Sequence[Feature] = ("j",),
         train_split: str = "xsub_train",
         val_split: str = "xsub_val",
         test_split: str | None = None,
@@ -112,6 +126,10 @@ class RecognitionDataModule(SplitDataModule):
         super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
         get_skeleton(skeleton)  # fail early on an unknown name
+        try:
+            self.feats = check_features(feats, skeleton)
+        except ValueError as err:
+            raise InputError(f"data feats: {err}") from None
         self.ann_file = ann_file
         self.num_classes = num_classes
         self.skeleton = skeleton
@@ -174,9 +192,13 @@ class RecognitionDataModule(SplitDataModule):
                 self.max_angle,
                 self.scale_range,
                 augment_before_sampling=self.augment_before_sampling,
+                feats=self.feats,
+                skeleton=self.skeleton,
             )
         num_clips = self.num_clips["validate" if stage == "validate" else "test"]
-        return SkeletonPipeline(self.clip_len, num_clips, True, self.num_person)
+        return SkeletonPipeline(
+            self.clip_len, num_clips, True, self.num_person, feats=self.feats, skeleton=self.skeleton
+        )
 
     contract_class = RecognitionContract
 
@@ -226,6 +248,7 @@ class SyntheticRecognitionDataModule(RecognitionDataModule):
         val_per_class: validation (and test) samples per class.
         num_frames: frames per generated sequence.
         skeleton: ``ntu25`` (3D) or ``openpose18`` (2D with scores).
+        feats: the input stream (PYSKL ``GenSkeFeat`` features; see :class:`RecognitionDataModule`).
         num_bodies: bodies per generated sequence.
         seed: generator seed.
         clip_len: frames per clip.
@@ -242,6 +265,7 @@ class SyntheticRecognitionDataModule(RecognitionDataModule):
         val_per_class: int = 8,
         num_frames: int = 32,
         skeleton: str = "ntu25",
+        feats: Sequence[Feature] = ("j",),
         num_bodies: int = 1,
         seed: int = 0,
         clip_len: int = 16,
@@ -254,6 +278,7 @@ class SyntheticRecognitionDataModule(RecognitionDataModule):
             ann_file="<generated>",
             num_classes=num_classes,
             skeleton=skeleton,
+            feats=feats,
             clip_len=clip_len,
             num_clips_test=num_clips_test,
             num_person=num_person,

@@ -34,7 +34,9 @@ def online_probabilities(model: ActionRecognizer, x: torch.Tensor) -> torch.Tens
     if not model.backbone.config.causal:
         raise ValueError("online recognition needs a causal backbone (backbone.causal: true)")
     b, t = x.shape[0], x.shape[2]
-    features = model.backbone(rearrange(x, "b m t j c -> (b m) t j c")).mean(dim=2)  # (B*M, T, D)
+    features = model.backbone(rearrange(model.normalize(x), "b m t j c -> (b m) t j c")).mean(
+        dim=2
+    )  # (B*M, T, D)
     count = torch.arange(1, t + 1, device=x.device, dtype=features.dtype)[:, None]
     running = rearrange(features.cumsum(dim=1) / count, "(b m) t d -> b m t d", b=b)
     present = x.flatten(3).ne(0).any(dim=-1).cummax(dim=2).values  # (B, M, T): seen up to t

@@ -54,16 +54,24 @@ class ActionRecognizer(PretrainedMixin, nn.Module):
         backbone: the backbone configuration (its ``skeleton`` and ``in_channels`` must match the data).
         num_classes: K, the number of action classes.
         dropout: dropout on the pooled embedding before the linear layer.
+        input_norm: batch-normalise every joint's channels before the backbone (:meth:`normalize`), as
+            PYSKL's GCNs do (``data_bn``): the bone and motion streams (``feats``) are an order of magnitude
+            smaller than the joints, and the backbone's linear input layer does not learn from them at
+            their raw scale.
     """
 
     pretrained_task = "Skeleton action recognition: (B, M, T, J, C) keypoints to class logits."
     pretrained_citations = ("EgoMusic", "Mamba-2", "PYSKL")
 
-    def __init__(self, backbone: SkeletonMambaConfig, num_classes: int, dropout: float = 0.0) -> None:
+    def __init__(
+        self, backbone: SkeletonMambaConfig, num_classes: int, dropout: float = 0.0, input_norm: bool = False
+    ) -> None:
         super().__init__()
         if num_classes < 1:
             raise ValueError(f"num_classes must be positive, got {num_classes}")
         self.backbone = SkeletonMamba(backbone)
+        channels = self.backbone.skeleton.num_joints * backbone.in_channels
+        self.input_norm = nn.BatchNorm1d(channels) if input_norm else None
         width = backbone.out_channels or backbone.dim
         self.dropout = nn.Dropout(dropout)
         self.head = nn.Linear(width, num_classes)
@@ -81,9 +89,18 @@ class ActionRecognizer(PretrainedMixin, nn.Module):
         if x.dim() != 5:
             raise ValueError(f"expected keypoints (B, M, T, J, C), got shape {tuple(x.shape)}")
         b = x.shape[0]
-        features = self.backbone(rearrange(x, "b m t j c -> (b m) t j c"))  # (B*M, T, J, D)
+        present = body_presence(x)  # of the keypoints as given (an absent body is zeros)
+        features = self.backbone(rearrange(self.normalize(x), "b m t j c -> (b m) t j c"))  # (B*M, T, J, D)
         pooled = rearrange(features.mean(dim=(1, 2)), "(b m) d -> b m d", b=b)
-        return pool_bodies(pooled, body_presence(x))
+        return pool_bodies(pooled, present)
+
+    def normalize(self, x: torch.Tensor) -> torch.Tensor:
+        """``x`` (..., J, C) with every (joint, channel) batch-normalised over the other axes (frames,
+        bodies, samples) when ``input_norm``, else as is. In eval mode a per-channel affine map, so a
+        frame is normalised alone (the online recognizer's steps)."""
+        if self.input_norm is None:
+            return x
+        return self.input_norm(x.flatten(-2).reshape(-1, x.shape[-2] * x.shape[-1])).reshape(x.shape)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Class logits (B, K) for keypoints (B, M, T, J, C)."""

@@ -16,8 +16,10 @@ and 0.2 for 2 devices x 128. The value used is logged as ``lr`` and printed at f
 Evaluation follows PYSKL (``average_clips='prob'``): a sample may carry several clips
 (B, N, M, T, J, C); the softmax probabilities of its clips are averaged. Metrics are torchmetrics
 top-1 / top-5 accuracy (micro) and, at test time, mean class accuracy and the confusion matrix,
-saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir. ``sm predict`` writes
-``predictions.csv`` there (:mod:`.prediction_writer`).
+saved as ``confusion_matrix.png`` and ``.csv`` in the logger's log_dir, and every sample's class scores
+(the clip-averaged probabilities and logits, with the sample names in the split's order) as ``scores.npz``
+there (:mod:`.scores`; ``sm ensemble`` adds the scores of several streams, as [PYSKL] does). ``sm predict``
+writes ``predictions.csv`` there (:mod:`.prediction_writer`).
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
-from lightning.pytorch.utilities import rank_zero_info
+from lightning.pytorch.utilities import rank_zero_info, rank_zero_warn
 from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
 
 from skeleton_mamba import SkeletonMambaConfig
+from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.early import (
     FRACTIONS,
@@ -40,6 +43,7 @@ from skeleton_mamba.tasks.recognition.early import (
 )
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 from skeleton_mamba.tasks.recognition.prediction_writer import PredictionCSVWriter
+from skeleton_mamba.tasks.recognition.scores import SCORES_FILE, save_scores
 from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
 
@@ -57,6 +61,8 @@ class ActionRecognitionModule(BackboneModule):
         in_channels: per-joint input channels. Linked from the data module.
         batch_size: per-device batch size. Linked from the data module; used for the LR scaling.
         dropout: dropout before the linear classifier.
+        input_norm: batch-normalise the input channels first (:class:`.model.ActionRecognizer`; for the
+            bone and motion streams).
         label_smoothing: label smoothing of the cross-entropy.
         lr: SGD learning rate for a global batch of ``base_batch_size`` (scaled linearly).
         base_batch_size: the global batch that ``lr`` refers to.
@@ -74,6 +80,7 @@ class ActionRecognitionModule(BackboneModule):
         in_channels: int = 3,
         batch_size: int = 128,
         dropout: float = 0.0,
+        input_norm: bool = False,
         label_smoothing: float = 0.0,
         lr: float = 0.1,
         base_batch_size: int = 128,
@@ -85,7 +92,7 @@ class ActionRecognitionModule(BackboneModule):
         super().__init__()
         config = self.save_backbone_hyperparameters(backbone)
         config = derived_backbone(config, "the data", skeleton=skeleton, in_channels=in_channels)
-        self.model = ActionRecognizer(config, num_classes=num_classes, dropout=dropout)
+        self.model = ActionRecognizer(config, num_classes=num_classes, dropout=dropout, input_norm=input_norm)
         top_k = {"top1": MulticlassAccuracy(num_classes, top_k=1, average="micro")}
         if num_classes > 5:
             top_k["top5"] = MulticlassAccuracy(num_classes, top_k=5, average="micro")
@@ -97,14 +104,22 @@ class ActionRecognitionModule(BackboneModule):
         self.test_confusion = MulticlassConfusionMatrix(num_classes)
         # Causal backbones: the early-recognition curve from per-frame probabilities (.early).
         self.test_early = EarlyRecognitionCurve() if self.model.backbone.config.causal else None
+        self._test_scores: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
+
+    def clip_logits(self, keypoint: torch.Tensor) -> torch.Tensor:
+        """Class logits (B, N, K) of every clip of keypoints (B, N, M, T, J, C)."""
+        b, n = keypoint.shape[:2]
+        return self.model(keypoint.flatten(0, 1)).unflatten(0, (b, n))
+
+    @staticmethod
+    def average_probabilities(logits: torch.Tensor) -> torch.Tensor:
+        """Clip logits (B, N, K) -> class probabilities (B, K): the softmax of each clip, averaged."""
+        # fp32 probabilities also under bf16-mixed (bf16's 8-bit mantissa: sums off by 2e-3)
+        return logits.softmax(dim=-1, dtype=torch.promote_types(logits.dtype, torch.float32)).mean(dim=1)
 
     def forward(self, keypoint: torch.Tensor) -> torch.Tensor:
         """Class probabilities (B, K), averaged over clips, for keypoints (B, N, M, T, J, C)."""
-        b, n = keypoint.shape[:2]
-        logits = self.model(keypoint.flatten(0, 1))  # (B*N, K)
-        # fp32 probabilities also under bf16-mixed (bf16's 8-bit mantissa: sums off by 2e-3)
-        probs = logits.softmax(dim=-1, dtype=torch.promote_types(logits.dtype, torch.float32))
-        return probs.unflatten(0, (b, n)).mean(dim=1)
+        return self.average_probabilities(self.clip_logits(keypoint))
 
     def training_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> torch.Tensor:
         keypoint, label = batch
@@ -116,20 +131,25 @@ class ActionRecognitionModule(BackboneModule):
         self.log_dict(self.train_metrics, on_step=False, on_epoch=True, batch_size=label.numel())
         return loss
 
-    def _evaluate(self, batch, metrics: MetricCollection, stage: str) -> torch.Tensor:
-        keypoint, label = batch
-        prob = self(keypoint)
+    def _evaluate(
+        self, prob: torch.Tensor, label: torch.Tensor, metrics: MetricCollection, stage: str
+    ) -> None:
         loss = F.nll_loss(prob.clamp_min(1e-12).log(), label)
         metrics.update(prob, label)
         self.log(f"{stage}/loss", loss, batch_size=label.numel(), sync_dist=True)
         self.log_dict(metrics, prog_bar=stage == "val", batch_size=label.numel())
-        return prob
 
     def validation_step(self, batch, batch_idx: int) -> None:
-        self._evaluate(batch, self.val_metrics, "val")
+        self._evaluate(self(batch[0]), batch[1], self.val_metrics, "val")
+
+    def on_test_epoch_start(self) -> None:
+        self._test_scores = []
 
     def test_step(self, batch, batch_idx: int) -> None:
-        prob = self._evaluate(batch, self.test_metrics, "test")
+        logits = self.clip_logits(batch[0])
+        prob = self.average_probabilities(logits)
+        self._evaluate(prob, batch[1], self.test_metrics, "test")
+        self._test_scores.append((prob.float().cpu(), logits.float().mean(dim=1).cpu(), batch[1].cpu()))
         self.test_mean_class_accuracy.update(prob, batch[1])
         self.test_confusion.update(prob, batch[1])
         self.log("test/mean_class_accuracy", self.test_mean_class_accuracy, batch_size=batch[1].numel())
@@ -142,6 +162,23 @@ class ActionRecognitionModule(BackboneModule):
         """Class probabilities (B, K)."""
         keypoint = batch[0] if isinstance(batch, list | tuple) else batch
         return self(keypoint)
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        """Refuse a checkpoint trained on another input stream than the recipe's data (``feats``: the same
+        channel count, so nothing else would notice a bone model tested on joints)."""
+        super().on_load_checkpoint(checkpoint)
+        trainer = attached_trainer(self)
+        current = getattr(getattr(trainer, "datamodule", None), "feats", None)
+        saved = checkpoint.get("datamodule_hyper_parameters")
+        if current is None or not isinstance(saved, dict) or "skeleton" not in saved:
+            return  # no recognition data module on either side
+        trained = tuple(saved.get("feats") or ("j",))  # checkpoints from before the option: joints
+        if trained != tuple(current):
+            raise CheckpointError(
+                f"the checkpoint was trained on feats {list(trained)}, the recipe's data gives "
+                f"{list(current)}: add --data.init_args.feats '[{', '.join(trained)}]' "
+                "(or use that stream's recipe)"
+            )
 
     def configure_callbacks(self) -> list:
         """``sm predict`` writes ``predictions.csv`` to the log dir (:class:`PredictionCSVWriter`)."""
@@ -156,8 +193,44 @@ class ActionRecognitionModule(BackboneModule):
                 matrix.cpu(), Path(log_dir) / "confusion_matrix.png", self.hparams.class_names
             )
             rank_zero_info(f"confusion matrix saved to {path} (and {path.with_suffix('.csv').name})")
+        self._save_test_scores(log_dir)
         if self.test_early is not None:
             self._log_early_curve(log_dir)
+
+    def _save_test_scores(self, log_dir: str | None) -> None:
+        """Write every test sample's scores, named, in the split's order, to ``scores.npz`` (:mod:`.scores`).
+
+        Only a single-device run over the whole test split knows each row's sample (a distributed sampler
+        splits and pads the split): otherwise a warning, and no file.
+        """
+        rows, self._test_scores = self._test_scores, []
+        if log_dir is None or not rows:
+            return
+        trainer = self.trainer
+        loader = trainer.test_dataloaders
+        loader = loader[0] if isinstance(loader, list | tuple) else loader
+        annotations = getattr(getattr(loader, "dataset", None), "annotations", None)
+        prob, logit, label = (torch.cat(column).numpy() for column in zip(*rows))
+        if trainer.world_size > 1 or annotations is None or len(annotations) != len(label):
+            rank_zero_warn(
+                f"{SCORES_FILE} not written: it needs sm test on one device over the whole test split "
+                f"({len(label)} scored rows, {trainer.world_size} processes); sm ensemble reads it"
+            )
+            return
+        datamodule = getattr(trainer, "datamodule", None)
+        path = save_scores(
+            Path(log_dir) / SCORES_FILE,
+            [a.get("frame_dir", str(i)) for i, a in enumerate(annotations)],
+            label,
+            prob,
+            logit,
+            split=str(getattr(datamodule, "splits", {}).get("test", "")),
+            source=str(getattr(datamodule, "ann_file", "")),
+            feats=tuple(getattr(datamodule, "feats", ())),
+            checkpoint=str(trainer.ckpt_path or ""),
+            class_names=self.hparams.class_names,
+        )
+        rank_zero_info(f"{len(label)} samples' class scores saved to {path} (sm ensemble adds runs' scores)")
 
     def _log_early_curve(self, log_dir: str | None) -> None:
         """Log top-1 at each observed fraction, print the curve and save it as a PNG + CSV."""

@@ -78,7 +78,9 @@ class OnlineRecognizer:
         if (b, m) != (self.batch, self.bodies):
             expected = f"({self.batch}, {self.bodies}, J, C)"
             raise ValueError(f"expected a frame of {expected}, got {tuple(frame.shape)}")
-        y, self.state = self.backbone_step(frame.flatten(0, 1), self.state)  # (B*M, J, D)
+        y, self.state = self.backbone_step(
+            self.model.normalize(frame).flatten(0, 1), self.state
+        )  # (B*M, J, D)
         self.feature_sum += y.mean(dim=1).view(b, m, -1)
         self.present |= frame.flatten(2).ne(0).any(dim=-1)
         self.frames += 1

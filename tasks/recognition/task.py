@@ -12,6 +12,11 @@ TASK = TaskSpec(
         "prepare": Command(
             f"{_PKG}.prepare:main", "build NTU / Kinetics annotation files", f"{_PKG}.prepare:build_parser"
         ),
+        "ensemble": Command(
+            f"{_PKG}.ensemble:main",
+            "add the test scores of several recognition streams (PYSKL)",
+            f"{_PKG}.ensemble_args:build_parser",
+        ),
     },
     variants={
         "stream": {

@@ -20,23 +20,39 @@ whose ST-GCN++ / CTR-GCN configs report NTU numbers with 10-clip testing::
   configs (``configs/strong_aug/*/j.py``: ``RandomScale(scale=0.1)``, ``RandomRot()``) and DG-STGCN configs
   (``RandomRot``) put them after ``PreNormalize3D`` and *before* ``UniformSample``, which is the pipeline's
   default order (``augment_before_sampling``).
+- :func:`skeleton_features` = ``GenSkeFeat(dataset, feats)``: the joint ``j``, bone ``b``, joint-motion ``jm``
+  and bone-motion ``bm`` streams, alone or concatenated on the channel axis in the order given. A bone is
+  the joint minus the joint its PYSKL pair names (:data:`BONE_PAIRS`, ``JointToBone``; one joint pairs with
+  itself, a zero bone: NTU's spine shoulder 20, the nose 0 of OpenPose / COCO), a motion the next frame minus
+  this one, zero at the last frame (``ToMotion``). For the 2-D layouts (x, y, score) the score channel is not
+  differenced: a bone's score is the mean of its two joints' scores, a motion's the mean of the two frames'
+  scores (zero at the last frame), as PYSKL does. PYSKL's configs run ``GenSkeFeat`` after ``PreNormalize`` /
+  ``RandomScale`` / ``RandomRot`` and before ``UniformSample``, so a motion spans two consecutive frames of
+  the full sequence, not of the sampled clip; the pipeline keeps that order.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 __all__ = [
+    "BONE_PAIRS",
+    "FEATURES",
+    "SCORE_LAYOUTS",
     "SkeletonPipeline",
+    "check_features",
+    "joint_to_bone",
     "keep_bodies",
     "pre_normalize_2d",
     "pre_normalize_3d",
     "random_rot",
     "random_rotate_scale",
     "random_scale",
+    "skeleton_features",
+    "to_motion",
     "uniform_sample_indices",
 ]
 
@@ -138,6 +154,128 @@ def keep_bodies(keypoint: np.ndarray, num_person: int = 2) -> np.ndarray:
         return keypoint[:num_person]
     pad = np.zeros((num_person - keypoint.shape[0],) + keypoint.shape[1:], keypoint.dtype)
     return np.concatenate([keypoint, pad], axis=0)
+
+
+FEATURES = ("j", "b", "jm", "bm")
+"""The skeleton features of [PYSKL] ``GenSkeFeat``: joint, bone, joint motion, bone motion."""
+
+# [PYSKL] pyskl/datasets/pipelines/pose_related.py ``JointToBone.pairs``: (joint, the joint its bone starts
+# from), 0-based; every joint is the first of exactly one pair, the root paired with itself.
+BONE_PAIRS: dict[str, tuple[tuple[int, int], ...]] = {
+    "ntu25": (  # PYSKL 'nturgb+d' (Kinect v2 order; hand tip 21 -> thumb 22 -> hand 7, as PYSKL pairs them)
+        (0, 1), (1, 20), (2, 20), (3, 2), (4, 20), (5, 4), (6, 5), (7, 6), (8, 20), (9, 8), (10, 9), (11, 10),
+        (12, 0), (13, 12), (14, 13), (15, 14), (16, 0), (17, 16), (18, 17), (19, 18), (21, 22), (20, 20),
+        (22, 7), (23, 24), (24, 11),
+    ),
+    "openpose18": (  # PYSKL 'openpose' (the ST-GCN Kinetics-skeleton order; hips pair with the shoulders)
+        (0, 0), (1, 0), (2, 1), (3, 2), (4, 3), (5, 1), (6, 5), (7, 6), (8, 2), (9, 8), (10, 9), (11, 5),
+        (12, 11), (13, 12), (14, 0), (15, 0), (16, 14), (17, 15),
+    ),
+    "coco17": (  # PYSKL 'coco' (HRNet 2-D keypoints; no skeleton of that name is registered yet)
+        (0, 0), (1, 0), (2, 0), (3, 1), (4, 2), (5, 0), (6, 0), (7, 5), (8, 6), (9, 7), (10, 8), (11, 0),
+        (12, 0), (13, 11), (14, 12), (15, 13), (16, 14),
+    ),
+}  # fmt: skip
+SCORE_LAYOUTS = frozenset({"openpose18", "coco17"})
+"""Layouts whose third channel, when present, is a confidence score (PYSKL's 'openpose' and 'coco')."""
+
+
+def check_features(feats: Sequence[str], skeleton: str | None = None) -> tuple[str, ...]:
+    """``feats`` as a tuple, checked: one or more of :data:`FEATURES`, each once; ``b`` / ``bm`` need a
+    ``skeleton`` of :data:`BONE_PAIRS` (when one is given).
+
+    Raises:
+        ValueError: naming the feature or the skeleton at fault.
+    """
+    if isinstance(feats, str):
+        raise ValueError(f"feats must be a list of features such as [j, b], got the string {feats!r}")
+    feats = tuple(feats)
+    if not feats:
+        raise ValueError(f"feats must name at least one of {list(FEATURES)}")
+    unknown = [f for f in feats if f not in FEATURES]
+    if unknown:
+        raise ValueError(f"unknown skeleton feature {unknown[0]!r}; known: {list(FEATURES)}")
+    if len(set(feats)) != len(feats):
+        raise ValueError(f"feats {list(feats)} names a feature twice")
+    if skeleton is not None and {"b", "bm"} & set(feats) and skeleton not in BONE_PAIRS:
+        raise ValueError(f"no PYSKL bone pairs for skeleton {skeleton!r} (bones: {sorted(BONE_PAIRS)})")
+    return feats
+
+
+def joint_to_bone(keypoint: np.ndarray, skeleton: str) -> np.ndarray:
+    """[PYSKL] ``JointToBone``: every joint minus the joint its pair in :data:`BONE_PAIRS` names.
+
+    Args:
+        keypoint: (M, T, V, C) joints, C = 3 (x y z; or x y score for :data:`SCORE_LAYOUTS`) or 2.
+        skeleton: the joint layout (a key of :data:`BONE_PAIRS`).
+
+    Returns:
+        (M, T, V, C) float64 bones; with a score channel, each bone's score is the mean of its two joints'.
+    """
+    keypoint = np.asarray(keypoint, dtype=np.float64)
+    check_features(("b",), skeleton)
+    pairs = np.asarray(BONE_PAIRS[skeleton])
+    if keypoint.ndim != 4 or keypoint.shape[-1] not in (2, 3) or keypoint.shape[2] != len(pairs):
+        raise ValueError(f"joint_to_bone expects (M, T, {len(pairs)}, C=2|3) {skeleton} joints, "
+                         f"got shape {keypoint.shape}")  # fmt: skip
+    child, parent = pairs[:, 0], pairs[:, 1]
+    bone = np.zeros_like(keypoint)
+    bone[..., child, :] = keypoint[..., child, :] - keypoint[..., parent, :]
+    if keypoint.shape[-1] == 3 and skeleton in SCORE_LAYOUTS:
+        bone[..., child, 2] = (keypoint[..., child, 2] + keypoint[..., parent, 2]) / 2
+    return bone
+
+
+def to_motion(data: np.ndarray, score: bool = False) -> np.ndarray:
+    """[PYSKL] ``ToMotion``: the next frame minus this one along T; the last frame's motion is zero.
+
+    Args:
+        data: (M, T, V, C) joints or bones.
+        score: channel 2 is a confidence score: the mean of the two frames' scores instead of a difference
+            (zero at the last frame, as every channel there).
+
+    Returns:
+        (M, T, V, C) float64.
+    """
+    data = np.asarray(data, dtype=np.float64)
+    if data.ndim != 4:
+        raise ValueError(f"to_motion expects (M, T, V, C) data, got shape {data.shape}")
+    motion = np.zeros_like(data)
+    motion[:, :-1] = np.diff(data, axis=1)
+    if score:
+        motion[:, :-1, :, 2] = (data[:, :-1, :, 2] + data[:, 1:, :, 2]) / 2
+    return motion
+
+
+def skeleton_features(keypoint: np.ndarray, feats: Sequence[str], skeleton: str | None = None) -> np.ndarray:
+    """[PYSKL] ``GenSkeFeat(feats)``: the features named, concatenated on the channel axis in that order.
+
+    Args:
+        keypoint: (M, T, V, C) joints of the whole (normalised) sequence; C = 3 with a score channel for
+            the 2-D layouts of :data:`SCORE_LAYOUTS` (x, y, score), else coordinates.
+        feats: one or more of :data:`FEATURES`: ``j`` joints, ``b`` bones (:func:`joint_to_bone`), ``jm``
+            joint motion, ``bm`` bone motion (:func:`to_motion`).
+        skeleton: the joint layout: a key of :data:`BONE_PAIRS` for ``b`` / ``bm``; it also says whether
+            channel 2 is a score. None: joints and joint motion of coordinates only.
+
+    Returns:
+        (M, T, V, len(feats) * C) float32.
+    """
+    feats = check_features(feats)
+    keypoint = np.asarray(keypoint)
+    if keypoint.ndim != 4:
+        raise ValueError(f"skeleton_features expects (M, T, V, C) joints, got shape {keypoint.shape}")
+    if {"b", "bm"} & set(feats) and skeleton not in BONE_PAIRS:
+        raise ValueError(f"bone features need a skeleton of {sorted(BONE_PAIRS)}, got {skeleton!r}")
+    score = keypoint.shape[-1] == 3 and skeleton in SCORE_LAYOUTS
+    out = {"j": np.asarray(keypoint, dtype=np.float64)}
+    if {"b", "bm"} & set(feats):
+        out["b"] = joint_to_bone(out["j"], skeleton)
+    if "jm" in feats:
+        out["jm"] = to_motion(out["j"], score)
+    if "bm" in feats:
+        out["bm"] = to_motion(out["b"], score)
+    return np.concatenate([out[f] for f in feats], axis=-1).astype(np.float32)
 
 
 def _integers(rng: np.random.Generator | np.random.RandomState, high):
@@ -291,18 +429,23 @@ def random_rotate_scale(
 class SkeletonPipeline:
     """One annotation -> (num_clips, M, clip_len, V, C) float32 network input (PYSKL GCN pipeline).
 
-    3D (C = 3, x y z): ``pre_normalize_3d`` -> [train: ``random_rotate_scale``] -> sampling -> bodies.
+    3D (C = 3, x y z): ``pre_normalize_3d`` -> [train: ``random_rotate_scale``] -> ``skeleton_features``
+    -> sampling -> bodies.
     2D (``keypoint_score`` present): ``pre_normalize_2d`` with the annotation's ``img_shape`` -> score
     appended as a third channel (x, y, score) as PYSKL ``GenSkeFeat`` does -> [train: ``random_rotate_scale``
-    of x, y: PYSKL's transforms on (M, T, V, 2) keypoints, C = 2] -> sampling -> bodies. (PYSKL's own
-    ``PreNormalize2D`` merges the score into a third channel, so a PYSKL 2-D config with ``RandomRot``, of
-    which it ships none, would turn (x, y, score) as if 3-D.)
+    of x, y: PYSKL's transforms on (M, T, V, 2) keypoints, C = 2] -> ``skeleton_features`` -> sampling ->
+    bodies. (PYSKL's own ``PreNormalize2D`` merges the score into a third channel, so a PYSKL 2-D config with
+    ``RandomRot``, of which it ships none, would turn (x, y, score) as if 3-D.) With ``feats`` other than
+    ``("j",)`` the output has ``len(feats) * C`` channels per joint.
 
     The order is PYSKL's: its configs that augment (``configs/strong_aug/*/j.py``, ``configs/dgstgcn/*/j.py``)
     run ``RandomScale`` / ``RandomRot`` on the whole normalised sequence before ``UniformSample``, so the
     draws come scale, rotation, then sampling, and with ``np.random.RandomState(seed)`` as ``rng`` the output
     equals PYSKL's after ``np.random.seed(seed)``. ``augment_before_sampling=False`` samples first and
-    augments the sampled clips (the order of the 2s-AGCN / CTR-GCN feeders: sampling draws first).
+    augments the sampled clips (the order of the 2s-AGCN / CTR-GCN feeders: sampling draws first); the
+    features are then computed on the whole sequence before sampling and the one drawn scale and rotation
+    turn every feature alike (bones and motions are differences of joints, so this equals augmenting the
+    joints first).
 
     Args:
         clip_len: frames per clip (PYSKL GCN configs: 100).
@@ -315,6 +458,10 @@ class SkeletonPipeline:
         img_shape: (height, width) for 2D data without ``img_shape`` in the annotation.
         seed: the test-mode sampling seed.
         augment_before_sampling: augment the whole sequence, then sample (PYSKL); False: sample, then augment.
+        feats: the [PYSKL] ``GenSkeFeat`` features (:data:`FEATURES`): ``("j",)`` joints (the default),
+            ``("b",)``, ``("jm",)``, ``("bm",)`` or several, concatenated in that order.
+        skeleton: the joint layout (:data:`BONE_PAIRS`): needed for ``b`` / ``bm``, and for a 2-D layout's
+            score channel in the motion features.
     """
 
     def __init__(
@@ -328,7 +475,13 @@ class SkeletonPipeline:
         img_shape: tuple[float, float] = (1080, 1920),
         seed: int = 255,
         augment_before_sampling: bool = True,
+        feats: Sequence[str] = ("j",),
+        skeleton: str | None = None,
     ) -> None:
+        self.feats = check_features(feats, skeleton)
+        if {"b", "bm"} & set(self.feats) and skeleton is None:
+            raise ValueError(f"feats {list(self.feats)} need the skeleton layout for the bones")
+        self.skeleton = skeleton
         self.clip_len = clip_len
         self.num_clips = num_clips
         self.test_mode = test_mode
@@ -340,10 +493,14 @@ class SkeletonPipeline:
         self.augment_before_sampling = augment_before_sampling
 
     def _augment(
-        self, keypoint: np.ndarray, xyz: int, rng: np.random.Generator | np.random.RandomState
-    ) -> None:
-        """In place: ``random_rotate_scale`` of the first ``xyz`` channels of (M, T, V, C) ``keypoint``."""
-        keypoint[..., :xyz] = random_rotate_scale(keypoint[..., :xyz], rng, self.max_angle, self.scale_range)
+        self, keypoint: np.ndarray, xyz: int, width: int, rng: np.random.Generator | np.random.RandomState
+    ) -> np.ndarray:
+        """``random_rotate_scale`` of the first ``xyz`` channels of every ``width``-channel feature of (M, T,
+        V, F * width) ``keypoint``, one draw for all (the features side by side as F * V joints)."""
+        m, t, v, c = keypoint.shape
+        chunks = np.array(keypoint, dtype=np.float32).reshape(m, t, v * (c // width), width)
+        chunks[..., :xyz] = random_rotate_scale(chunks[..., :xyz], rng, self.max_angle, self.scale_range)
+        return chunks.reshape(m, t, v, c)
 
     def __call__(
         self, annotation: Mapping, rng: np.random.Generator | np.random.RandomState | None = None
@@ -368,16 +525,19 @@ class SkeletonPipeline:
         else:
             keypoint = pre_normalize_3d(keypoint)
             xyz = 3
-        m, t, v, c = keypoint.shape
-        if t == 0:
+        width = keypoint.shape[-1]  # channels of one feature
+        if keypoint.shape[1] == 0:
             raise ValueError(f"{annotation.get('frame_dir', '<sample>')}: no frame with a body to sample")
         augment = not self.test_mode and bool(self.max_angle or self.scale_range)
         if augment and self.augment_before_sampling:
-            self._augment(keypoint, xyz, rng)
+            keypoint = self._augment(keypoint, xyz, width, rng)
+        if self.feats != ("j",):  # PYSKL GenSkeFeat: after PreNormalize / RandomScale / RandomRot
+            keypoint = skeleton_features(keypoint, self.feats, self.skeleton)
+        m, t, v, c = keypoint.shape
         inds = uniform_sample_indices(t, self.clip_len, self.num_clips, self.test_mode, rng, self.seed)
         clips = keypoint[:, inds]  # (M, num_clips * clip_len, V, C)
         if augment and not self.augment_before_sampling:
-            self._augment(clips, xyz, rng)
+            clips = self._augment(clips, xyz, width, rng)
         clips = keep_bodies(clips, self.num_person)
         clips = clips.reshape(self.num_person, self.num_clips, self.clip_len, v, c).transpose(1, 0, 2, 3, 4)
         return np.ascontiguousarray(clips, dtype=np.float32)

@@ -66,6 +66,11 @@ MACHINERY_COMMANDS: dict[str, Command] = {
         "write a motion file as glTF 2.0 (.glb)",
         f"{_PKG}.motion.export_args:build_parser",
     ),
+    "retarget": Command(
+        f"{_PKG}.motion.retarget_cli:main",
+        "put a motion on your character (skinned glTF, VRM or BVH rig)",
+        f"{_PKG}.motion.retarget_args:build_parser",
+    ),
     "view": Command(
         f"{_PKG}.motion.view:main",
         "motions in one self-contained HTML viewer",
