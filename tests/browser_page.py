@@ -29,9 +29,14 @@ def browser_or_skip() -> str:
     return BROWSER
 
 
+class PageCrashed(AssertionError):
+    """The page's renderer died (crashed, or Chromium terminated it): nothing it would answer comes."""
+
+
 class Page:
     """A page of a headless Chromium; ``flags``: more command-line switches. ``errors`` collects console
-    errors and exceptions, ``requests`` the URL of every request the page made."""
+    errors and exceptions, ``requests`` the URL of every request the page made. A call raises
+    :class:`PageCrashed` at once when the renderer dies (else it would wait out the socket's 60 s)."""
 
     def __init__(self, url: str, tmp: Path, flags: tuple[str, ...] = ()):
         import websocket
@@ -71,6 +76,7 @@ class Page:
             pages[0]["webSocketDebuggerUrl"], timeout=60, suppress_origin=True
         )
         self.next_id, self.errors, self.requests = 0, [], []
+        self.call("Inspector.enable")
         self.call("Runtime.enable")
         self.call("Log.enable")
         self.call("Network.enable")
@@ -88,6 +94,8 @@ class Page:
                 self.errors.append(message["params"]["entry"])
             elif message.get("method") == "Network.requestWillBeSent":
                 self.requests.append(message["params"]["request"]["url"])
+            elif message.get("method") == "Inspector.targetCrashed":
+                raise PageCrashed(f"the page's renderer died during {method} ({self.errors})")
             if message.get("id") == self.next_id:
                 assert "error" not in message, message
                 return message["result"]
@@ -126,7 +134,14 @@ class Page:
             time.sleep(0.1)
 
     def set_file(self, selector: str, path: Path) -> None:
-        """Choose ``path`` in the file input at ``selector`` (as a user would: its change event fires)."""
+        """Choose ``path`` in the file input at ``selector`` (as a user would: its change event fires).
+
+        The path goes to Chromium absolute: given a relative one, Chromium grants the page that path but
+        the renderer asks for the file by its absolute name, and the browser terminates the renderer about
+        a second later ("Terminating renderer for bad IPC message, reason 2" on its stderr), which looks
+        like a page that stopped answering."""
+        path = Path(path).resolve()
+        assert path.is_file(), f"{path}: no such file to pick"
         root = self.call("DOM.getDocument")["root"]["nodeId"]
         node = self.call("DOM.querySelector", nodeId=root, selector=selector)["nodeId"]
         self.call("DOM.setFileInputFiles", files=[str(path)], nodeId=node)

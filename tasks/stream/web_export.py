@@ -13,9 +13,14 @@ and makes no network request, with the licences of what it embeds beside it:
 The page (``web/dancer.html``) dances to a picked music file as it plays (decoded and resampled to 15360 Hz
 by the browser) or to the microphone (an AudioWorklet at 15360 Hz), steps the graph once per hop with its
 state fed back, draws the skeleton, and shows the step's time, the frames per second it allows and the
-audio-to-pose latency. The wasm backend runs one thread from disk; served cross-origin isolated (headers
-``Cross-Origin-Opener-Policy: same-origin`` and ``Cross-Origin-Embedder-Policy: require-corp``) it takes
-``?threads=N``. ``window.smDance`` exposes the poses, joints, features and timings it computed.
+audio-to-pose latency. Its status line says what it waits for or does (before music: pick a file or press
+the microphone button, with the dancer in its first pose on silence; decoding; preparing; dancing; a file
+the browser cannot decode, said as such). A step does not yield the page's thread, so the page steps at
+most 25 ms of frames (plus one) before it yields: where a machine steps slower than real time the dancer
+falls behind (said on screen) and the page still answers. The wasm backend runs one thread from disk;
+served cross-origin isolated (headers ``Cross-Origin-Opener-Policy: same-origin`` and
+``Cross-Origin-Embedder-Policy: require-corp``) it takes ``?threads=N``. ``window.smDance`` exposes the
+poses, joints, features and timings it computed, and the status (``status``, ``message``, ``statuses``).
 """
 
 from __future__ import annotations
