@@ -43,6 +43,21 @@ def _write(out: Path, command: str, files: dict[str, bytes], **kw) -> None:
             (out / name).write_bytes(data)
 
 
+def _dance_args(tmp_path: Path) -> list[str]:
+    """``sm dance`` with input files that exist (checked as it parses) and a checkpoint that does not."""
+    (tmp_path / "m.wav").write_bytes(b"")
+    (tmp_path / "v.mp4").write_bytes(b"")
+    return [
+        "dance",
+        "--ckpt",
+        "none.ckpt",
+        "--music",
+        str(tmp_path / "m.wav"),
+        "--video",
+        str(tmp_path / "v.mp4"),
+    ]
+
+
 def test_a_commands_own_output_is_proven_by_its_signed_manifest(tmp_path):
     out = tmp_path / "live"
     _write(out, "sm stream", {"song.npz": b"poses", "song.mp4": b"video"})
@@ -92,18 +107,7 @@ def test_sm_dance_does_not_replace_a_file_a_planted_manifest_names(tmp_path, cap
     out.mkdir()
     (out / "dance.npz").write_bytes(b"the user's dance")
     (out / MANIFEST).write_text(json.dumps({"command": "sm dance", "files": ["dance.npz"]}))  # the old form
-    (tmp_path / "m.wav").write_bytes(b"")
-    (tmp_path / "v.mp4").write_bytes(b"")
-    args = [
-        "dance",
-        "--ckpt",
-        "none.ckpt",
-        "--music",
-        str(tmp_path / "m.wav"),
-        "--video",
-        str(tmp_path / "v.mp4"),
-    ]
-    assert sm([*args, "--out", str(out)]) == 2
+    assert sm([*_dance_args(tmp_path), "--out", str(out)]) == 2
     assert "not an earlier output of sm dance" in capsys.readouterr().err
     assert (out / "dance.npz").read_bytes() == b"the user's dance"
 
@@ -111,18 +115,8 @@ def test_sm_dance_does_not_replace_a_file_a_planted_manifest_names(tmp_path, cap
 @pytest.mark.parametrize("name", ["../victim_dance", "/tmp/victim_dance", "..", "a/b", "a\\b", ""])
 @pytest.mark.parametrize("command", ["dance", "stream", "stream-recognition"])
 def test_a_name_option_is_a_plain_file_name(tmp_path, capsys, name, command):
-    (tmp_path / "m.wav").write_bytes(b"")
-    (tmp_path / "v.mp4").write_bytes(b"")
     argv = {
-        "dance": [
-            "dance",
-            "--ckpt",
-            "none.ckpt",
-            "--music",
-            str(tmp_path / "m.wav"),
-            "--video",
-            str(tmp_path / "v.mp4"),
-        ],
+        "dance": _dance_args(tmp_path),
         "stream": ["stream", "--ckpt", "none.ckpt", "--music", str(tmp_path / "m.wav")],
         "stream-recognition": [
             "stream",

@@ -50,26 +50,25 @@ def _swap(a: str, b: str):
     return lambda name: name.replace(a, b)
 
 
+_MIXAMO_LEFT = {
+    "hips": "Hips",
+    "spine": "Spine",
+    "chest": "Spine1",
+    "upperChest": "Spine2",
+    "neck": "Neck",
+    "head": "Head",
+    "leftShoulder": "LeftShoulder",
+    "leftUpperArm": "LeftArm",
+    "leftLowerArm": "LeftForeArm",
+    "leftHand": "LeftHand",
+    "leftUpperLeg": "LeftUpLeg",
+    "leftLowerLeg": "LeftLeg",
+    "leftFoot": "LeftFoot",
+    "leftToes": "LeftToeBase",
+}  # Mixamo's names, the left side; CMU's BVH names are the same without an upper chest
+
 PRESETS: dict[str, dict[str, str]] = {
-    "mixamo": _sided(
-        {
-            "hips": "Hips",
-            "spine": "Spine",
-            "chest": "Spine1",
-            "upperChest": "Spine2",
-            "neck": "Neck",
-            "head": "Head",
-            "leftShoulder": "LeftShoulder",
-            "leftUpperArm": "LeftArm",
-            "leftLowerArm": "LeftForeArm",
-            "leftHand": "LeftHand",
-            "leftUpperLeg": "LeftUpLeg",
-            "leftLowerLeg": "LeftLeg",
-            "leftFoot": "LeftFoot",
-            "leftToes": "LeftToeBase",
-        },
-        _swap("Left", "Right"),
-    ),  # fmt: skip
+    "mixamo": _sided(_MIXAMO_LEFT, _swap("Left", "Right")),
     "vrm": _sided({b: b for b in BONES if not b.startswith("right")}, _swap("left", "right")),
     "vroid": _sided(
         {
@@ -103,24 +102,7 @@ PRESETS: dict[str, dict[str, str]] = {
         },
         _swap(".L", ".R"),
     ),  # fmt: skip
-    "cmu": _sided(
-        {
-            "hips": "Hips",
-            "spine": "Spine",
-            "chest": "Spine1",
-            "neck": "Neck",
-            "head": "Head",
-            "leftShoulder": "LeftShoulder",
-            "leftUpperArm": "LeftArm",
-            "leftLowerArm": "LeftForeArm",
-            "leftHand": "LeftHand",
-            "leftUpperLeg": "LeftUpLeg",
-            "leftLowerLeg": "LeftLeg",
-            "leftFoot": "LeftFoot",
-            "leftToes": "LeftToeBase",
-        },
-        _swap("Left", "Right"),
-    ),  # fmt: skip
+    "cmu": _sided({k: v for k, v in _MIXAMO_LEFT.items() if k != "upperChest"}, _swap("Left", "Right")),
     "smpl": _sided(
         {
             "hips": "pelvis",
