@@ -20,6 +20,7 @@ from skeleton_mamba.tasks.motion.option_types import (
     seed_option,
 )
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
 
 __all__ = ["DANCE_BF16_ERROR", "DEFAULT_BATCH_WINDOWS", "build_parser", "overlap_problem"]
 
@@ -76,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", type=file_name_option, default="dance", help="file stem inside an output folder")
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.add_argument("--no-render", action="store_true", help="write .npz and .bvh only")
+    add_rig_arguments(p)
     p.add_argument(
         "--render-size",
         type=image_size_option,

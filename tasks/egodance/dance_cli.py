@@ -19,7 +19,8 @@ denoising step (EDGE long-form), ``--batch-windows`` at a time, so a 60 s song g
 bounded memory. A video shorter than the music: the dance covers the part where both are (said before the
 video is decoded); a video of another frame rate is taken at the model's. ``--out DIR`` receives
 ``<name>.npz`` (our motion format), ``<name>.bvh`` and ``<name>.mp4`` (the skeleton with the music muxed in;
-``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE. A checkpoint trained with
+``--no-render`` skips it); ``--out FILE.npz`` names the files after FILE; ``--rig RIG`` (``--map``) also
+writes the dance on that character, ``<name>_rig.glb`` / ``.vrm`` / ``.bvh``. A checkpoint trained with
 ``canonicalize_init_head`` (the demo's), whose windows face their first frame's head heading, samples each
 window in that frame, found from the previous window's dance, with head targets estimated per window; the
 windows are turned back and joined (:mod:`.window_frames`).
@@ -34,6 +35,7 @@ from pathlib import Path
 
 import torch
 
+from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.egodance.dance_args import build_parser
 from skeleton_mamba.tasks.egodance.dance_inputs import DanceInputs, sample_inputs, track_inputs
@@ -51,6 +53,7 @@ from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.output_folder import claim_output_files, claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.training.diffusion.sampling import SamplingOptions
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
@@ -156,15 +159,22 @@ def _list_samples(ckpt: str, checkpoint: dict) -> int:
     return 0
 
 
-def claim_dance_output(out: str, name: str, render: bool, overwrite: bool) -> None:
+def _output_names(out: str, name: str, render: bool, rig: str | None) -> tuple[Path, str, list[str]]:
+    """The folder, the stem and the file names of the dance (``rig``: the ``--rig`` file, its one too)."""
+    path = Path(out)
+    folder, stem = (path.parent, path.stem) if path.suffix.lower() == ".npz" else (path, name)
+    return folder, stem, dance_files(stem, render) + rig_file_names([stem], rig)
+
+
+def claim_dance_output(out: str, name: str, render: bool, overwrite: bool, rig: str | None = None) -> None:
     """``--out DIR``: a folder this command may write into; ``--out FILE.npz``: no file beside it replaced
     (:mod:`~skeleton_mamba.tasks.motion.output_folder`)."""
     path = Path(out)
+    folder, _, names = _output_names(out, name, render, rig)
     if path.suffix.lower() == ".npz":
-        siblings = [path.with_name(name) for name in dance_files(path.stem, render)]
-        claim_output_files(siblings, path, overwrite=overwrite)
+        claim_output_files([folder / n for n in names], path, overwrite=overwrite)
     else:
-        claim_output_folder(path, "sm dance", dance_files(name, render), overwrite=overwrite)
+        claim_output_folder(path, "sm dance", names, overwrite=overwrite)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -176,8 +186,12 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(f"--render-size {args.render_size[0]}x{args.render_size[1]}: use multiples of 16")
     if args.head == "oracle" and not args.sample:
         raise InputError("--head oracle needs the ground-truth camera path of a --sample")
+    rig = None
     if not args.list_samples:  # the arguments first, then the output, then any work
-        claim_dance_output(args.out, args.name, not args.no_render, args.overwrite)
+        claim_dance_output(args.out, args.name, not args.no_render, args.overwrite, args.rig)
+        folder, stem, _ = _output_names(args.out, args.name, not args.no_render, args.rig)
+        # the character read and mapped before the checkpoint, the music and the video
+        rig = prepare_rig(args, [folder / n for n in rig_file_names([stem], args.rig)], SMPL24.joint_names)
 
     # checked: local, weights_only, project classes; read once
     module, checkpoint = load_module_and_checkpoint_from(EgoDanceModule, args.ckpt)
@@ -212,14 +226,10 @@ def main(argv: list[str] | None = None) -> int:
     seconds["sampling"] = time.perf_counter() - start
     start = time.perf_counter()
     out = Path(args.out)
-    out_dir, name = (out.parent, out.stem) if out.suffix.lower() == ".npz" else (out, args.name)
+    out_dir, name, names = _output_names(args.out, args.name, not args.no_render, args.rig)
     width, height = args.render_size
     into_folder = out.suffix.lower() != ".npz"
-    with (
-        writing_outputs(out_dir, "sm dance", dance_files(name, not args.no_render))
-        if into_folder
-        else nullcontext()
-    ):
+    with writing_outputs(out_dir, "sm dance", names) if into_folder else nullcontext():
         files = write_dance(
             tokens,
             out_dir,
@@ -232,6 +242,8 @@ def main(argv: list[str] | None = None) -> int:
             progress=args.progress,
             fps=fps,
         )
+        if rig is not None:  # the dance written above, on the character: same frames and frame rate
+            files.rig = rig.write_file(files.npz, out_dir / rig.file_name(name), name)
     seconds["writing"] = time.perf_counter() - start
     duration = tokens.shape[0] / fps
     guidance = {

@@ -32,13 +32,15 @@ def dance_files(name: str, render: bool = True) -> list[str]:
 
 @dataclass
 class DanceFiles:
-    """Paths of one written dance (``mp4``/``wav`` None when not rendered / no music)."""
+    """Paths of one written dance (``mp4``/``wav`` None when not rendered / no music; ``rig``: the dance on a
+    character, written by the command with ``--rig``)."""
 
     npz: Path
     bvh: Path
     glb: Path | None = None
     mp4: Path | None = None
     wav: Path | None = None
+    rig: Path | None = None
 
     def lines(self) -> list[str]:
         return [f"  {kind:4s} {path}" for kind, path in vars(self).items() if path is not None]

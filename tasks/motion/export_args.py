@@ -6,6 +6,7 @@ import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.option_types import fps_option
+from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
 from skeleton_mamba.tasks.motion.units import add_unit_arguments
 
 __all__ = ["build_parser"]
@@ -22,12 +23,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output .glb, in an existing folder")
     p.add_argument("--music", default=None, help="audio file: its first seconds are written beside as .wav")
+    add_rig_arguments(p)
     p.add_argument("--skeleton", default=None, help="skeleton of a .npy joint file (smpl24, ntu25, ...)")
     p.add_argument(
         "--motion-fps", type=fps_option, default=None, help="input frame rate (overrides the file's)"
     )
     p.add_argument(
-        "--overwrite", action="store_true", help="with --music: replace an existing .wav beside --out"
+        "--overwrite",
+        action="store_true",
+        help="with --music / --rig: replace an existing .wav / rig file beside --out",
     )
     add_unit_arguments(p)
     return p

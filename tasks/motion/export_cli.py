@@ -5,7 +5,8 @@ Writes any motion file the toolkit reads (:mod:`.motion_reader`: ``.npz``, AIST+
 (:mod:`.gltf`): a skinned skeleton and one animation, in metres. A scale other than metres by the file's
 format (a BVH's detected unit, ``--units``, ``--scale``) is stated on stderr; every file records it in its
 ``asset.extras``. ``--music`` writes the track's slice of the motion's length beside it (``dance.wav``), as
-glTF has no audio. ``--out``'s folder must exist.
+glTF has no audio; ``--rig RIG`` (``--map``) the motion on that character too (``dance_rig.glb`` / ``.vrm`` /
+``.bvh``, :mod:`.rig_output`). ``--out``'s folder must exist.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from skeleton_mamba.tasks.motion.export_args import build_parser
 from skeleton_mamba.tasks.motion.gltf import write_glb
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.output_folder import claim_output_files
+from skeleton_mamba.tasks.motion.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.motion.units import METRES
 
 __all__ = ["main"]
@@ -34,13 +36,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if out.suffix.lower() != ".glb":
             raise InputError(f"{out}: the output must be a .glb file")
         output_file(out)
-        if args.music is not None:  # the .wav beside the .glb: not named by the user, so not replaced unasked
-            claim_output_files([out.with_suffix(".wav")], out, overwrite=args.overwrite)
+        beside = [out.with_suffix(".wav")] if args.music is not None else []
+        beside += [out.with_name(name) for name in rig_file_names([out.stem], args.rig)]
+        # the .wav and the rig's file beside the .glb: not named by the user, so not replaced unasked
+        claim_output_files(beside, out, overwrite=args.overwrite)
+        rig = prepare_rig(args, beside[-1:] if args.rig is not None else (), inputs=[args.motion])
         motion = load_skeleton_motion(args.motion, args.skeleton, args.motion_fps, args.units, args.scale)
         if motion.scale != METRES:
             print(motion.scale.line(args.motion), file=sys.stderr)
         write_glb(motion, out, name=Path(args.motion).stem)
         print(f"wrote {out} ({len(motion.names)} joints, {motion.num_frames} frames at {motion.fps:g} fps)")
+        if rig is not None:
+            path = rig.write(motion, out.with_name(rig.file_name(out.stem)), Path(args.motion).stem)
+            print(f"wrote {path} (on the rig {rig.path}, {rig.rig.how})")
         if args.music is not None:
             wav = write_music_slice(args.music, 0.0, motion.num_frames / motion.fps, out.with_suffix(".wav"))
             print(f"wrote {wav}")

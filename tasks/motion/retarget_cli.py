@@ -20,14 +20,10 @@ from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.output_folder import claim_output_files
-from skeleton_mamba.tasks.motion.retarget import (
-    bone_direction_errors,
-    retarget,
-    write_bvh_rig,
-    write_gltf_rig,
-)
+from skeleton_mamba.tasks.motion.retarget import bone_direction_errors
 from skeleton_mamba.tasks.motion.retarget_args import build_parser
-from skeleton_mamba.tasks.motion.retarget_rig import find_bones, load_rig, read_map, separate_torso
+from skeleton_mamba.tasks.motion.retarget_rig import load_rig, read_map
+from skeleton_mamba.tasks.motion.rig_output import retarget_onto
 from skeleton_mamba.tasks.motion.units import METRES
 
 __all__ = ["main"]
@@ -53,14 +49,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         motion = load_skeleton_motion(args.motion, args.skeleton, args.motion_fps, args.units, args.scale)
         if motion.scale != METRES:
             print(motion.scale.line(args.motion), file=sys.stderr)
-        joints = motion.joint_positions()
-        source_bones, _ = find_bones(motion.names, str(args.motion), what="motion")
-        source_bones = separate_torso(source_bones, motion.parents, joints)
-        result = retarget(rig, joints, source_bones)
-        if rig.kind == "bvh":
-            write_bvh_rig(rig, result, motion.fps, out)
-        else:
-            write_gltf_rig(rig_path, rig, result, motion.fps, out, Path(args.motion).stem)
+        result, joints, source_bones = retarget_onto(
+            rig_path, rig, motion, out, Path(args.motion).stem, str(args.motion)
+        )
         errors = bone_direction_errors(result.positions, rig.bones, joints, source_bones, result.driven)
         worst = max(errors, key=lambda b: float(errors[b].max()))
         mean = float(np.mean([e.mean() for e in errors.values()]))

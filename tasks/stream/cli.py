@@ -13,7 +13,8 @@ Examples::
 Dance (``--task dance``, default): reads the music in chunks of ``--chunk-ms`` as it arrives, extracts
 causal features (:mod:`skeleton_mamba.tasks.stream.features`: no look-ahead; a pose frame needs
 its own 33.3 ms of audio) and emits one pose per 30 fps frame. At the end (or on Ctrl-C) it writes
-``DIR/<name>.npz`` (our motion format), ``<name>.bvh``, ``<name>.mp4`` (the skeleton with the music)
+``DIR/<name>.npz`` (our motion format), ``<name>.bvh``, ``<name>.mp4`` (the skeleton with the music),
+with ``--rig RIG`` (``--map``) ``<name>_rig.glb`` / ``.vrm`` / ``.bvh`` (the dance on that character)
 and ``<name>_stream.json`` (frame count, latency figures, file paths), and prints
 the audio-to-pose latency: median / p99 / max over frames of the time from the delivery of the audio
 chunk that completes a frame to its pose.
@@ -32,12 +33,14 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
+from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import dance_files, write_motion
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.rig_output import RigOutput, prepare_rig, rig_file_names
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.stream.cli_args import build_parser
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
@@ -67,21 +70,26 @@ def stream_dance(args: argparse.Namespace) -> int:
     if args.compile and args.precision != "fp32":
         raise InputError(f"--compile steps in fp32 only: drop --compile or --precision {args.precision}")
     name = args.name or ("stdin" if args.music == "-" else Path(args.music).stem)
-    produced = [*dance_files(name, not args.no_render), f"{name}_stream.json"]
+    on_rig = rig_file_names([name], args.rig)
+    produced = [*dance_files(name, not args.no_render), f"{name}_stream.json", *on_rig]
     out = claim_output_folder(args.out, "sm stream", produced, overwrite=args.overwrite)
+    # the character read and mapped before the music is opened and the checkpoint loaded
+    rig = prepare_rig(args, [out / n for n in on_rig], SMPL24.joint_names)
     source = AudioSource(args.music, args.chunk_ms / 1e3, args.realtime, args.raw_rate)
     model = _load_dancer(args.ckpt)
     with inference_precision(args.precision):  # the warm-up frame too
         dancer = LiveDancer(model, source.sample_rate, compile=announce_compile(args.compile))
     report_compile(dancer.compile_seconds, args.compile)
     with writing_outputs(out, "sm stream", produced):
-        return _dance_into(args, out, name, source, dancer)
+        return _dance_into(args, out, name, source, dancer, rig)
 
 
 def _dance_into(
-    args: argparse.Namespace, out: Path, name: str, source: AudioSource, dancer: LiveDancer
-) -> int:
-    """Stream ``source`` through ``dancer``; write the dance, its video and report as ``name`` in ``out``."""
+    args: argparse.Namespace, out: Path, name: str, source: AudioSource, dancer: LiveDancer,
+    rig: RigOutput | None = None,
+) -> int:  # fmt: skip
+    """Stream ``source`` through ``dancer``; write the dance, its video and report as ``name`` in ``out``
+    (``rig``: the dance on that character too)."""
     # The music as received, for the video (a live input has no file of its own).
     recording = None if args.music != "-" else Path(tempfile.mkstemp(suffix=".wav", dir=out)[1])
     writer = None if recording is None else sf.SoundFile(recording, "w", source.sample_rate, 1, "PCM_16")
@@ -120,6 +128,8 @@ def _dance_into(
             style=RenderStyle(width=width, height=height),
             title=f"live {Path(args.ckpt).name}",
         )
+        if rig is not None:  # the dance written above, on the character: same frames and frame rate
+            files.rig = rig.write_file(files.npz, out / rig.file_name(name), name)
     finally:  # the received music is only needed for the video; none stays behind in the out folder
         if recording is not None:
             recording.unlink(missing_ok=True)

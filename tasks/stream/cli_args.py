@@ -13,6 +13,7 @@ from skeleton_mamba.tasks.motion.option_types import (
     real_option,
 )
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
 from skeleton_mamba.tasks.training.threads import THREADS_HELP
 
 __all__ = ["STREAM_BF16_ERROR", "build_parser"]
@@ -70,6 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="audio chunk length in ms",
     )
     p.add_argument("--no-render", action="store_true", help="skip the mp4")
+    add_rig_arguments(p)
     p.add_argument(
         "--render-size",
         type=image_size_option,

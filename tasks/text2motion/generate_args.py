@@ -7,6 +7,7 @@ import argparse
 from skeleton_mamba.tasks.motion.cli_options import add_quiet_argument, add_sampling_arguments, command_parser
 from skeleton_mamba.tasks.motion.option_types import int_option, seed_option
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
 
 __all__ = ["build_parser"]
 
@@ -28,5 +29,6 @@ def build_parser() -> argparse.ArgumentParser:
     add_sampling_arguments(p)
     p.add_argument("--seed", type=seed_option, default=0, help="noise seed")
     p.add_argument("--render", choices=("gif", "mp4"), default=None, help="also render each motion")
+    add_rig_arguments(p)
     add_quiet_argument(p, "progress bar")
     return p

@@ -5,7 +5,9 @@ repetition it writes, in ``DIR``:
 
 - ``NNN_<words>.npy``: joint positions (T, 22, 3), metres, y-up, 20 fps (``sm render`` reads it);
 - ``NNN_<words>_features.npy``: the de-normalised HumanML3D features (T, 263);
-- ``NNN_<words>.gif`` / ``.mp4`` with ``--render gif|mp4``.
+- ``NNN_<words>.gif`` / ``.mp4`` with ``--render gif|mp4``;
+- ``NNN_<words>_rig.glb`` / ``.vrm`` / ``.bvh`` with ``--rig RIG`` (``--map``): the motion on that character
+  (:mod:`~skeleton_mamba.tasks.motion.rig_output`).
 
 ``--length`` is seconds with an ``s`` suffix (``6s`` = 120 frames) or a frame count (``120``).
 Sampling takes the checkpoint's settings unless ``--sampler ddim|ddpm|dpmpp|unipc``, ``--steps`` (alone on a
@@ -32,6 +34,7 @@ from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import render_motion
+from skeleton_mamba.tasks.motion.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.motion.value_checks import non_finite_message
 from skeleton_mamba.tasks.text2motion.generate_args import build_parser
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
@@ -139,8 +142,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     stems = [f"{i:03d}_{slug(caption)}" for i, caption in enumerate(captions)]
     suffixes = (".npy", "_features.npy", ".glb", *((f".{args.render}",) if args.render else ()))
-    produced = [stem + suffix for stem in stems for suffix in suffixes]
-    claim_output_folder(args.out, "sm generate", produced, overwrite=args.overwrite)
+    on_rig = rig_file_names(stems, args.rig)
+    produced = [stem + suffix for stem in stems for suffix in suffixes] + on_rig
+    out = claim_output_folder(args.out, "sm generate", produced, overwrite=args.overwrite)
+    # the character read and mapped before the checkpoint and the text encoder are loaded
+    rig = prepare_rig(args, [out / n for n in on_rig], list(HUMANML3D22.joint_names))
     overrides = sampling_overrides(args)
     check_model_source(args.checkpoint)  # the text as given: a URL is refused as one
 
@@ -167,6 +173,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     with writing_outputs(args.out, "sm generate", produced) as out:
         for i, caption in enumerate(captions):
             paths = save_generated(features[i], caption, out / stems[i], args.render)
+            if rig is not None:  # the joints written above, on the character: same frames and frame rate
+                rig_out = out / rig.file_name(stems[i])
+                paths["rig"] = rig.write_file(paths["joints"], rig_out, stems[i], HUMANML3D22.name, FPS)
             print(f"{caption!r}: {frames} frames at {FPS:g} fps")
             print("\n".join(f"  {kind:8s} {path}" for kind, path in paths.items()))
     return 0
