@@ -112,3 +112,18 @@ def test_causal_recipe_tests_with_an_early_curve_and_streams_a_skeleton(tmp_path
     probs = np.array([[float(v) for v in line.split(",")[2:]] for line in lines[1:]])
     np.testing.assert_allclose(probs.sum(axis=1), 1.0, atol=1e-5)
     assert (tmp_path / "online" / "clip_online.png").is_file()
+
+
+def test_the_online_recognizer_streams_the_checkpoints_own_input_stream():
+    """A bone checkpoint is fed bones (the same channel count as joints: nothing else would notice), a joint
+    or old checkpoint joints; a motion stream, which needs the next frame, is refused."""
+    from skeleton_mamba.tasks.recognition.online import _stream_features
+    from skeleton_mamba.tasks.recognition.transforms import joint_to_bone
+
+    joints = np.random.default_rng(0).normal(size=(2, 6, 25, 3)).astype(np.float32)
+    bones = _stream_features(joints, {"datamodule_hyper_parameters": {"feats": ["b"]}}, "ntu25", "b.ckpt")
+    np.testing.assert_allclose(bones, joint_to_bone(joints, "ntu25"), rtol=0, atol=1e-6)
+    for old in ({}, {"datamodule_hyper_parameters": {"skeleton": "ntu25"}}):
+        np.testing.assert_array_equal(_stream_features(joints, old, "ntu25", "j.ckpt"), joints)
+    with pytest.raises(ValueError, match=r"jm.ckpt: trained on feats \['jm'\]; a motion stream needs the next"):
+        _stream_features(joints, {"datamodule_hyper_parameters": {"feats": ["jm"]}}, "ntu25", "jm.ckpt")

@@ -35,14 +35,14 @@ from skeleton_mamba.tasks.motion.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.recognition.online_args import build_parser
-from skeleton_mamba.tasks.recognition.transforms import pre_normalize_3d
+from skeleton_mamba.tasks.recognition.transforms import pre_normalize_3d, skeleton_features
 from skeleton_mamba.tasks.training.frame_timing import (
     announce_compile,
     latency_summary,
     prepare_live,
     report_compile,
 )
-from skeleton_mamba.tasks.training.pretrained import load_module_from
+from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
 __all__ = ["OnlineRecognizer", "build_parser", "main", "stream_recognition"]
 
@@ -145,15 +145,30 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(one_line_message(err)) from err
 
 
+def _stream_features(joints: np.ndarray, checkpoint: dict, skeleton: str, ckpt: str) -> np.ndarray:
+    """The input stream the checkpoint was trained on (its data's ``feats``, [PYSKL] ``GenSkeFeat``) of
+    ``joints`` (M, T, J, C), frame by frame: joints and bones need only the frame itself; a motion stream
+    needs the next frame, which a live recognizer does not have yet, and is refused."""
+    data = checkpoint.get("datamodule_hyper_parameters")
+    feats = tuple((data.get("feats") if isinstance(data, dict) else None) or ("j",))
+    if any(f in ("jm", "bm") for f in feats):
+        raise ValueError(
+            f"{ckpt}: trained on feats {list(feats)}; a motion stream needs the next frame, which sm stream "
+            "does not have yet: stream a joint or bone checkpoint (feats [j] or [b])"
+        )
+    return skeleton_features(joints, feats, skeleton).astype(np.float32)
+
+
 def stream_recognition(args: argparse.Namespace) -> int:
     """Feed ``args.skeleton`` frame by frame to the checkpoint's recognizer; write the table and the plot."""
     path = Path(args.skeleton)
     name = args.name or path.stem
     produced = [f"{name}_online.csv", f"{name}_online.png"]
     claim_output_folder(args.out, COMMAND, produced, overwrite=args.overwrite)
-    keypoints = _load_keypoints(path)
-    module = load_module_from(ActionRecognitionModule, args.ckpt)
+    joints = _load_keypoints(path)
+    module, checkpoint = load_module_and_checkpoint_from(ActionRecognitionModule, args.ckpt)
     model = module.model
+    keypoints = _stream_features(joints, checkpoint, model.backbone.skeleton.name, args.ckpt)
     m, t, j, c = keypoints.shape
     expected = (model.backbone.skeleton.num_joints, model.backbone.config.in_channels)
     if (j, c) != expected:
