@@ -107,7 +107,7 @@ def librosa_calls(warm_path: str | None = None) -> Iterator[ModuleType]:
     stalls a live stream.
     """
     if warm_path is not None and warm_path in _warm_paths:
-        import librosa  # imported (under the lock) on the path's first run
+        import librosa  # lazy: imported (under the lock) on the path's first run
 
         yield librosa
         return

@@ -400,7 +400,7 @@ def extract_music_features(
         use_cache: ``False`` always recomputes and writes nothing.
         duration_s: analyse only the first seconds (``None``: the whole track).
     """
-    from skeleton_mamba.tasks.motion.music_windows import (
+    from skeleton_mamba.tasks.motion.music_windows import (  # lazy: it imports this module
         LONG_TRACK_S,
         mean_tempogram,
         windowed_frame_features,

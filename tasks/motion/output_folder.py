@@ -190,7 +190,8 @@ def writing_outputs(
     folder: str | os.PathLike[str], command: str, files: Iterable[str], *, replaces: bool = False
 ) -> Iterator[Path]:
     """Create ``folder`` (after :func:`claim_output_folder`) and record ``command``'s outputs in its
-    manifest: the names before the block, what the block wrote when it ends (module docstring).
+    manifest: the names before the block, what the block wrote when it ends (module docstring). A folder it
+    created is removed again when the block fails before writing anything.
 
     Args:
         files: the names the block may write (a superset is fine: only what it wrote is recorded).
@@ -198,6 +199,7 @@ def writing_outputs(
             output's files it did not write again are removed.
     """
     folder = Path(folder)
+    created = not folder.exists()
     folder.mkdir(parents=True, exist_ok=True)
     earlier = verified_outputs(folder, command)
     names = set(files) | set(earlier)
@@ -208,7 +210,10 @@ def writing_outputs(
         yield folder
         succeeded = True
     finally:
-        if folder.is_dir():  # a command may remove a folder it created for nothing (make-ego)
+        if created and not succeeded and folder.is_dir() and set(os.listdir(folder)) <= {MANIFEST}:
+            (folder / MANIFEST).unlink(missing_ok=True)  # failed before its first file: nothing left behind
+            folder.rmdir()
+        elif folder.is_dir():  # a command may remove a folder it created for nothing (make-ego)
             _seal(folder, command, names, before, earlier, remove=replaces and succeeded)
 
 

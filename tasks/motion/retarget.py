@@ -247,7 +247,7 @@ def write_gltf_rig(
     per driven bone and a translation channel for the hips, one key per frame at ``t = i / fps``; the
     rig's own animations are replaced. ``animation.extras``: ``fps``, ``frames``, ``duration_s``
     (frames / fps). Written atomically to ``out``."""
-    from skeleton_mamba.tasks.motion.gltf import _Buffer, _quaternions_xyzw
+    from skeleton_mamba.tasks.motion.gltf import _Buffer, _quaternions_xyzw  # lazy: glTF out only
 
     gltf = pygltflib.GLTF2().load_binary(str(rig_path))
     blob = bytes(gltf.binary_blob() or b"")
@@ -292,8 +292,8 @@ def write_gltf_rig(
 def write_bvh_rig(rig: Rig, result: Retarget, fps: float, out) -> Path:
     """A BVH with the rig's hierarchy and offsets (file units): the root's position and every joint's
     rotation (``Zrotation Xrotation Yrotation``, degrees) per frame."""
-    from skeleton_mamba.tasks.motion.bvh import BvhMotion, save_bvh
-    from skeleton_mamba.tasks.motion.rotations import matrix_to_euler
+    from skeleton_mamba.tasks.motion.bvh import BvhMotion, save_bvh  # lazy: BVH out only
+    from skeleton_mamba.tasks.motion.rotations import matrix_to_euler  # lazy: BVH out only
 
     bvh = rig.bvh
     root = rig.parents.index(-1)

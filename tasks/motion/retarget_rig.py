@@ -249,7 +249,7 @@ def _vrm_bones(gltf, path: Path) -> tuple[dict[str, int], str] | None:
 
 def read_map(path: str | PathLike[str]) -> dict[str, str]:
     """A ``--map`` file: YAML mapping humanoid bone (:data:`BONES`) -> the rig's joint name."""
-    import yaml
+    import yaml  # lazy: only with --map
 
     path = Path(path)
     if not path.is_file():
@@ -311,7 +311,7 @@ def load_rig(path: str | PathLike[str], explicit: dict[str, str] | None = None) 
         return _bvh_rig(path, explicit)
     if suffix not in (".glb", ".vrm"):
         raise InputError(f"{path}: a rig is a .glb, .vrm or .bvh file")
-    from skeleton_mamba.tasks.motion.gltf_read import _load
+    from skeleton_mamba.tasks.motion.gltf_read import _load  # lazy: a glTF rig only
 
     try:
         gltf, _ = _load(path)
@@ -357,8 +357,8 @@ def load_rig(path: str | PathLike[str], explicit: dict[str, str] | None = None) 
 
 
 def _bvh_rig(path: Path, explicit: dict[str, str] | None) -> Rig:
-    from skeleton_mamba.tasks.motion.bvh import load_bvh
-    from skeleton_mamba.tasks.motion.units import choose_scale
+    from skeleton_mamba.tasks.motion.bvh import load_bvh  # lazy: a BVH rig only
+    from skeleton_mamba.tasks.motion.units import choose_scale  # lazy: a BVH rig only
 
     bvh = load_bvh(path)
     scale = choose_scale(None, None, bvh.rest_height()).metres_per_unit

@@ -69,8 +69,15 @@ def retarget_onto(
     animation ``name`` added, or a BVH with the rig's hierarchy. ``source``: the motion a refusal names
     (default ``name``). Returns ``(result, joints, source_bones)``: the :class:`~.retarget.Retarget`, the
     source's joints (T, J, 3) and its humanoid bones."""
-    from skeleton_mamba.tasks.motion.retarget import retarget, write_bvh_rig, write_gltf_rig
-    from skeleton_mamba.tasks.motion.retarget_rig import find_bones, separate_torso
+    from skeleton_mamba.tasks.motion.retarget import (  # lazy: with --rig only
+        retarget,
+        write_bvh_rig,
+        write_gltf_rig,
+    )
+    from skeleton_mamba.tasks.motion.retarget_rig import (  # lazy: with --rig only
+        find_bones,
+        separate_torso,
+    )
 
     joints = motion.joint_positions()
     source_bones, _ = find_bones(motion.names, source or name, what="motion")
@@ -107,7 +114,7 @@ class RigOutput:
     ) -> Path:  # fmt: skip
         """The motion file a command has just written (``skeleton``, ``fps``: of a ``.npy`` of joints) on the
         rig, written at ``out``: same frame count and frame rate."""
-        from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
+        from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion  # lazy: with --rig only
 
         return self.write(load_skeleton_motion(motion_file, skeleton, fps), out, name)
 
@@ -133,7 +140,11 @@ def prepare_rig(
         if map_path is not None:
             raise InputError("--map: a bone map of --rig; pass --rig too")
         return None
-    from skeleton_mamba.tasks.motion.retarget_rig import find_bones, load_rig, read_map
+    from skeleton_mamba.tasks.motion.retarget_rig import (  # lazy: with --rig only
+        find_bones,
+        load_rig,
+        read_map,
+    )
 
     rig_path = Path(rig_path)
     given = [rig_path, *inputs, *((map_path,) if map_path is not None else ())]

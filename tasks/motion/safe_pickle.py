@@ -170,10 +170,10 @@ def _numpy_core_attr(module: str, name: str) -> Any:
     # object directly so that reading a numpy-1 pickle neither imports numpy.core nor warns.
     try:
         import numpy._core.multiarray as multiarray  # lazy: numpy 2
-        import numpy._core.numeric as numeric
+        import numpy._core.numeric as numeric  # lazy: numpy 2
     except ImportError:  # numpy 1.x (pyproject admits >= 1.24; Blender's bpy pins 1.26): numpy.core
-        import numpy.core.multiarray as multiarray
-        import numpy.core.numeric as numeric
+        import numpy.core.multiarray as multiarray  # lazy: numpy 1
+        import numpy.core.numeric as numeric  # lazy: numpy 1
 
     return {"multiarray": multiarray, "numeric": numeric}[module].__dict__[name]
 

@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         ],  # fmt: skip
         "ensemble": result,
     }
-    from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix  # matplotlib: lazily
+    from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix  # lazy: matplotlib
 
     with writing_outputs(args.out, COMMAND, OUTPUTS) as out:
         with atomic_open(out / "ensemble.json", "w", encoding="utf-8") as handle:

@@ -321,7 +321,7 @@ def _is_class(value: object) -> bool:
 
 def _machinery_commands() -> dict[str, Command]:
     """The ``sm`` commands of the machinery and the toolkit (``fit``, ``recipes``, ...): no task takes one."""
-    from skeleton_mamba.tasks.training.cli import MACHINERY_COMMANDS  # noqa: PLC0415 (cli imports this module)
+    from skeleton_mamba.tasks.training.cli import MACHINERY_COMMANDS  # noqa: PLC0415  # lazy: cli imports this module
 
     return dict(MACHINERY_COMMANDS)
 
