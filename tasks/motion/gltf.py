@@ -48,6 +48,7 @@ from skeleton_mamba.tasks.motion.units import METRES, UnitScale
 from skeleton_mamba.tasks.motion.value_checks import MAX_POSITION_M, check_finite, check_fps, check_magnitude
 
 __all__ = [
+    "add_channel",
     "MAX_JOINTS",
     "SkeletonMotion",
     "check_skeleton_motion",
@@ -208,6 +209,17 @@ def _rest_world(motion: SkeletonMotion) -> np.ndarray:
     return world
 
 
+def add_channel(animation: pygltflib.Animation, times: int, values: int, node: int, path: str) -> None:
+    """Animate ``node``'s ``path`` (``"rotation"``, ``"translation"``) in ``animation``: a linear sampler
+    from the key-time accessor ``times`` to the value accessor ``values``, and its channel."""
+    animation.samplers.append(pygltflib.AnimationSampler(input=times, output=values, interpolation="LINEAR"))
+    animation.channels.append(
+        pygltflib.AnimationChannel(
+            sampler=len(animation.samplers) - 1, target=pygltflib.AnimationChannelTarget(node=node, path=path)
+        )
+    )
+
+
 class _Buffer:
     """Accessors packed into one binary buffer, each 4-byte aligned."""
 
@@ -316,15 +328,7 @@ def glb_bytes(motion: SkeletonMotion, name: str = "motion", source: str = "motio
         if rotations is not None:
             tracks.append(("rotation", buffer.add(rotations[:, j], pygltflib.VEC4)))
         for path, accessor in tracks:
-            animation.samplers.append(
-                pygltflib.AnimationSampler(input=times, output=accessor, interpolation="LINEAR")
-            )
-            animation.channels.append(
-                pygltflib.AnimationChannel(
-                    sampler=len(animation.samplers) - 1,
-                    target=pygltflib.AnimationChannelTarget(node=j, path=path),
-                )
-            )
+            add_channel(animation, times, accessor, j, path)
     gltf.animations.append(animation)
     gltf.buffers.append(pygltflib.Buffer(byteLength=len(buffer.blob)))
     gltf.set_binary_blob(bytes(buffer.blob))

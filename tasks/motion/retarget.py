@@ -247,7 +247,11 @@ def write_gltf_rig(
     per driven bone and a translation channel for the hips, one key per frame at ``t = i / fps``; the
     rig's own animations are replaced. ``animation.extras``: ``fps``, ``frames``, ``duration_s``
     (frames / fps). Written atomically to ``out``."""
-    from skeleton_mamba.tasks.motion.gltf import _Buffer, _quaternions_xyzw  # lazy: glTF out only
+    from skeleton_mamba.tasks.motion.gltf import (  # lazy: glTF out only
+        _Buffer,
+        _quaternions_xyzw,
+        add_channel,
+    )
 
     gltf = pygltflib.GLTF2().load_binary(str(rig_path))
     blob = bytes(gltf.binary_blob() or b"")
@@ -269,15 +273,7 @@ def write_gltf_rig(
         tracks.append((j, "rotation", _quaternions_xyzw(result.local[j])))
     for node, path, values in tracks:
         output = buffer.add(values, pygltflib.VEC4 if path == "rotation" else pygltflib.VEC3)
-        animation.samplers.append(
-            pygltflib.AnimationSampler(input=times, output=output, interpolation="LINEAR")
-        )
-        animation.channels.append(
-            pygltflib.AnimationChannel(
-                sampler=len(animation.samplers) - 1,
-                target=pygltflib.AnimationChannelTarget(node=node, path=path),
-            )
-        )
+        add_channel(animation, times, output, node, path)
     gltf.animations = [animation]
     gltf.buffers[0].byteLength = len(buffer.blob)
     gltf.buffers[0].uri = None
