@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -25,6 +27,25 @@ def load_script(relative: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _remove_keypoint_stores_of_test_files(tmp_path_factory):
+    """The recognition data module keeps a memory-mapped copy of each annotation file in the user's cache
+    (``keypoints/``): at the end of the session, those of this session's temporary files are removed."""
+    yield
+    from skeleton_mamba.tasks.motion.cache import default_cache_root
+
+    base = tmp_path_factory.getbasetemp().resolve()
+    root = default_cache_root() / "keypoints"
+    for meta in root.glob("*/store.json"):
+        try:
+            source = Path(json.loads(meta.read_text())["source"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if source.is_relative_to(base):
+            shutil.rmtree(meta.parent, ignore_errors=True)
+            (root / f".{meta.parent.name}.lock").unlink(missing_ok=True)
 
 
 @pytest.fixture(scope="session")

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 from checkpoint_files import save_module_checkpoint
+from peak_memory import PEAK_KIB_SOURCE
 
 from skeleton_mamba.tasks.egodance import dance_cli
 from skeleton_mamba.tasks.egodance.frames import read_video_frames
@@ -163,9 +164,9 @@ def test_video_features_are_those_of_the_held_frames(dance_inputs):
     module.eval()
 
 
-_PEAK_RSS = textwrap.dedent(
+_PEAK_RSS = PEAK_KIB_SOURCE + textwrap.dedent(
     """
-    import resource, sys, warnings
+    import sys, warnings
     import torch
     from transformers import ResNetConfig
     from skeleton_mamba.tasks.egodance.encoders import VisionEncoder
@@ -179,9 +180,9 @@ _PEAK_RSS = textwrap.dedent(
     head = HeadTrajectoryEstimator(HeadEstimatorConfig(input_size=16, channels=(8, 8), dim=8, layers=1))
     head.eval()
     encode_video(sys.argv[1], int(sys.argv[2]), vision, head, window=150, max_frames=48)  # warm up
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    before = peak_kib()
     features = encode_video(sys.argv[1], int(sys.argv[2]), vision, head, window=150)
-    print(features.num_frames, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)
+    print(features.num_frames, peak_kib() - before)
     """
 )
 
@@ -220,12 +221,12 @@ def test_encode_condition_refuses_vision_features_that_do_not_fit(tiny_egodance_
         music_only.encode_condition(music, vision=vision)
 
 
-_PEAK_8K = textwrap.dedent(
+_PEAK_8K = PEAK_KIB_SOURCE + textwrap.dedent(
     """
-    import resource, sys
+    import sys
     from skeleton_mamba.tasks.egodance.frames import iter_video_frames
     chunks = [len(chunk) for chunk in iter_video_frames(sys.argv[1], 112)]
-    print(len(chunks), sum(chunks), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    print(len(chunks), sum(chunks), peak_kib())
     """
 )
 

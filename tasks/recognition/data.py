@@ -14,6 +14,12 @@ holds every sample and the named splits; the data module picks ``train_split`` /
 
 A batch is ``(keypoint (B, N, M, T, V, C) float32, label (B,) int64)`` with N clips and M bodies.
 
+The keypoints are read from a memory-mapped copy of the annotation file (:mod:`.keypoint_store`, built once
+per machine by Lightning's ``prepare_data`` on the node's first rank): every rank and loader worker maps the
+same pages, so the data set is held once per machine whatever the number of ranks. Under DDP the validation
+and test splits are divided among the ranks without the padding samples of torch's ``DistributedSampler``,
+so the accuracy of N processes is the accuracy of one over the same split.
+
 ``num_classes``, ``skeleton``, ``in_channels`` and ``batch_size`` are its :class:`RecognitionContract`, which
 ``sm`` links to the model's arguments of those names (``in_channels`` is read off the pipeline output: x y z
 for 3D, x y score for 2D, times the number of ``feats``). ``batch_size`` is the per-device batch; the model
@@ -29,10 +35,12 @@ from typing import Literal
 
 import numpy as np
 import torch
+from lightning.pytorch.overrides.distributed import UnrepeatedDistributedSampler
 from torch.utils.data import Dataset
 
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
+from skeleton_mamba.tasks.recognition.keypoint_store import KeypointStore, StoreSplit, ensure_store
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.recognition.transforms import SkeletonPipeline, check_features
@@ -51,12 +59,19 @@ class SkeletonClipDataset(Dataset):
     ``seed_everything(workers=True)``), so runs are reproducible and workers differ.
     """
 
-    def __init__(self, annotations: list[dict], pipeline: SkeletonPipeline) -> None:
+    def __init__(self, annotations: Sequence[dict], pipeline: SkeletonPipeline) -> None:
         self.annotations = annotations
         self.pipeline = pipeline
 
     def __len__(self) -> int:
         return len(self.annotations)
+
+    @property
+    def sample_names(self) -> list[str]:
+        """Each sample's ``frame_dir``, in order (read from the index, not the keypoints, for a store)."""
+        if isinstance(self.annotations, StoreSplit):
+            return self.annotations.sample_names
+        return [a["frame_dir"] for a in self.annotations]
 
     def __getitem__(self, index: int) -> tuple[torch.Tensor, int]:
         annotation = self.annotations[index]
@@ -101,6 +116,10 @@ class RecognitionDataModule(SplitDataModule):
         batch_size: per-device batch size.
         num_workers: DataLoader worker processes.
         prepare_command: how to build ``ann_file`` (shown when it is missing).
+        memory_map: read the keypoints from a memory-mapped copy of ``ann_file``, one per machine
+            (:mod:`.keypoint_store`); False unpickles the whole file in every process.
+        store_dir: where the memory-mapped copies go (default ``~/.cache/skeleton_mamba/keypoints``, or
+            ``$SKELETON_MAMBA_CACHE/keypoints``): a local disk of each node.
     """
 
     def __init__(
@@ -122,6 +141,8 @@ class RecognitionDataModule(SplitDataModule):
         batch_size: int = 128,
         num_workers: int = 4,
         prepare_command: str | None = None,
+        memory_map: bool = True,
+        store_dir: str | None = None,
     ) -> None:
         super().__init__(batch_size, num_workers)
         self.save_hyperparameters()
@@ -141,7 +162,9 @@ class RecognitionDataModule(SplitDataModule):
         self.scale_range = scale_range
         self.augment_before_sampling = augment_before_sampling
         self.prepare_command = prepare_command
-        self._data: dict | None = None
+        self.memory_map = memory_map
+        self.store_dir = store_dir
+        self._data: dict | KeypointStore | None = None
         self.check_data()
 
     def check_data(self) -> None:
@@ -155,29 +178,47 @@ class RecognitionDataModule(SplitDataModule):
             f"Or point the recipe at it with --data.init_args.ann_file PATH."
         )
 
-    def load(self) -> dict:
-        """The PYSKL annotation dict (loaded once, validated)."""
+    def prepare_data(self) -> None:
+        """Build the memory-mapped copy of ``ann_file`` once per node (Lightning calls this on each node's
+        first rank before the others set up)."""
+        if self.memory_map:
+            ensure_store(self.ann_file, self.store_dir)
+
+    def load(self) -> dict | KeypointStore:
+        """The samples and splits: the memory-mapped store (built first when missing), or the PYSKL
+        annotation dict unpickled whole (``memory_map=False``); read once, validated."""
         if self._data is None:
-            self._data = load_annotations(self.ann_file)
+            self._data = (
+                ensure_store(self.ann_file, self.store_dir)
+                if self.memory_map
+                else load_annotations(self.ann_file)
+            )
         return self._data
 
-    def _split(self, name: str) -> list[dict]:
+    def _split(self, name: str) -> Sequence[dict]:
         data = self.load()
-        if name not in data["split"]:
-            raise DataFileError(f"{self.ann_file}: no split {name!r}; it has {sorted(data['split'])}")
-        if not data["split"][name]:
+        splits = data.splits if isinstance(data, KeypointStore) else data["split"]
+        if name not in splits:
+            raise DataFileError(f"{self.ann_file}: no split {name!r}; it has {sorted(splits)}")
+        if not len(splits[name]):
             raise DataFileError(f"{self.ann_file}: split {name!r} is empty")
-        by_name = {a["frame_dir"]: a for a in data["annotations"]}
-        annotations = [by_name[n] for n in data["split"][name]]
-        bad = [a["frame_dir"] for a in annotations if not 0 <= a["label"] < self.num_classes]
-        if bad:
-            raise DataFileError(f"{self.ann_file}: labels outside [0, {self.num_classes}) in {bad[:3]}")
-        joints = get_skeleton(self.skeleton).num_joints
-        found = sorted({a["keypoint"].shape[2] for a in annotations} - {joints})
+        if isinstance(data, KeypointStore):
+            annotations: Sequence[dict] = data.split(name)
+            labels, names, joints = annotations.labels, annotations.sample_names, {data.num_joints}
+        else:
+            by_name = {a["frame_dir"]: a for a in data["annotations"]}
+            annotations = [by_name[n] for n in data["split"][name]]
+            labels = np.asarray([a["label"] for a in annotations])
+            names, joints = data["split"][name], {a["keypoint"].shape[2] for a in annotations}
+        outside = (labels < 0) | (labels >= self.num_classes)
+        if outside.any():
+            bad = [names[i] for i in np.flatnonzero(outside)[:3]]
+            raise DataFileError(f"{self.ann_file}: labels outside [0, {self.num_classes}) in {bad}")
+        found = sorted(joints - {get_skeleton(self.skeleton).num_joints})
         if found:
             raise DataFileError(
                 f"{self.ann_file}: split {name!r} has samples with {found} joints; "
-                f"skeleton {self.skeleton!r} has {joints}"
+                f"skeleton {self.skeleton!r} has {get_skeleton(self.skeleton).num_joints}"
             )
         return annotations
 
@@ -215,13 +256,15 @@ class RecognitionDataModule(SplitDataModule):
     @property
     def in_channels(self) -> int:
         """Per-joint channels C of the network input (from the first training sample)."""
-        train = self.splits["train"]
-        first = (self._split(train)[:1] if self.load()["split"].get(train) else []) or self.load()[
-            "annotations"
-        ][:1]
-        if not first:
-            raise DataFileError(f"{self.ann_file}: no annotations")
-        return int(self.pipeline("validate")(first[0]).shape[-1])
+        data = self.load()
+        if isinstance(data, KeypointStore):
+            first = data.annotation(0)
+        else:
+            train = data["split"].get(self.splits["train"])
+            if not data["annotations"]:
+                raise DataFileError(f"{self.ann_file}: no annotations")
+            first = self._split(self.splits["train"])[0] if train else data["annotations"][0]
+        return int(self.pipeline("validate")(first).shape[-1])
 
     def setup(self, stage: str) -> None:
         keys = {"fit": ("train", "val"), "validate": ("val",)}.get(stage, ("test",))
@@ -231,12 +274,19 @@ class RecognitionDataModule(SplitDataModule):
                 self.datasets[key] = SkeletonClipDataset(self._split(self.splits[key]), pipeline)
 
     def loader_options(self, split: str) -> dict:
-        train = split == "train"
-        return {
-            "drop_last": train,
+        options = {
+            "drop_last": split == "train",
             "persistent_workers": self.num_workers > 0,
             "pin_memory": torch.cuda.is_available(),
         }
+        trainer = self.trainer
+        if split != "train" and trainer is not None and trainer.world_size > 1:
+            # each rank its share of the split, no sample repeated to even them (Lightning keeps this sampler)
+            sampler = UnrepeatedDistributedSampler(
+                self.datasets[split], num_replicas=trainer.world_size, rank=trainer.global_rank, shuffle=False
+            )
+            options.update(sampler=sampler, shuffle=False)
+        return options
 
 
 class SyntheticRecognitionDataModule(RecognitionDataModule):
@@ -284,6 +334,7 @@ class SyntheticRecognitionDataModule(RecognitionDataModule):
             num_person=num_person,
             batch_size=batch_size,
             num_workers=num_workers,
+            memory_map=False,
         )
         self.save_hyperparameters()
         self.generator_args = dict(

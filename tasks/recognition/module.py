@@ -200,30 +200,36 @@ class ActionRecognitionModule(BackboneModule):
     def _save_test_scores(self, log_dir: str | None) -> None:
         """Write every test sample's scores, named, in the split's order, to ``scores.npz`` (:mod:`.scores`).
 
-        Only a single-device run over the whole test split knows each row's sample (a distributed sampler
-        splits and pads the split): otherwise a warning, and no file.
+        Under DDP each rank scored its share of the split (the data module's sampler repeats no sample):
+        the rows are gathered with their positions in the split and rank 0 writes one file in split order.
         """
         rows, self._test_scores = self._test_scores, []
-        if log_dir is None or not rows:
-            return
         trainer = self.trainer
         loader = trainer.test_dataloaders
         loader = loader[0] if isinstance(loader, list | tuple) else loader
-        annotations = getattr(getattr(loader, "dataset", None), "annotations", None)
-        prob, logit, label = (torch.cat(column).numpy() for column in zip(*rows))
-        if trainer.world_size > 1 or annotations is None or len(annotations) != len(label):
+        names = getattr(getattr(loader, "dataset", None), "sample_names", None)
+        k = self.hparams.num_classes
+        empty = (torch.zeros(0, k), torch.zeros(0, k), torch.zeros(0, dtype=torch.long))
+        prob, logit, label = (torch.cat(column) for column in zip(*(rows or [empty]), strict=True))
+        position = torch.as_tensor(list(loader.sampler), dtype=torch.long)[: len(label)]
+        if trainer.world_size > 1:
+            prob, logit, label, position = self._gather_rows(prob, logit, label, position)
+        if not trainer.is_global_zero or log_dir is None or not len(label):
+            return
+        if names is None or sorted(position.tolist()) != list(range(len(names))):
             rank_zero_warn(
-                f"{SCORES_FILE} not written: it needs sm test on one device over the whole test split "
-                f"({len(label)} scored rows, {trainer.world_size} processes); sm ensemble reads it"
+                f"{SCORES_FILE} not written: the test loader's {len(label)} scored rows do not cover its "
+                f"split once each ({len(names or ())} samples); sm ensemble reads it"
             )
             return
+        order = torch.argsort(position)
         datamodule = getattr(trainer, "datamodule", None)
         path = save_scores(
             Path(log_dir) / SCORES_FILE,
-            [a.get("frame_dir", str(i)) for i, a in enumerate(annotations)],
-            label,
-            prob,
-            logit,
+            names,
+            label[order].numpy(),
+            prob[order].numpy(),
+            logit[order].numpy(),
             split=str(getattr(datamodule, "splits", {}).get("test", "")),
             source=str(getattr(datamodule, "ann_file", "")),
             feats=tuple(getattr(datamodule, "feats", ())),
@@ -231,6 +237,20 @@ class ActionRecognitionModule(BackboneModule):
             class_names=self.hparams.class_names,
         )
         rank_zero_info(f"{len(label)} samples' class scores saved to {path} (sm ensemble adds runs' scores)")
+
+    def _gather_rows(self, *columns: torch.Tensor) -> list[torch.Tensor]:
+        """Every rank's rows of ``columns`` (n_rank, ...) concatenated in rank order (ranks may hold
+        different counts: padded to the largest for the collective, then cut back)."""
+        count = columns[0].shape[0]
+        counts = self.all_gather(torch.tensor(count, device=self.device)).reshape(-1).tolist()
+        most = max(counts)
+        out = []
+        for column in columns:
+            padded = column.new_zeros(most, *column.shape[1:])
+            padded[:count] = column
+            gathered = self.all_gather(padded.to(self.device)).cpu()  # (world, most, ...)
+            out.append(torch.cat([gathered[r, :n] for r, n in enumerate(counts)]))
+        return out
 
     def _log_early_curve(self, log_dir: str | None) -> None:
         """Log top-1 at each observed fraction, print the curve and save it as a PNG + CSV."""

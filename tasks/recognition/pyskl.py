@@ -10,6 +10,7 @@ restricted unpickler of :mod:`skeleton_mamba.tasks.motion.safe_pickle`, never pl
 from __future__ import annotations
 
 import pickle
+from collections.abc import Iterator, Sequence
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,15 @@ from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
-__all__ = ["AnnotationFileError", "load_annotations", "save_annotations", "validate_annotations"]
+__all__ = [
+    "AnnotationFileError",
+    "check_structure",
+    "iter_validated",
+    "load_annotations",
+    "save_annotations",
+    "validate_annotations",
+    "validate_split",
+]
 
 
 class AnnotationFileError(DataFileError):
@@ -100,18 +109,37 @@ def validate_annotations(data: Any, source: str = "<annotations>") -> dict:
         AnnotationFileError: a missing or ill-typed field, a duplicate ``frame_dir``, or a split naming a
             ``frame_dir`` that has no annotation.
     """
+    check_structure(data, source)
+    seen: set[str] = set()
+    annos = list(iter_validated(data["annotations"], source, seen))
+    out = dict(data)
+    out.update(split=validate_split(data["split"], seen, source), annotations=annos)
+    return out
+
+
+def check_structure(data: Any, source: str) -> None:
+    """Refuse an object that is not a dict with ``split`` and an ``annotations`` list."""
     if not isinstance(data, dict) or "split" not in data or "annotations" not in data:
         keys = sorted(data) if isinstance(data, dict) else type(data).__name__
         raise AnnotationFileError(f"{source}: expected a dict with 'split' and 'annotations', got {keys}")
-    split, annotations = data["split"], data["annotations"]
+    annotations = data["annotations"]
     if not isinstance(annotations, list | tuple):
         raise AnnotationFileError(f"{source}: 'annotations' must be a list, got {type(annotations).__name__}")
-    annos = [_validate_annotation(a, i, source) for i, a in enumerate(annotations)]
-    seen: set[str] = set()
-    for anno in annos:
+
+
+def iter_validated(annotations: Sequence[Any], source: str, seen: set[str]) -> Iterator[dict]:
+    """Each annotation checked and normalized (:func:`validate_annotations`), one at a time; ``seen``
+    collects the ``frame_dir`` names, a repeated one refused."""
+    for index, anno in enumerate(annotations):
+        anno = _validate_annotation(anno, index, source)
         if anno["frame_dir"] in seen:
             raise AnnotationFileError(f"{source}: frame_dir {anno['frame_dir']!r} appears twice")
         seen.add(anno["frame_dir"])
+        yield anno
+
+
+def validate_split(split: Any, seen: set[str], source: str) -> dict[str, list[str]]:
+    """The ``split`` dict checked: names mapping to lists of ``frame_dir`` that are all in ``seen``."""
     if not isinstance(split, dict):
         raise AnnotationFileError(f"{source}: 'split' must be a dict name -> list of frame_dir, "
                                   f"got {type(split).__name__}")  # fmt: skip
@@ -126,9 +154,7 @@ def validate_annotations(data: Any, source: str = "<annotations>") -> dict:
             raise AnnotationFileError(f"{source}: split {name!r} names {len(unknown)} frame_dir without an "
                                       f"annotation, e.g. {unknown[:3]}")  # fmt: skip
         clean_split[name] = list(members)
-    out = dict(data)
-    out.update(split=clean_split, annotations=annos)
-    return out
+    return clean_split
 
 
 def load_annotations(path: str | PathLike[str]) -> dict:
