@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import statistics
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import torch
 
@@ -129,3 +131,12 @@ def operator_profile(fn: Callable[[], object], rows: int = 25) -> tuple[str, flo
         sort_by="self_cpu_time_total", row_limit=rows, max_name_column_width=30, max_shapes_column_width=70
     )
     return table, gemm / max(total, 1e-9)
+
+
+def write_report(script: str, report: dict) -> Path:
+    """Write ``report`` as the JSON beside ``script`` (``bench_x.py`` -> ``bench_x.json``); print and
+    return its path."""
+    out = Path(script).with_suffix(".json")
+    out.write_text(json.dumps(report, indent=1) + "\n")
+    print(f"wrote {out}")
+    return out
