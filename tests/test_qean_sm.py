@@ -18,11 +18,13 @@ from importlib.resources import files
 import imageio_ffmpeg
 import numpy as np
 import pytest
+from retarget_rigs import HUMANOID, MIXAMO, build_rig, read_animated, rest_positions
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
+from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.lightning_cli import run
 
 TRAIN = ["gBR_sBM_cAll_d04_mBR0_ch01", "gPO_sBM_cAll_d10_mPO1_ch02"]
@@ -95,13 +97,19 @@ def test_sm_fit_qean_mamba_then_predict_from_the_checkpoint(aistpp, tmp_path):
     assert "`max_steps=1` reached" in fit.stdout + fit.stderr
     (ckpt,) = (tmp_path / "checkpoints").glob("*.ckpt")
     seed_file, music_file = aistpp / "motions" / f"{TEST[0]}.pkl", aistpp / "music" / "mPO1.wav"
+    meaningless = {b: f"n{i}" for i, b in enumerate(HUMANOID)}
+    rig = build_rig(tmp_path / "avatar.vrm", meaningless, rest_positions(), 5, vrm="1")
     _sm(
         ["predict", "--recipe", "qean_mamba.yaml", *common, f"--ckpt_path={ckpt}",
-         f"--data.init_args.predict_seed={seed_file}", f"--data.init_args.predict_music={music_file}"],
+         f"--data.init_args.predict_seed={seed_file}", f"--data.init_args.predict_music={music_file}",
+         f"--rig={rig}"],
         tmp_path,
     )  # fmt: skip
     stem = f"mPO1_{TEST[0]}"
     npz, mp4 = tmp_path / "predictions" / f"{stem}.npz", tmp_path / "predictions" / f"{stem}.mp4"
+    # sm predict --rig: the dance on the VRM character too, its frame count and frame rate
+    gltf, times, _, _ = read_animated(tmp_path / "predictions" / f"{stem}_rig.vrm")
+    assert len(times) == len(np.load(npz)["joints"]) and gltf.animations[0].extras["fps"] == 60.0
     with np.load(npz, allow_pickle=False) as saved:
         frames = len(saved["joints"])  # the whole 1 s song danced (generate_frames is the test's length)
         assert abs(frames - 60) <= 1 and saved["smpl_poses"].shape == (frames, 72)
@@ -135,3 +143,21 @@ def test_sm_test_prints_our_figures_beside_the_paper_table(aistpp, tmp_path, mon
         ours, paper_value = float(match.group(1)), float(match.group(2))
         assert np.isfinite(ours) and paper_value == paper
     assert 0.0 <= float(re.search(r"^BeatAlign\s+(\S+)", text, re.MULTILINE).group(1)) <= 1.0
+
+
+def test_sm_predict_refuses_a_bad_rig_before_the_model_and_data(aistpp, tmp_path, capsys):
+    """``sm predict --rig`` of a rig lacking the feet, or a missing file: one line, exit 2, nothing read or
+    written (the checkpoint named does not even exist)."""
+    footless = {b: p for b, p in rest_positions().items() if "Foot" not in b and "Toes" not in b}
+    rig = build_rig(tmp_path / "footless.glb", MIXAMO, footless)
+    argv = ["predict", "--recipe", "qean_mamba.yaml", *_overrides(aistpp, backbone=False),
+            f"--ckpt_path={tmp_path / 'never.ckpt'}"]  # fmt: skip
+    for extra, expected in (
+        ([f"--rig={rig}"], "footless.glb: the rig lacks the humanoid bones leftFoot"),
+        ([f"--rig={tmp_path / 'nosuch.vrm'}"], "nosuch.vrm: no such file"),
+        ([f"--map={tmp_path / 'map.yaml'}"], "--map"),
+    ):
+        assert sm_main([*argv, *extra]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.strip().count("\n") == 0, err
+    assert not (tmp_path / "predictions").exists()

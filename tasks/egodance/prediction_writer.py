@@ -3,7 +3,9 @@
 For each predicted window (the data module's test split): ``<sample_id>_dance.npz`` (our motion format),
 ``.bvh``, ``.glb`` and ``.mp4`` with its ``.wav`` (the window's slice of its music), as ``sm dance`` writes
 them (:func:`~.export.write_dance`), in ``predictions/`` of the logger's log_dir (``predictions_rank{r}/``
-per process under DDP); each window's files are printed as they are written.
+per process under DDP); each window's files are printed as they are written. With ``sm predict --rig RIG``
+also ``<sample_id>_dance_rig.glb`` / ``.vrm`` / ``.bvh``: the dance on that character
+(:mod:`~skeleton_mamba.tasks.training.prediction_rig`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from lightning.pytorch.callbacks import BasePredictionWriter
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba.tasks.egodance.export import write_dance
+from skeleton_mamba.tasks.training.prediction_rig import PredictionRig
 
 __all__ = ["DancePredictionWriter"]
 
@@ -62,6 +65,8 @@ class DancePredictionWriter(BasePredictionWriter):
                 render=self.render,
                 title=f"EMM prediction {sample_id}",
             )
+            if (rig := PredictionRig.of(trainer)) is not None:  # sm predict --rig: on the character too
+                files.rig = rig.write(files.npz, f"{sample_id}_dance")
             paths = [p for p in vars(files).values() if p is not None]
             self.written.extend(paths)
             rank_zero_info(f"sm predict: {sample_id} ({prediction['head_source']} head guidance)\n"

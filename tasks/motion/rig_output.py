@@ -1,7 +1,7 @@
 """``--rig RIG [--map map.yaml]`` of the commands that write motions (``sm dance``, ``sm stream``,
-``sm generate``, ``sm export``): the motion also written on a humanoid character, ``<stem>_rig<suffix>``
-(the rig's suffix: ``.glb``, ``.vrm`` or ``.bvh``) beside the command's own files, as ``sm retarget``
-writes it (:mod:`.retarget`).
+``sm generate``, ``sm export``; ``sm predict`` through :mod:`~skeleton_mamba.tasks.training.prediction_rig`):
+the motion also written on a humanoid character, ``<stem>_rig<suffix>`` (the rig's suffix: ``.glb``, ``.vrm``
+or ``.bvh``) beside the command's own files, as ``sm retarget`` writes it (:mod:`.retarget`).
 
 :func:`prepare_rig` reads the rig and maps its bones (and those of the skeleton the command writes, when
 known) after the command's arguments and output claim, before any heavy work (checkpoint, music, video): a

@@ -40,6 +40,7 @@ from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
 from skeleton_mamba.tasks.training.base_module import BackboneModule, attached_trainer
+from skeleton_mamba.tasks.training.prediction_rig import PredictionRig
 
 __all__ = ["QEANModule", "QEAN_TABLE1", "features_to_motion"]
 
@@ -290,7 +291,9 @@ class QEANModule(BackboneModule):
     # ----- predict -----
     def predict_step(self, batch: dict, batch_idx: int) -> list[Path]:
         """Generate and write ``<output_dir>/<name>.npz / .bvh / .glb`` (and ``.mp4`` with its ``.wav``, the
-        music's slice of the dance's length, when ``render``); returns the written paths."""
+        music's slice of the dance's length, when ``render``; ``<name>_rig.glb`` / ``.vrm`` / ``.bvh`` with
+        ``sm predict --rig``: :mod:`~skeleton_mamba.tasks.training.prediction_rig`); returns the written
+        paths."""
         frames = int(batch["frames"].max())  # the song's length after the seed (batches of one song)
         full = self.generate(batch["seed"], batch["music"], frames=frames)  # Lightning's bar counts songs
         written = []
@@ -298,6 +301,8 @@ class QEANModule(BackboneModule):
             motion = features_to_motion(full[i])
             music, render = batch["music_path"][i], self.hparams.render
             files = write_motion(motion, self.hparams.output_dir, name, music=music, render=render)
+            if (rig := PredictionRig.of(attached_trainer(self))) is not None:  # sm predict --rig
+                files.rig = rig.write(files.npz, name)
             paths = [p for p in vars(files).values() if p is not None]
             written.extend(paths)
             rank_zero_info(f"QEAN: wrote {', '.join(str(p) for p in paths)}")

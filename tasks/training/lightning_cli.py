@@ -45,6 +45,11 @@ from skeleton_mamba.tasks.training.checkpoints import (
 from skeleton_mamba.tasks.training.contract_links import contract_class_of, contract_links
 from skeleton_mamba.tasks.training.lightning_compat import import_policy, install_accepted_links
 from skeleton_mamba.tasks.training.model_summary import with_parameter_summary
+from skeleton_mamba.tasks.training.prediction_rig import (
+    PredictionRig,
+    add_prediction_rig_arguments,
+    prediction_rig_from,
+)
 from skeleton_mamba.tasks.training.pretrained import checkpoint_file_from, is_checkpoint_source
 from skeleton_mamba.tasks.training.progress_bar import with_default_progress_bar
 from skeleton_mamba.tasks.training.recipe_policy import (
@@ -222,6 +227,8 @@ class SkeletonMambaCLI(LightningCLI):
                 f"data.{LINK_PREFIX}{field}", f"model.init_args.{target}", apply_on="instantiate"
             )
         self._link_parsers.append(parser)
+        if self.only_subcommand == "predict":  # sm predict --rig RIG [--map]: the dances on a character too
+            add_prediction_rig_arguments(parser)
 
     def link_data_contract(self) -> list[tuple[str, str]]:
         """The links of the chosen data module's contract and the chosen model
@@ -259,6 +266,7 @@ class SkeletonMambaCLI(LightningCLI):
         all before Lightning parses them (which imports the classes they name). ``sm fit`` resumes in the
         checkpoint's own run folder (:func:`~.run_folders.resume_in_run_folder`). The trainer method's
         ``weights_only`` is set to True, so that Lightning's own load of the checkpoint is restricted too.
+        ``sm predict --rig`` reads and maps its rig first (:mod:`.prediction_rig`).
         """
         super().parse_arguments(parser, args)
         subcommand = self.config.get("subcommand")
@@ -267,6 +275,8 @@ class SkeletonMambaCLI(LightningCLI):
             return
         sources = [str(p) for p in (config.get("config") or []) if p is not None]
         check_config_values(config.as_dict(), sources)
+        if subcommand == "predict":  # --rig read and mapped before the checkpoint, the model and the data
+            self.prediction_rig = prediction_rig_from(config)
         if "weights_only" in config:  # the Trainer method's argument (Lightning >= 2.6)
             config.weights_only = True
         ckpt_path = config.get("ckpt_path")
@@ -288,6 +298,7 @@ class SkeletonMambaCLI(LightningCLI):
                 resume_in_run_folder(config.trainer, Path(ckpt_path))
 
     checkpoint_shapes: tuple[str, dict] | None = None  # --ckpt_path and its tensors' shapes
+    prediction_rig: PredictionRig | None = None  # sm predict --rig (:mod:`.prediction_rig`)
 
     def _check_checkpoint_fits(self) -> None:
         """``--ckpt_path``'s tensors against the instantiated model, before the trainer loads them."""
@@ -338,6 +349,8 @@ class SkeletonMambaCLI(LightningCLI):
         callbacks = with_default_progress_bar(config.get("callbacks"), config.get("enable_progress_bar"))
         summary = with_parameter_summary(callbacks, config.get("enable_model_summary"))
         kwargs["callbacks"], kwargs["enable_model_summary"] = summary
+        if self.prediction_rig is not None:
+            kwargs["callbacks"] = [*(kwargs["callbacks"] or []), self.prediction_rig]
         trainer = super().instantiate_trainer(**kwargs)
         use_checked_checkpoint_io(trainer)  # checked reads, writes through a temporary file beside the target
         for logger in trainer.loggers:
