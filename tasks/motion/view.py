@@ -1,16 +1,17 @@
 """``sm view MOTION [MOTION ...] [--music FILE] [--metrics demo.json] [--overlay] [--units U|--scale S]
 --out view.html``.
 
-Writes ONE self-contained HTML page (opens from disk, no network): three.js r170 and its OrbitControls (the
-npm package ``three``, MIT, bundled in :mod:`.viewer`) as data-URI modules, each motion as its glTF binary
-(:mod:`.gltf`, base64), the music as a data-URI ``<audio>`` element. The page draws the skeletons on a ground
-grid with shadows, fits an orbit camera to the whole motion, and has play / pause / scrub / speed; with music
-the audio element is the clock and a scrub moves it. Several motions stand side by side (or ``--overlay``),
-named and coloured, with the metrics of a ``demo.json`` listed by their full names (nested objects as
-``scores.dance.mpjpe_m``, whole numbers as such, booleans as yes / no, short texts as they are) and the scale
-each file was read with when it is not metres by its format (:mod:`.units`). Motions are read by
-:mod:`.motion_reader` (our ``.glb`` exports too). ``window.smViewer`` exposes the clock, ``seek(t)``, the
-camera, the projection of a world point to canvas pixels, each motion's root and joints in world space.
+Writes ONE self-contained HTML page (opens from disk, no network): three.js r170, its OrbitControls and
+GLTFLoader (the npm package ``three``, MIT, bundled in :mod:`.viewer`) as data-URI modules, each motion as its
+glTF binary (:mod:`.gltf`, base64; a character, :mod:`.character`, as its own file: its meshes move), the
+music as a data-URI ``<audio>`` element. The page draws the skeletons on a ground grid with shadows, fits an
+orbit camera to the whole motion, and has play / pause / scrub / speed; with music the audio element is the
+clock and a scrub moves it. Several motions stand side by side (or ``--overlay``), named and coloured, with
+the metrics of a ``demo.json`` listed by their full names (nested objects as ``scores.dance.mpjpe_m``, whole
+numbers as such, booleans as yes / no, short texts as they are) and the scale each file was read with when it
+is not metres by its format (:mod:`.units`). Motions are read by :mod:`.motion_reader` (our ``.glb`` exports
+too). ``window.smViewer`` exposes the clock, ``seek(t)``, the camera, the projection of a world point to
+canvas pixels, each motion's root and joints in world space.
 
 Hostile input cannot break the page: the embedded data is strict JSON (:func:`script_json`: a non-finite
 metric is written as ``null``, every ``<``, ``>`` and ``&`` of every string as a ``\\u`` escape, so no name,
@@ -38,6 +39,7 @@ import numpy as np
 from skeleton_mamba.bounded_read import read_bytes, read_json
 from skeleton_mamba.tasks.motion.atomic import atomic_open, output_file
 from skeleton_mamba.tasks.motion.audio_io import probe_audio
+from skeleton_mamba.tasks.motion.character import Character, read_character
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, glb_bytes
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
@@ -51,6 +53,7 @@ __all__ = [
     "listed_metrics",
     "main",
     "script_json",
+    "three_modules",
     "write_view",
 ]
 
@@ -106,8 +109,32 @@ def listed_metrics(metrics: dict | None, prefix: str = "") -> dict[str, float | 
     return out
 
 
+def three_modules() -> dict[str, str]:
+    """The import map's modules of a page (``__THREE__``, ``__ORBIT__``, ``__GLTF__``, ``__BGU__``): three.js
+    r170, its OrbitControls, GLTFLoader and the BufferGeometryUtils GLTFLoader imports, as data URIs.
+
+    GLTFLoader imports ``'../utils/BufferGeometryUtils.js'``, a path a data-URI module cannot resolve: the
+    page's import map names it ``sm-bgu`` and the one import is rewritten to that name here."""
+    assets = files("skeleton_mamba.tasks.motion.viewer")
+
+    def module(name: str, replace: tuple[str, str] | None = None) -> str:
+        text = assets.joinpath(name).read_text(encoding="utf-8")
+        if replace is not None:
+            if text.count(replace[0]) != 1:
+                raise RuntimeError(f"{name}: expected one {replace[0]} to rewrite")
+            text = text.replace(*replace)
+        return _data_uri(text.encode("utf-8"), "text/javascript")
+
+    return {
+        "__THREE__": module("three.module.min.js"),
+        "__ORBIT__": module("OrbitControls.js"),
+        "__GLTF__": module("GLTFLoader.js", ("'../utils/BufferGeometryUtils.js'", "'sm-bgu'")),
+        "__BGU__": module("BufferGeometryUtils.js"),
+    }
+
+
 def write_view(
-    motions: Sequence[tuple[str, SkeletonMotion]],
+    motions: Sequence[tuple[str, SkeletonMotion | Character]],
     out: str | PathLike[str],
     music: str | PathLike[str] | None = None,
     metrics: dict | str | PathLike[str] | None = None,
@@ -116,7 +143,8 @@ def write_view(
     """Write the viewer page for named motions (module docstring), atomically; returns its path.
 
     Args:
-        motions: (name, motion) pairs, drawn left to right (all at the origin with ``overlay``).
+        motions: (name, motion) pairs, drawn left to right (all at the origin with ``overlay``); a
+            :class:`~.character.Character` is drawn with its own meshes, playing its first animation.
         out: the ``.html`` to write.
         music: an audio file played in sync from the motions' first frame.
         metrics: a dict or the path of a JSON file (e.g. a demo's ``demo.json``), listed by
@@ -133,12 +161,17 @@ def write_view(
         if not isinstance(metrics, dict):
             raise InputError(f"{path}: expected a JSON object of metrics")
     entries = [  # checked and written first: the spacing below reads only checked motions
-        {"name": name, "glb": base64.b64encode(glb_bytes(m, f"m{i}", name)).decode("ascii")}
+        {"name": name, "character": base64.b64encode(m.data).decode("ascii"), "hips": m.hips}
+        if isinstance(m, Character)
+        else {"name": name, "glb": base64.b64encode(glb_bytes(m, f"m{i}", name)).decode("ascii")}
         for i, (name, m) in enumerate(motions)
     ]
     spacing = 0.0
-    if not overlay:
-        extents = [np.ptp(np.asarray(m.translations)[:, :, 0]) for _, m in motions]  # rough body width
+    if not overlay:  # rough body widths (a character's: 1 m)
+        extents = [
+            1.0 if isinstance(m, Character) else np.ptp(np.asarray(m.translations)[:, :, 0])
+            for _, m in motions
+        ]
         spacing = max(1.2, 1.5 * max(float(e) for e in extents))
     audio = ""
     if music is not None:
@@ -150,13 +183,12 @@ def write_view(
         sound = read_bytes(music, max_bytes=MAX_MUSIC_BYTES, what="music file to embed", error=InputError)
         audio = f'<audio id="music" preload="auto" src="{_data_uri(sound, mime)}"></audio>'
     assets = files("skeleton_mamba.tasks.motion.viewer")
-    notes = [f"{name}: {m.scale.describe()}" for name, m in motions if m.scale != METRES]
+    notes = [f"{name}: {m.scale.describe()}" for name, m in motions if getattr(m, "scale", METRES) != METRES]
     data = {"motions": entries, "metrics": listed_metrics(metrics), "notes": notes, "spacing": spacing,
             "floor": 0.0}  # fmt: skip
     fields = {
         "__TITLE__": html.escape(" vs ".join(name for name, _ in motions)),
-        "__THREE__": _data_uri(assets.joinpath("three.module.min.js").read_bytes(), "text/javascript"),
-        "__ORBIT__": _data_uri(assets.joinpath("OrbitControls.js").read_bytes(), "text/javascript"),
+        **three_modules(),
         "__AUDIO__": audio,
         "__DATA__": script_json(data),
     }
@@ -175,6 +207,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         output_file(args.out)
         motions = []
         for m in args.motions:
+            character = read_character(m)  # a skinned glTF / VRM: its own meshes
+            if character is not None:
+                motions.append((Path(m).stem, character))
+                continue
             motion = load_skeleton_motion(m, args.skeleton, args.motion_fps, args.units, args.scale)
             if motion.scale != METRES:
                 print(motion.scale.line(m), file=sys.stderr)

@@ -16,7 +16,10 @@ def build_parser() -> argparse.ArgumentParser:
         "sm view", "Write a self-contained HTML viewer of motions (opens from disk, no network)."
     )
     p.add_argument(
-        "motions", nargs="+", help="motion files: .npz, .pkl, .bvh, .npy (T,J,3) or (T,263), .skeleton, .glb"
+        "motions",
+        nargs="+",
+        help="motion files: .npz, .pkl, .bvh, .npy (T,J,3) or (T,263), .skeleton, .glb; a skinned character "
+        ".glb / .vrm (sm retarget's output) is drawn with its own meshes",
     )
     p.add_argument("--out", required=True, help="output .html, in an existing folder")
     p.add_argument("--music", default=None, help="audio file played in sync (.wav, .mp3, .ogg, .flac)")

@@ -36,7 +36,7 @@ from pathlib import Path
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
-from skeleton_mamba.tasks.motion.view import script_json
+from skeleton_mamba.tasks.motion.view import script_json, three_modules
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
@@ -78,8 +78,7 @@ def write_web_page(dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: st
             "inputs": shapes, "ort_version": VERSION}  # fmt: skip
     fields = {
         "__TITLE__": html.escape(title),
-        "__THREE__": _data_uri(viewer.joinpath("three.module.min.js").read_bytes(), "text/javascript"),
-        "__ORBIT__": _data_uri(viewer.joinpath("OrbitControls.js").read_bytes(), "text/javascript"),
+        **three_modules(),
         "__ORT__": _data_uri(ort.module, "text/javascript"),
         "__DATA__": script_json(data),
         "__MODEL__": base64.b64encode(model).decode("ascii"),
