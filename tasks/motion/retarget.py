@@ -32,7 +32,7 @@ from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.retarget_rig import BONES, Rig
 
-__all__ = ["Retarget", "bone_direction_errors", "retarget", "write_bvh_rig", "write_gltf_rig"]
+__all__ = ["Retarget", "bone_direction_errors", "driven_tips", "retarget", "write_bvh_rig", "write_gltf_rig"]
 
 _TORSO = ("spine", "chest", "upperChest", "neck")
 _TIPS = {
@@ -107,6 +107,24 @@ def _rotation(world: np.ndarray) -> np.ndarray:
     return m / np.cbrt(np.linalg.det(m))[..., None, None]
 
 
+def driven_tips(rig: Rig, positions: np.ndarray, names_to_bones: dict[str, int]) -> dict[str, str]:
+    """Humanoid bone -> its tip, for the bones both ``rig`` and the source (``positions`` (T, J, 3),
+    ``names_to_bones``) have that are given a direction: the nearest mapped bone of :data:`_TIPS`, none when
+    it sits on this one (a CMU chest and neck) on the rig or in the source (median length)."""
+    rest_pos = rig.rest_world[:, :3, 3]
+    both = [b for b in BONES if b in rig.bones and b in names_to_bones]
+    tips = {}
+    for b in both:
+        t = next((t for t in _TIPS.get(b, ()) if t in both), None)
+        if t is None:
+            continue
+        rig_length = np.linalg.norm(rest_pos[rig.bones[t]] - rest_pos[rig.bones[b]])
+        source = positions[:, names_to_bones[t]] - positions[:, names_to_bones[b]]
+        if min(rig_length, np.median(np.linalg.norm(source, axis=-1))) > 1e-4:
+            tips[b] = t
+    return tips
+
+
 def retarget(rig: Rig, positions: np.ndarray, names_to_bones: dict[str, int]) -> Retarget:
     """Retarget source joint ``positions`` (T, J, 3), metres +Y up, with humanoid bones ``names_to_bones``
     (bone -> source joint), onto ``rig`` (module docstring)."""
@@ -115,20 +133,13 @@ def retarget(rig: Rig, positions: np.ndarray, names_to_bones: dict[str, int]) ->
     rest_pos = rig.rest_world[:, :3, 3]
     rest_rot = _rotation(rig.rest_world)
     both = [b for b in BONES if b in rig.bones and b in names_to_bones]
+    tips = driven_tips(rig, positions, names_to_bones)
 
     def src(b: str) -> np.ndarray:
         return positions[:, names_to_bones[b]]
 
     def rest(b: str) -> np.ndarray:
         return rest_pos[rig.bones[b]]
-
-    def tip(b: str) -> str | None:
-        for t in _TIPS.get(b, ()):
-            if t in both:  # the nearest mapped bone; none when it sits on this one (a CMU chest and neck)
-                rig_length = np.linalg.norm(rest(t) - rest(b))
-                source_length = np.median(np.linalg.norm(src(t) - src(b), axis=-1))
-                return t if min(rig_length, source_length) > 1e-4 else None
-        return None
 
     hip_axis = (rest("leftUpperLeg") - rest("rightUpperLeg"), src("leftUpperLeg") - src("rightUpperLeg"))
     shoulders = all(f"{s}UpperArm" in both for s in ("left", "right"))
@@ -146,7 +157,7 @@ def retarget(rig: Rig, positions: np.ndarray, names_to_bones: dict[str, int]) ->
         p = rig.parents[j]
         parent_delta = delta[:, p] if p >= 0 else np.broadcast_to(np.eye(3), (frames, 3, 3))
         b = node_bone.get(j)
-        t = tip(b) if b is not None else None
+        t = tips.get(b) if b is not None else None
         if t is None:
             delta[:, j] = parent_delta
             continue

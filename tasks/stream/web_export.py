@@ -33,9 +33,14 @@ from collections.abc import Sequence
 from importlib.resources import files
 from pathlib import Path
 
+import torch
+
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.tasks.motion.character import CHARACTER_SUFFIXES
+from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.rig_output import RigOutput, prepare_rig
 from skeleton_mamba.tasks.motion.view import script_json, three_modules
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
@@ -46,7 +51,7 @@ from skeleton_mamba.tasks.stream.web_graph import web_step_spec
 from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
 from skeleton_mamba.tasks.training.pretrained import load_module_from
 
-__all__ = ["PAGE", "THREE_LICENCE", "export_web_graph", "main", "write_web_page"]
+__all__ = ["PAGE", "THREE_LICENCE", "avatar_plan", "export_web_graph", "main", "write_web_page"]
 
 PAGE = "index.html"
 THREE_LICENCE = "LICENSE-three.txt"
@@ -65,17 +70,37 @@ def export_web_graph(dancer: StreamDancer, path: Path) -> tuple[dict[str, list[i
     return shapes, max_difference_from_eager(spec, path)
 
 
-def write_web_page(dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str) -> tuple[Path, float]:
+def avatar_plan(rig: RigOutput) -> dict:
+    """The plan by which the page drives ``rig`` from the dancer's SMPL-24 joints
+    (:func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`, from SMPL's rest pose, feet on the
+    floor)."""
+    from skeleton_mamba.tasks.motion.retarget_live import live_plan  # lazy: with --rig only
+    from skeleton_mamba.tasks.motion.retarget_rig import find_bones, separate_torso
+    from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
+
+    eye = torch.eye(3, dtype=torch.float64).expand(len(SMPL24.parents), 3, 3)
+    rest = smpl_forward_kinematics(eye, torch.zeros(3, dtype=torch.float64)).numpy()
+    rest[:, 1] -= rest[:, 1].min()  # the feet on the floor
+    bones, _ = find_bones(list(SMPL24.joint_names), "the dancer", what="motion")
+    bones = separate_torso(bones, list(SMPL24.parents), rest[None])
+    return live_plan(rig.rig, rest, bones)
+
+
+def write_web_page(
+    dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str, rig: RigOutput | None = None
+) -> tuple[Path, float]:
     """Export ``dancer`` and write the page into the (claimed) folder ``out``; the page's path and the
-    graph's onnxruntime-vs-eager difference."""
+    graph's onnxruntime-vs-eager difference. ``rig``: the character the page's dancer drives (its file
+    embedded, and the plan of :func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`)."""
     out = Path(out)
     with tempfile.TemporaryDirectory() as tmp:
         graph = Path(tmp) / "dancer.onnx"
         shapes, diff = export_web_graph(dancer, graph)
         model = graph.read_bytes()
-    viewer = files("skeleton_mamba.tasks.motion.viewer")
+    viewer, web = files("skeleton_mamba.tasks.motion.viewer"), files("skeleton_mamba.tasks.stream.web")
     data = {"title": title, "sr": SR, "hop": HOP, "fps": FPS, "parents": list(SMPL24.parents),
-            "inputs": shapes, "ort_version": VERSION}  # fmt: skip
+            "inputs": shapes, "ort_version": VERSION,
+            "avatar": None if rig is None else avatar_plan(rig)}  # fmt: skip
     fields = {
         "__TITLE__": html.escape(title),
         **three_modules(),
@@ -84,8 +109,10 @@ def write_web_page(dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: st
         "__MODEL__": base64.b64encode(model).decode("ascii"),
         "__WASM__": base64.b64encode(ort.wasm).decode("ascii"),
         "__GLUE__": base64.b64encode(ort.glue).decode("ascii"),
+        "__AVATAR_JS__": _data_uri(web.joinpath("avatar.js").read_bytes(), "text/javascript"),
+        "__AVATAR__": "" if rig is None else base64.b64encode(rig.path.read_bytes()).decode("ascii"),
     }
-    template = files("skeleton_mamba.tasks.stream.web").joinpath("dancer.html").read_text(encoding="utf-8")
+    template = web.joinpath("dancer.html").read_text(encoding="utf-8")
     page = re.sub("|".join(fields), lambda match: fields[match.group()], template)
     with atomic_open(out / PAGE, "w", encoding="utf-8") as f:
         f.write(page)
@@ -101,11 +128,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(list(argv) if argv is not None else None)
     produced = [PAGE, LICENCE_FILE, THREE_LICENCE]
     out = claim_output_folder(args.out, "sm export-web", produced, overwrite=args.overwrite)
+    if args.rig is not None and Path(args.rig).suffix.lower() not in CHARACTER_SUFFIXES:
+        raise InputError(f"--rig {args.rig}: the page draws a character's mesh: a skinned .glb or .vrm")
+    rig = prepare_rig(args, [out / name for name in produced], list(SMPL24.joint_names))  # before the model
     dancer = load_module_from(StreamDanceModule, args.ckpt).model.eval()
     ort = read_ort_web(args.ort_web)  # checked before the export (a minute at the paper width)
     print("sm export-web: exporting the dancer's step with its music front end ...", flush=True)
     with writing_outputs(out, "sm export-web", produced, replaces=True):
-        page, diff = write_web_page(dancer, out, ort, f"Skeleton Mamba dancer: {Path(args.ckpt).name}")
+        page, diff = write_web_page(dancer, out, ort, f"Skeleton Mamba dancer: {Path(args.ckpt).name}", rig)
     print(f"sm export-web: wrote {page} ({page.stat().st_size / 1e6:.1f} MB; onnxruntime vs eager max |diff| "
           f"{diff:.1e}); open it from disk or serve {out} (python -m http.server -d {out})")  # fmt: skip
     return 0

@@ -12,6 +12,7 @@ __all__ = ["build_parser"]
 EXAMPLES = """examples:
   sm export-web --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out site/
   sm export-web --ckpt my-dancer/ --out site/ --ort-web onnxruntime-web-1.31.1.tgz   # no npm, no network
+  sm export-web --ckpt my-dancer/ --out site/ --rig avatar.vrm    # your character dances in the page
   python -m http.server -d site/     # or open site/index.html from disk"""
 
 
@@ -31,6 +32,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--ort-web",
         default=None,
         help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache; npm pack fetches it)",
+    )
+    p.input_path(
+        p.add_argument(
+            "--rig",
+            default=None,
+            help="your character (a skinned .glb or .vrm 0.x / 1.0): the page's dancer drives it, its own "
+            "mesh, instead of the skeleton (bones found as sm retarget finds them)",
+        )
+    )
+    p.input_path(
+        p.add_argument(
+            "--map", default=None, help="with --rig: YAML bone map `humanoid bone: rig joint` (hips, ...)"
+        )
     )
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p
