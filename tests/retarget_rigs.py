@@ -156,13 +156,19 @@ def build_rig(
     gltf.scene = 0
     if vrm == "1":
         gltf.extensionsUsed = ["VRMC_vrm"]
-        gltf.extensions = {"VRMC_vrm": {"specVersion": "1.0", "humanoid": {
+        meta = {
+            "name": "test rig",
+            "authors": ["skeleton-mamba tests"],
+            "licenseUrl": "https://vrm.dev/licenses/1.0/",
+        }  # VRM 1.0's required meta
+        gltf.extensions = {"VRMC_vrm": {"specVersion": "1.0", "meta": meta, "humanoid": {
             "humanBones": {b: {"node": index[b]} for b in bones}}}}  # fmt: skip
     elif vrm == "0":
         gltf.extensionsUsed = ["VRM"]
         gltf.extensions = {
-            "VRM": {"humanoid": {"humanBones": [{"bone": b, "node": index[b]} for b in bones]}}
-        }
+            "VRM": {"meta": {"title": "test rig", "author": "skeleton-mamba tests"},
+                    "humanoid": {"humanBones": [{"bone": b, "node": index[b]} for b in bones]}}
+        }  # fmt: skip
     gltf.buffers.append(pygltflib.Buffer(byteLength=len(blob)))
     gltf.set_binary_blob(bytes(blob))
     path.write_bytes(b"".join(gltf.save_to_bytes()))

@@ -1,7 +1,8 @@
 """``sm export-web --rig``: the page's dancer drives the user's character (rigs built in code,
 :mod:`retarget_rigs`).
 
-The per-frame plan (:mod:`skeleton_mamba.tasks.motion.retarget_live`) gives every frame of a dance the local
+A VRM 1.0 and a VRM 0.x, each with meaningless node names, are drawn by three-vrm's loader. The per-frame
+plan (:mod:`skeleton_mamba.tasks.motion.retarget_live`) gives every frame of a dance the local
 rotations :func:`~skeleton_mamba.tasks.motion.retarget.retarget` gives the whole clip, and the hips' path
 but for the constant floor lift (a Mixamo-named A-pose with rolled rests, a VRM 1.0 with meaningless names).
 In a real headless Chromium (:mod:`browser_page`): the page loads the character with GLTFLoader, a picked
@@ -44,6 +45,7 @@ def rigs(tmp_path_factory):
     return {
         "glb": build_rig(tmp / "hero.glb", MIXAMO, rest_positions(a_pose=True, legs=1.2), roll_seed=3),
         "vrm": build_rig(tmp / "avatar.vrm", meaningless, rest_positions(scale=0.8), 7, vrm="1"),
+        "vrm0": build_rig(tmp / "avatar0.vrm", meaningless, rest_positions(legs=0.9), 8, vrm="0"),
     }
 
 
@@ -69,8 +71,8 @@ def test_the_live_plan_gives_every_frame_the_clips_retarget(rigs, kind, tmp_path
         assert abs(hips[1] - whole.hips_translation[t, 1]) < 0.03  # the floor lift: constant live
 
 
-@pytest.fixture(scope="module")
-def avatar_site(rigs, tmp_path_factory):
+@pytest.fixture(scope="module", params=["vrm", "vrm0"])
+def avatar_site(rigs, tmp_path_factory, request):
     browser_or_skip()
     ort_web_or_skip()
     tmp = tmp_path_factory.mktemp("web_avatar")
@@ -79,13 +81,13 @@ def avatar_site(rigs, tmp_path_factory):
     sf.write(wav, audio, SR, subtype="PCM_16")
     ckpt, _ = tiny_stream_checkpoint(tmp / "dancer.ckpt", torch.from_numpy(music_features(audio, SR)))
     site = tmp / "site"
-    assert sm(["export-web", "--ckpt", str(ckpt), "--out", str(site), "--rig", str(rigs["vrm"])]) == 0
-    return site / "index.html", wav, ckpt
+    assert sm(["export-web", "--ckpt", str(ckpt), "--out", str(site), "--rig", str(rigs[request.param])]) == 0
+    return site / "index.html", wav, rigs[request.param]
 
 
 def test_the_character_dances_in_the_page_as_the_plan_says(avatar_site, rigs, tmp_path):
-    page_file, wav, _ = avatar_site
-    rig = load_rig(rigs["vrm"])
+    page_file, wav, rig_file = avatar_site
+    rig = load_rig(rig_file)
     p = Page(page_file.as_uri(), tmp_path)
     try:
         p.wait_for(READY, 120, "the page's start")
@@ -122,9 +124,12 @@ def test_the_character_dances_in_the_page_as_the_plan_says(avatar_site, rigs, tm
             in_dance = shown[bones[tip]] - shown[bones[bone]]
             cosine = on_rig @ in_dance / np.linalg.norm(on_rig) / np.linalg.norm(in_dance)
             assert cosine > np.cos(np.radians(3)), (bone, np.degrees(np.arccos(cosine)))
+        assert p.js("window.smDance.avatarVrm") is True  # drawn by three-vrm's loader
         assert not p.errors, p.errors
         only_local(p.requests)
         assert rig.bones  # the VRM's humanoid map was read (meaningless node names)
+        licence = page_file.with_name("LICENSE-three-vrm.txt").read_text()
+        assert "pixiv" in licence and "MIT" in licence
     finally:
         p.close()
 

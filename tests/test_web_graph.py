@@ -99,13 +99,13 @@ def test_the_onnxruntime_web_tarball_is_checked(tmp_path):
 
 
 def test_a_huge_or_forged_onnxruntime_web_tarball_is_refused_without_reading_it_whole(tmp_path, monkeypatch):
-    from skeleton_mamba.tasks.stream import ort_web
+    from skeleton_mamba.tasks.stream import npm_tarball, ort_web
 
     huge = tmp_path / "huge.tgz"
     with huge.open("wb") as f:  # a sparse 5 GB file: refused by its size, before a byte is read
         f.truncate(5 << 30)
     opened = []
-    monkeypatch.setattr(ort_web, "_read_hashed", lambda path, chunk=0: opened.append(path))
+    monkeypatch.setattr(npm_tarball, "_read_hashed", lambda path, limit, chunk=0: opened.append(path))
     with pytest.raises(InputError, match=rf"huge.tgz: not the npm tarball .*\({5 << 30} bytes, not "):
         read_ort_web(huge)
     assert opened == []

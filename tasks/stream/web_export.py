@@ -46,6 +46,8 @@ from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.stream.ort_web import LICENCE_FILE, VERSION, OrtWeb, read_ort_web
+from skeleton_mamba.tasks.stream.three_vrm import LICENCE_FILE as VRM_LICENCE_FILE
+from skeleton_mamba.tasks.stream.three_vrm import ThreeVrm, read_three_vrm
 from skeleton_mamba.tasks.stream.web_export_args import build_parser
 from skeleton_mamba.tasks.stream.web_graph import web_step_spec
 from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
@@ -87,11 +89,13 @@ def avatar_plan(rig: RigOutput) -> dict:
 
 
 def write_web_page(
-    dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str, rig: RigOutput | None = None
-) -> tuple[Path, float]:
+    dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str, rig: RigOutput | None = None,
+    vrm: ThreeVrm | None = None,
+) -> tuple[Path, float]:  # fmt: skip
     """Export ``dancer`` and write the page into the (claimed) folder ``out``; the page's path and the
     graph's onnxruntime-vs-eager difference. ``rig``: the character the page's dancer drives (its file
-    embedded, and the plan of :func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`)."""
+    embedded, and the plan of :func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`); ``vrm``:
+    three-vrm, for a VRM character (its licence written beside the page)."""
     out = Path(out)
     with tempfile.TemporaryDirectory() as tmp:
         graph = Path(tmp) / "dancer.onnx"
@@ -100,7 +104,7 @@ def write_web_page(
     viewer, web = files("skeleton_mamba.tasks.motion.viewer"), files("skeleton_mamba.tasks.stream.web")
     data = {"title": title, "sr": SR, "hop": HOP, "fps": FPS, "parents": list(SMPL24.parents),
             "inputs": shapes, "ort_version": VERSION,
-            "avatar": None if rig is None else avatar_plan(rig)}  # fmt: skip
+            "avatar": None if rig is None else {**avatar_plan(rig), "vrm": vrm is not None}}  # fmt: skip
     fields = {
         "__TITLE__": html.escape(title),
         **three_modules(),
@@ -111,6 +115,7 @@ def write_web_page(
         "__GLUE__": base64.b64encode(ort.glue).decode("ascii"),
         "__AVATAR_JS__": _data_uri(web.joinpath("avatar.js").read_bytes(), "text/javascript"),
         "__AVATAR__": "" if rig is None else base64.b64encode(rig.path.read_bytes()).decode("ascii"),
+        "__VRM__": _data_uri(b"export {};" if vrm is None else vrm.module, "text/javascript"),
     }
     template = web.joinpath("dancer.html").read_text(encoding="utf-8")
     page = re.sub("|".join(fields), lambda match: fields[match.group()], template)
@@ -120,22 +125,28 @@ def write_web_page(
         f.write(ort.licence)
     with atomic_open(out / THREE_LICENCE, "w", encoding="utf-8") as f:
         f.write(viewer.joinpath(THREE_LICENCE).read_text(encoding="utf-8"))
+    if vrm is not None:
+        with atomic_open(out / VRM_LICENCE_FILE, "w", encoding="utf-8") as f:
+            f.write(vrm.licence)
     return out / PAGE, diff
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-web``; returns 0 (bad input raises: ``sm`` prints one line, exit 2)."""
     args = build_parser().parse_args(list(argv) if argv is not None else None)
-    produced = [PAGE, LICENCE_FILE, THREE_LICENCE]
+    vrm_rig = args.rig is not None and Path(args.rig).suffix.lower() == ".vrm"
+    produced = [PAGE, LICENCE_FILE, THREE_LICENCE, *([VRM_LICENCE_FILE] if vrm_rig else [])]
     out = claim_output_folder(args.out, "sm export-web", produced, overwrite=args.overwrite)
     if args.rig is not None and Path(args.rig).suffix.lower() not in CHARACTER_SUFFIXES:
         raise InputError(f"--rig {args.rig}: the page draws a character's mesh: a skinned .glb or .vrm")
     rig = prepare_rig(args, [out / name for name in produced], list(SMPL24.joint_names))  # before the model
+    vrm = read_three_vrm(args.three_vrm) if vrm_rig else None  # a .vrm: drawn by three-vrm
     dancer = load_module_from(StreamDanceModule, args.ckpt).model.eval()
     ort = read_ort_web(args.ort_web)  # checked before the export (a minute at the paper width)
     print("sm export-web: exporting the dancer's step with its music front end ...", flush=True)
     with writing_outputs(out, "sm export-web", produced, replaces=True):
-        page, diff = write_web_page(dancer, out, ort, f"Skeleton Mamba dancer: {Path(args.ckpt).name}", rig)
+        title = f"Skeleton Mamba dancer: {Path(args.ckpt).name}"
+        page, diff = write_web_page(dancer, out, ort, title, rig, vrm)
     print(f"sm export-web: wrote {page} ({page.stat().st_size / 1e6:.1f} MB; onnxruntime vs eager max |diff| "
           f"{diff:.1e}); open it from disk or serve {out} (python -m http.server -d {out})")  # fmt: skip
     return 0

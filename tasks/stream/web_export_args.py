@@ -46,5 +46,11 @@ def build_parser() -> argparse.ArgumentParser:
             "--map", default=None, help="with --rig: YAML bone map `humanoid bone: rig joint` (hips, ...)"
         )
     )
+    p.add_argument(
+        "--three-vrm",
+        default=None,
+        help="with a VRM --rig: the npm tarball pixiv-three-vrm-3.5.5.tgz (default: the cache; npm pack "
+        "fetches it)",
+    )
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p

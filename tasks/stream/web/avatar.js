@@ -16,8 +16,17 @@ function frame(primary, secondary) {
   return new THREE.Matrix4().makeBasis(e1, e2, new THREE.Vector3().crossVectors(e1, e2));
 }
 
+// A VRM (plan.vrm) is loaded with three-vrm's plugin: its materials (MToon) and spring bones; the page drives
+// its raw bones itself (the plugin's normalized humanoid is not copied onto them).
 export async function loadAvatar(bytes, plan) {
-  const gltf = await new GLTFLoader().parseAsync(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.length), '');
+  const loader = new GLTFLoader();
+  if (plan.vrm) {
+    const { VRMLoaderPlugin } = await import('sm-vrm');
+    loader.register(parser => new VRMLoaderPlugin(parser, { autoUpdateHumanBones: false }));
+  }
+  const gltf = await loader.parseAsync(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.length), '');
+  const vrm = gltf.userData.vrm || null;
+  if (vrm) vrm.humanoid.autoUpdateHumanBones = false;
   const skins = [];
   gltf.scene.traverse(o => {
     if (o.isMesh) { o.castShadow = true; o.frustumCulled = false; }  // skinned: its bounds move with it
@@ -33,7 +42,9 @@ export async function loadAvatar(bytes, plan) {
   const pose = { local: {}, hips: [0, 0, 0] };  // the last frame set (read back by the tests)
   const local = new THREE.Matrix4(), swing = new THREE.Quaternion(), carried = new THREE.Vector3();
 
-  // One frame of joints (J * 3, metres, y-up): every driven bone's local rotation and the hips' position.
+  // One frame of joints (J * 3, metres, y-up): every driven bone's local rotation and the hips' position;
+  // a VRM's spring bones, look-at and materials advance by the frame's time.
+  let last = null;
   function drive(joints) {
     const deltas = [];
     steps.forEach((s, i) => {
@@ -57,6 +68,11 @@ export async function loadAvatar(bytes, plan) {
     path.y += plan.lift;
     hips.position.copy(path.applyMatrix4(hipsInverse));
     pose.hips = hips.position.toArray();
+    if (vrm) {
+      const now = performance.now();
+      vrm.update(last === null ? 0 : Math.min((now - last) / 1000, 0.1));
+      last = now;
+    }
   }
   // Where the skins put every vertex now (world space, metres): one [x, y, z] list per skinned mesh.
   function vertices() {
@@ -65,5 +81,5 @@ export async function loadAvatar(bytes, plan) {
     return skins.map(mesh => Array.from({ length: mesh.geometry.attributes.position.count },
                                         (_, k) => mesh.localToWorld(mesh.getVertexPosition(k, v)).toArray()));
   }
-  return { scene: gltf.scene, drive, pose, vertices };
+  return { scene: gltf.scene, drive, pose, vertices, vrm: !!vrm };
 }
