@@ -95,3 +95,29 @@ def test_sm_view_draws_the_characters_own_mesh_where_its_file_puts_it(character,
         assert image.reshape(-1, 3).std(axis=0).max() > 5, "the canvas is blank"
     finally:
         page.close()
+
+
+def test_sm_render_draws_the_characters_mesh_where_the_skin_puts_it(character, tmp_path):
+    """``sm render`` of the character: every frame of its animation, and in a frame each box of the mesh
+    (8 vertices around its bone) drawn in the mesh's colour where the file's skinning puts it."""
+    import imageio
+
+    from skeleton_mamba.tasks.motion.character_mesh import read_character_mesh
+    from skeleton_mamba.tasks.motion.render import RenderStyle, fit_cameras
+    from skeleton_mamba.tasks.motion.render_mesh import mesh_frames
+
+    out = tmp_path / "hero.mp4"
+    assert sm_main(["render", str(character), "--out", str(out)]) == 0
+    frames = read_animated(character)[1]
+    assert imageio.get_reader(out).count_frames() == len(frames)
+    mesh = read_character_mesh(character)
+    style = RenderStyle()
+    joints = mesh.joint_positions()
+    camera = fit_cameras(joints, [-1] * joints.shape[1], mesh.fps, style)[40]
+    image = list(mesh_frames(mesh, style))[40]
+    expected = _expected_vertices(character, 40)  # the independent skinning of the test
+    centres = camera.pixels(camera.to_camera(expected.reshape(-1, 8, 3).mean(1)))
+    for x, y in np.round(centres).astype(int):
+        patch = image[y - 1 : y + 2, x - 1 : x + 2].reshape(-1, 3).astype(int)
+        assert (patch[:, 2] - patch[:, 0]).max() > 10, (x, y)  # the mesh's blue-grey, not the grey floor
+    assert np.abs(mesh.posed(40) - expected).max() < 1e-9

@@ -36,6 +36,8 @@ _WIDTH = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 # glTF 2.0's accessor types (components per element) and component types (bytes per component)
 _COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_DTYPES = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"),
+           5125: np.dtype("<u4"), 5126: np.dtype("<f4")}  # fmt: skip
 _MAX_STRIDE = 252  # bufferView.byteStride: 4 to 252, a multiple of 4
 _DEFAULT_FPS = 30.0  # a single-key animation carries no spacing: ``asset.extras.fps`` or this
 
@@ -73,6 +75,30 @@ class _Reader:
         if message is not None:
             raise self.fail(message)
         return values.astype(np.float64)
+
+    def values(self, index, kinds: tuple[str, ...]) -> np.ndarray:
+        """(count, width) values of accessor ``index`` of any component type (a ``normalized`` integer
+        accessor mapped to [0, 1] or [-1, 1] as glTF says), interleaved views followed by their stride;
+        float64 for floats and normalized values, int64 for integers."""
+        acc = self.gltf.accessors[self.index(index, self.gltf.accessors, "accessor")]
+        if acc.type not in kinds or acc.sparse is not None:
+            raise self.fail(f"accessor {index}: expected dense {' or '.join(kinds)}, got {acc.type}")
+        view = self.gltf.bufferViews[acc.bufferView]
+        width, dtype = _COMPONENTS[acc.type], _DTYPES[acc.componentType]
+        element = width * dtype.itemsize
+        stride = view.byteStride or element
+        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+        raw = np.frombuffer(self.blob, np.uint8, stride * (acc.count - 1) + element, start)
+        rows = np.lib.stride_tricks.as_strided(raw, (acc.count, element), (stride, 1))
+        values = np.ascontiguousarray(rows).view(dtype).reshape(acc.count, width)
+        if acc.componentType == pygltflib.FLOAT:
+            message = non_finite_message(values, f"accessor {index}")
+            if message is not None:
+                raise self.fail(message)
+            return values.astype(np.float64)
+        if acc.normalized:
+            return np.maximum(values / float(np.iinfo(dtype).max), -1.0)
+        return values.astype(np.int64)
 
 
 def _natural(value, low: int) -> bool:

@@ -24,7 +24,7 @@ import os
 import re
 import tempfile
 import warnings
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -40,7 +40,7 @@ from skeleton_mamba.tasks.motion.audio_io import read_audio
 from skeleton_mamba.tasks.motion.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.value_checks import check_fps
 
-__all__ = ["RenderStyle", "fit_cameras", "joint_sides", "render_frames", "render_motion"]
+__all__ = ["RenderStyle", "fit_cameras", "joint_sides", "render_frames", "render_motion", "write_video"]
 
 _AA = cv2.LINE_AA
 # "left" / "right" in any case, or a capital L / R prefix before a capital (CMU "LHipJoint").
@@ -205,6 +205,35 @@ def fit_cameras(
     return [_Camera(target + distance * direction, target, focal, cx, cy) for target in targets]
 
 
+def _floor_frames(
+    cameras: Sequence[_Camera], joints: np.ndarray, style: RenderStyle
+) -> Iterator[tuple[np.ndarray, _Camera]]:
+    """For each camera a new image of the background with the floor grid (world-aligned lines around the
+    followed root, at the lowest point of ``joints`` (T, J, 3), spaced by the body's size)."""
+    floor, size = joints[..., 1].min(), _clip_size(joints)
+    spacing = _grid_spacing(size)
+    distance = float(np.linalg.norm(cameras[0].eye - cameras[0].target))
+    half = 4 * spacing * max(1, round(distance / (4 * spacing)))
+    ticks = np.arange(-half, half + spacing / 2, spacing)
+    blank = np.empty((style.height, style.width, 3), dtype=np.uint8)
+    blank[:] = np.asarray(style.background, dtype=np.uint8)  # filled once: per-frame tuple fills are slow
+    for camera in cameras:
+        image = blank.copy()
+        gx = spacing * np.round(camera.target[0] / spacing) + ticks
+        gz = spacing * np.round(camera.target[2] / spacing) + ticks
+        one = np.ones_like(gx)
+        lines_x = [np.stack([gx, floor * one, gz[i] * one], 1) for i in (0, -1)]  # along z, one per x
+        lines_z = [np.stack([gx[i] * one, floor * one, gz], 1) for i in (0, -1)]  # along x, one per z
+        a, b = np.concatenate([lines_x[0], lines_z[0]]), np.concatenate([lines_x[1], lines_z[1]])
+        _draw_lines(image, camera, a, b, 0.05 * size, style.grid, 1)
+        yield image, camera
+
+
+def _time_label(image: np.ndarray, seconds: float, title: str | None) -> None:
+    label = f"{seconds:6.2f} s" + (f"   {title}" if title else "")
+    cv2.putText(image, label, (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (60, 60, 60), 1, cv2.LINE_AA)
+
+
 def render_frames(
     joints: np.ndarray,
     parents: Sequence[int],
@@ -220,29 +249,9 @@ def render_frames(
     colors = {-1: style.left, 1: style.right, 0: style.middle}
     bones = np.array([(p, j) for j, p in enumerate(parents) if p >= 0], dtype=np.int64).reshape(-1, 2)
     cameras = fit_cameras(joints, parents, fps, style)
-
-    floor = joints[..., 1].min()
-    size = _clip_size(joints)
-    spacing = _grid_spacing(size)
-    distance = float(np.linalg.norm(cameras[0].eye - cameras[0].target))
-    half = 4 * spacing * max(1, round(distance / (4 * spacing)))
-    ticks = np.arange(-half, half + spacing / 2, spacing)
+    floor, near = joints[..., 1].min(), 0.05 * _clip_size(joints)
     thickness, radius = style.bone_thickness, style.joint_radius * 16
-    blank = np.empty((style.height, style.width, 3), dtype=np.uint8)
-    blank[:] = np.asarray(style.background, dtype=np.uint8)  # filled once: per-frame tuple fills are slow
-
-    near = 0.05 * size
-    for t, camera in enumerate(cameras):
-        image = blank.copy()
-        target = camera.target
-        # Floor grid on world-aligned lines around the followed root.
-        gx = spacing * np.round(target[0] / spacing) + ticks
-        gz = spacing * np.round(target[2] / spacing) + ticks
-        one = np.ones_like(gx)
-        lines_x = [np.stack([gx, floor * one, gz[i] * one], 1) for i in (0, -1)]  # along z, one per x
-        lines_z = [np.stack([gx[i] * one, floor * one, gz], 1) for i in (0, -1)]  # along x, one per z
-        a, b = np.concatenate([lines_x[0], lines_z[0]]), np.concatenate([lines_x[1], lines_z[1]])
-        _draw_lines(image, camera, a, b, near, style.grid, 1)
+    for t, (image, camera) in enumerate(_floor_frames(cameras, joints, style)):
         frame = joints[t]
         shadow = frame.copy()
         shadow[:, 1] = floor
@@ -259,8 +268,7 @@ def render_frames(
         for j in np.argsort(-cam[:, 2]):
             if cam[j, 2] > near:
                 cv2.circle(image, tuple(pix[j].tolist()), radius, colors[sides[j]], -1, _AA, 4)
-        label = f"{t / fps:6.2f} s" + (f"   {title}" if title else "")
-        cv2.putText(image, label, (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (60, 60, 60), 1, cv2.LINE_AA)
+        _time_label(image, t / fps, title)
         yield image
 
 
@@ -304,6 +312,26 @@ def render_motion(
     Returns:
         The written path.
     """
+    style = style or RenderStyle()
+    joints = _check_joints(joints, parents)  # fail before an output file is opened
+    return write_video(
+        lambda: render_frames(joints, parents, fps, names=names, style=style, title=title),
+        len(joints), out, fps, music, style, progress,
+    )  # fmt: skip
+
+
+def write_video(
+    frames: Callable[[], Iterable[np.ndarray]],
+    count: int,
+    out: str | PathLike[str],
+    fps: float,
+    music: str | PathLike[str] | None = None,
+    style: RenderStyle | None = None,
+    progress: bool = True,
+) -> Path:
+    """The ``count`` images that ``frames()`` yields written to ``out`` (``.mp4`` with ``music`` muxed, or a
+    looping ``.gif``), atomically; everything is checked (suffix, frame rate, music, size) before
+    ``frames`` is called."""
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in (".mp4", ".gif"):
@@ -311,14 +339,12 @@ def render_motion(
     check_fps(fps, "fps")  # bounds the camera smoothing window (it grows with fps)
     check_writable(out)
     style = style or RenderStyle()
-    joints = _check_joints(joints, parents)  # fail before an output file is opened
     sound = None
     if music is not None and suffix == ".mp4":  # decoded and checked before anything is written
-        sound = read_audio(music, duration_s=len(joints) / fps, mono=False)
+        sound = read_audio(music, duration_s=count / fps, mono=False)
     if suffix == ".mp4" and (style.width % 16 or style.height % 16):
         raise ValueError(f"mp4 width and height must be multiples of 16, got {style.width}x{style.height}")
-    frames = render_frames(joints, parents, fps, names=names, style=style, title=title)
-    frames = tqdm(frames, total=len(joints), desc=f"render {out.name}", unit="frame", disable=not progress)
+    frames = tqdm(frames(), total=count, desc=f"render {out.name}", unit="frame", disable=not progress)
     if suffix == ".gif":
         if music is not None:
             warnings.warn(f"{out}: GIF has no audio track, music ignored", stacklevel=2)

@@ -1,12 +1,13 @@
 """``sm render MOTION [--music FILE] --out clip.mp4|clip.gif [--fps N] [--skeleton J] [--units U|--scale S]``.
 
-Reads any motion file the toolkit knows (:mod:`.motion_reader`: ``.npz``, AIST++ ``.pkl``, joints or
-HumanML3D features ``.npy``, ``.bvh``, NTU ``.skeleton``, ``.glb``) in metres and renders a skeleton
-animation (see :mod:`.render`). The output frame rate is ``--fps``, else the motion's own up to
+Reads any motion file the toolkit knows (:mod:`.motion_reader`: ``.npz``, AIST++ ``.pkl``, joints or HumanML3D
+features ``.npy``, ``.bvh``, NTU ``.skeleton``, ``.glb``) in metres and renders a skeleton animation (see
+:mod:`.render`); a character (a skinned ``.glb`` / ``.vrm``, ``sm retarget``'s output) is rendered with its
+own mesh (:mod:`.render_mesh`). The output frame rate is ``--fps``, else the motion's own up to
 :data:`~.render_args.PREVIEW_FPS` (a 120 fps BVH is rendered at 30 fps: four times fewer frames, the same
 motion); frames are resampled linearly and the line on stderr says so. A scale other than metres by the file's
-format (a BVH's detected unit, ``--units``, ``--scale``: :mod:`.units`) is stated on stderr too.
-``--out``'s folder must exist.
+format (a BVH's detected unit, ``--units``, ``--scale``: :mod:`.units`) is stated on stderr too. ``--out``'s
+folder must exist.
 """
 
 from __future__ import annotations
@@ -21,10 +22,13 @@ import numpy as np
 import torch
 
 from skeleton_mamba.tasks.motion.atomic import output_file
+from skeleton_mamba.tasks.motion.character import read_character
+from skeleton_mamba.tasks.motion.character_mesh import read_character_mesh
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.render import render_motion
 from skeleton_mamba.tasks.motion.render_args import PREVIEW_FPS, build_parser
+from skeleton_mamba.tasks.motion.render_mesh import render_character
 from skeleton_mamba.tasks.motion.resample import resample_linear
 from skeleton_mamba.tasks.motion.units import METRES
 from skeleton_mamba.tasks.motion.value_checks import check_fps
@@ -49,6 +53,8 @@ def render_file(
     stderr."""
 
     out = output_file(out)
+    if read_character(motion) is not None:  # a skinned .glb / .vrm: its own mesh
+        return _render_character(motion, out, music, fps, title, progress)
     clip = load_joints(motion, skeleton=skeleton, motion_fps=motion_fps, units=units, scale=scale)
     if clip.scale != METRES:
         print(clip.scale.line(str(motion)), file=sys.stderr)
@@ -65,6 +71,24 @@ def render_file(
     return render_motion(
         joints, clip.parents, out, out_fps, music=music, names=clip.names, title=title, progress=progress
     )
+
+
+def _render_character(
+    path: str | PathLike[str], out: Path, music, fps: float | None, title: str | None, progress: bool
+) -> Path:
+    """A character file's mesh (:mod:`.render_mesh`), at ``fps`` (default: the animation's, at most
+    :data:`~.render_args.PREVIEW_FPS`; other rates take the nearest frame)."""
+    mesh = read_character_mesh(path)
+    if fps is not None:
+        check_fps(fps, "--fps")
+    elif mesh.fps > PREVIEW_FPS:
+        fps = PREVIEW_FPS
+    if fps is not None and abs(fps - mesh.fps) > 1e-9:
+        count = max(1, int(np.floor((mesh.num_frames - 1) * fps / mesh.fps)) + 1)
+        index = np.minimum(np.round(np.arange(count) * mesh.fps / fps).astype(int), mesh.num_frames - 1)
+        print(f"{path}: {mesh.fps:g} fps rendered at {fps:g} fps (nearest frames)", file=sys.stderr)
+        mesh.world, mesh.fps = mesh.world[index], float(fps)
+    return render_character(mesh, out, music=music, title=title, progress=progress)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
