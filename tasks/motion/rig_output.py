@@ -25,6 +25,8 @@ if TYPE_CHECKING:  # the command lines import this module for their options: num
     from skeleton_mamba.tasks.motion.retarget_rig import Rig
 
 __all__ = [
+    "MAP_HELP",
+    "RIG_HELP",
     "RigOutput",
     "add_rig_arguments",
     "prepare_rig",
@@ -34,21 +36,17 @@ __all__ = [
 ]
 
 
-def add_rig_arguments(p) -> None:
+RIG_HELP = (
+    "also write the motion on this character (skinned .glb, .vrm 0.x / 1.0 or .bvh) beside the other files, "
+    "as <stem>_rig.glb / .vrm / .bvh (sm retarget)"
+)
+MAP_HELP = "with --rig: YAML bone map `humanoid bone: rig joint` (hips, ...)"
+
+
+def add_rig_arguments(p, rig_help: str = RIG_HELP) -> None:
     """``--rig`` and ``--map`` on a :func:`~.cli_options.command_parser` (a missing file refused at parse)."""
-    p.input_path(
-        p.add_argument(
-            "--rig",
-            default=None,
-            help="also write the motion on this character (skinned .glb, .vrm 0.x / 1.0 or .bvh) beside the "
-            "other files, as <stem>_rig.glb / .vrm / .bvh (sm retarget)",
-        )
-    )
-    p.input_path(
-        p.add_argument(
-            "--map", default=None, help="with --rig: YAML bone map `humanoid bone: rig joint` (hips, ...)"
-        )
-    )
+    p.input_path(p.add_argument("--rig", default=None, help=rig_help))
+    p.input_path(p.add_argument("--map", default=None, help=MAP_HELP))
 
 
 def rig_file_name(stem: str, rig: str | PathLike[str]) -> str:

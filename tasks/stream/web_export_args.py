@@ -6,6 +6,7 @@ import argparse
 
 from skeleton_mamba.tasks.motion.cli_options import command_parser
 from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
 
 __all__ = ["build_parser"]
 
@@ -33,18 +34,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="the npm tarball onnxruntime-web-1.31.1.tgz (default: the cache; npm pack fetches it)",
     )
-    p.input_path(
-        p.add_argument(
-            "--rig",
-            default=None,
-            help="your character (a skinned .glb or .vrm 0.x / 1.0): the page's dancer drives it, its own "
-            "mesh, instead of the skeleton (bones found as sm retarget finds them)",
-        )
-    )
-    p.input_path(
-        p.add_argument(
-            "--map", default=None, help="with --rig: YAML bone map `humanoid bone: rig joint` (hips, ...)"
-        )
+    add_rig_arguments(
+        p,
+        "your character (a skinned .glb or .vrm 0.x / 1.0): the page's dancer drives it, its own mesh, "
+        "instead of the skeleton (bones found as sm retarget finds them)",
     )
     p.add_argument(
         "--three-vrm",

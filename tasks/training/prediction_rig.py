@@ -17,7 +17,7 @@ from lightning.pytorch import Trainer
 from lightning.pytorch.callbacks import Callback
 
 from skeleton_mamba.tasks.motion.errors import InputError
-from skeleton_mamba.tasks.motion.rig_output import RigOutput, prepare_rig
+from skeleton_mamba.tasks.motion.rig_output import MAP_HELP, RigOutput, prepare_rig
 
 __all__ = ["PredictionRig", "add_prediction_rig_arguments", "prediction_rig_from"]
 
@@ -25,7 +25,6 @@ RIG_HELP = (
     "also write every predicted motion on this character (skinned .glb, .vrm 0.x / 1.0 or .bvh), "
     "<stem>_rig.glb / .vrm / .bvh beside its .npz (sm retarget)"
 )
-MAP_HELP = "with --rig: YAML bone map `humanoid bone: rig joint` (hips, ...)"
 
 
 def add_prediction_rig_arguments(parser) -> None:
