@@ -77,8 +77,8 @@ def avatar_plan(rig: RigOutput) -> dict:
     (:func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`, from SMPL's rest pose, feet on the
     floor)."""
     from skeleton_mamba.tasks.motion.retarget_live import live_plan  # lazy: with --rig only
-    from skeleton_mamba.tasks.motion.retarget_rig import find_bones, separate_torso
-    from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
+    from skeleton_mamba.tasks.motion.retarget_rig import find_bones, separate_torso  # lazy: with --rig only
+    from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics  # lazy: with --rig only
 
     eye = torch.eye(3, dtype=torch.float64).expand(len(SMPL24.parents), 3, 3)
     rest = smpl_forward_kinematics(eye, torch.zeros(3, dtype=torch.float64)).numpy()
