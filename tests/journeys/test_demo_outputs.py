@@ -15,6 +15,7 @@ import pytest
 import torch
 from checkpoint_files import save_module_checkpoint
 from gltf_reader import glb_joint_positions
+from retarget_rigs import MIXAMO, build_rig, read_animated, rest_positions
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.motion.motion_file import load_motion
@@ -114,8 +115,9 @@ def test_sm_predict_of_the_egodance_demo_writes_and_lists_the_dances(tmp_path):
         "--trainer.enable_progress_bar=false",
     )
     ckpt = tmp_path / "runs/egodance_demo/version_0/checkpoints/last.ckpt"
+    rig = build_rig(tmp_path / "hero.glb", MIXAMO, rest_positions(a_pose=True), roll_seed=2)
     printed = sm("predict", "--recipe", "egodance_demo.yaml", f"--ckpt_path={ckpt}",
-                 "--trainer.enable_progress_bar=false")  # fmt: skip
+                 "--trainer.enable_progress_bar=false", f"--rig={rig}")  # fmt: skip
     folder = tmp_path / "runs/egodance_demo/version_1/predictions"
     dances = sorted(folder.glob("*_dance.npz"))
     where = folder.relative_to(tmp_path)  # as the run's log dir is given: relative to the working folder
@@ -124,4 +126,7 @@ def test_sm_predict_of_the_egodance_demo_writes_and_lists_the_dances(tmp_path):
         for suffix in (".npz", ".bvh", ".glb", ".mp4", ".wav"):
             path = npz.with_suffix(suffix)
             assert path.stat().st_size > 0 and str(path.relative_to(tmp_path)) in printed
+        on_rig = npz.with_name(f"{npz.stem}_rig.glb")  # sm predict --rig: the dance on the character
+        assert str(on_rig.relative_to(tmp_path)) in printed
+        assert len(read_animated(on_rig)[1]) == len(np.load(npz)["joints"])
     _readable_by_every_command([dances[0], dances[0].with_suffix(".glb")], tmp_path)
