@@ -108,11 +108,14 @@ def _stream(summary: dict) -> dict:
 def _text2motion(summary: dict) -> dict:
     scores = summary["scores"]
     columns = scores["dynamics"]["columns"]
-    return {
+    row = {
         "captions": {k: scores[k] for k in ("plausibility_m", "within_caption_m", "between_captions_m")},
         "dance": _dance(columns, DYNAMICS),
         "baselines": {"random_clip": columns["random_clip"]},
     }
+    if "actions" in summary:  # the paraphrased prompts whose motion shows their action
+        row["actions"] = {"shown": summary["actions"]["shown"]}
+    return row
 
 
 ROWS: dict[str, Callable[[dict], dict]] = {
@@ -320,13 +323,22 @@ def stream_seeds(results: dict) -> str:
 
 def text2motion_seeds(results: dict) -> str:
     keys = ("plausibility_m", "within_caption_m", "between_captions_m")
-    header = ["seed", "plausibility (m)", "within a caption (m)", "between captions (m)", "amplitude ratio",
-              "jitter ratio", "energy above 6 Hz", "targets"]  # fmt: skip
-    rows = [[s, *(_f(r["captions"][k]) for k in keys), *(_f(r["dance"][k]) for k in DYNAMICS), _reached(r)]
-            for s, r in _seeds(results, "text2motion")]  # fmt: skip
+    seeds = _seeds(results, "text2motion")
+    acted = any("actions" in r for _, r in seeds)  # the column of the action check, once a run has it
+    header = ["seed", "plausibility (m)", "within a caption (m)", "between captions (m)",
+              *(["action shown"] if acted else []), "amplitude ratio", "jitter ratio", "energy above 6 Hz",
+              "targets"]  # fmt: skip
+
+    def shown(r: dict) -> list[str]:
+        return [f"{r['actions']['shown']:.0%}" if "actions" in r else ""] if acted else []
+
+    rows = [[s, *(_f(r["captions"][k]) for k in keys), *shown(r), *(_f(r["dance"][k]) for k in DYNAMICS),
+             _reached(r)] for s, r in seeds]  # fmt: skip
     clip = _first(results, "text2motion")["baselines"]["random_clip"]
-    rows.append(["random training clip", "", "", "", *(_f(clip[k]) for k in DYNAMICS), ""])
-    rows.append(["target", "<= 0.080", "", "> within", ">= 0.7", "<= 1.5", "0.5 to 2", ""])
+    blank = [""] * (4 if acted else 3)
+    rows.append(["random training clip", *blank, *(_f(clip[k]) for k in DYNAMICS), ""])
+    rows.append(["target", "<= 0.080", "", "> within", *([">= 80%"] if acted else []), ">= 0.7", "<= 1.5",
+                 "0.5 to 2", ""])  # fmt: skip
     return _table(header, rows)
 
 
@@ -355,6 +367,10 @@ def readme_demos(results: dict) -> str:
     t2m = [r for _, r in _seeds(results, "text2motion")]
     if t2m:
         own = f"plausibility {_span([r['captions']['plausibility_m'] for r in t2m], 3)} m"
+        if all("actions" in r for r in t2m):
+            low, high = (f(r["actions"]["shown"] for r in t2m) for f in (min, max))
+            span = f"{low:.0%}" + (f"-{high:.0%}" if high > low else "")
+            own += f"; paraphrased prompts showing their action {span}"
         seeds = _seed_list(results, "text2motion")
         out.append(["`humanml3d_demo.yaml`", seeds, *spans(t2m, lambda r: r["dance"]),
                     own, reached(t2m)])  # fmt: skip

@@ -154,6 +154,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
     import subprocess
     import sys
 
+    from skeleton_mamba.tasks.text2motion.actions import PARAPHRASES
     from skeleton_mamba.tasks.training.cli import main
 
     monkeypatch.chdir(tmp_path)
@@ -162,7 +163,13 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
         {"class_path": "lightning.pytorch.callbacks.ModelCheckpoint", "init_args": {"filename": "last"}},
         {
             "class_path": "skeleton_mamba.tasks.text2motion.demo.TextToMotionDemo",
-            "init_args": {"prompts": ["a person jumps"], "length": "8", "sampling_steps": 1, "render": "mp4"},
+            "init_args": {
+                "prompts": ["a person jumps"],
+                "length": "8",
+                "sampling_steps": 1,
+                "render": "mp4",
+                "action_samples": 1,
+            },
         },
     ]
     fit = ["fit", "--recipe", "humanml3d_demo.yaml", "--trainer.max_steps", "1", "--trainer.logger", "false"]
@@ -170,6 +177,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
     fit += ["--trainer.callbacks", json.dumps(callbacks)]
     fit += ["--data.train_clips", "3", "--data.val_clips", "2", "--data.batch_size", "3"]
     fit += ["--data.min_frames", "40", "--data.max_frames", "44"]
+    fit += ["--data.kinds", json.dumps(list(PARAPHRASES))]  # the everyday actions: the action check runs
     assert main(fit) == 0
     checkpoint = tmp_path / "checkpoints" / "last.ckpt"
     assert checkpoint.is_file()
@@ -179,9 +187,17 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
     assert (tmp_path / "demo" / "synthetic_00_a_person_jumps.mp4").stat().st_size > 0
     assert np.load(tmp_path / "demo" / "synthetic_00_a_person_jumps_features.npy").shape == (8, 263)
     assert np.load(tmp_path / "demo" / "synthetic_00_a_person_jumps.npy").shape == (8, 22, 3)
-    # scored: two held-out captions, two motions each
+    # scored: two held-out captions, two motions each (the clips: the everyday actions)
     assert len(demo["scores"]["captions"]) == 2 and demo["scores"]["plausibility_m"] > 0
-    assert set(demo["checks"]) and "pose plausibility" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert set(demo["checks"]) and "pose plausibility" in printed
+    # every paraphrased prompt generated once and its action read back (a 1-step model: any score)
+    actions = demo["actions"]
+    assert len(actions["prompts"]) == 14 and len(actions["read"]) == 14 and 0 <= actions["shown"] <= 1
+    assert set(actions["per_action"]) == {"walk", "turn", "jump", "squat", "kick", "wave", "run_in_place"}
+    assert (
+        "paraphrased prompts show their action >= 80%" in demo["checks"] and "of the prompts show" in printed
+    )
 
     args = ["generate", "--checkpoint", str(checkpoint), "--text", "a person waves", "--length", "8"]
     assert main([*args, "--steps", "1", "--out", str(tmp_path / "gen"), "--num", "2"]) == 0

@@ -22,7 +22,7 @@ from torch.utils.data import Dataset
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics, read_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import UNIT_LENGTH, MotionClip, crop_length, load_clips
-from skeleton_mamba.tasks.text2motion.synthetic import synthetic_clips
+from skeleton_mamba.tasks.text2motion.synthetic import KINDS, synthetic_clips
 from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, unlinked
 
 __all__ = [
@@ -195,6 +195,8 @@ class SyntheticTextMotionDataModule(_TextMotionDataModule):
         seed: generator seed (validation uses ``seed + 1``).
         batch_size: per-device batch.
         num_workers: data loader workers.
+        kinds: the clips' kinds, in turn: dance styles (``bounce``, ``sway``, ``arms``, the default) or
+            everyday actions (``walk``, ``turn``, ``jump``, ``squat``, ``kick``, ``wave``, ``run_in_place``).
     """
 
     def __init__(
@@ -206,8 +208,11 @@ class SyntheticTextMotionDataModule(_TextMotionDataModule):
         seed: int = 0,
         batch_size: int = 16,
         num_workers: int = 0,
+        kinds: list[str] | None = None,
     ) -> None:
         super().__init__(batch_size, num_workers)
+        self.kinds = tuple(kinds) if kinds else KINDS
+        synthetic_clips(0, kinds=self.kinds)  # unknown kinds refused when the module is made
         self.train_clips, self.val_clips = train_clips, val_clips
         self.min_frames, self.max_frames, self.seed = min_frames, max_frames, seed
         self._clips: dict[str, list[MotionClip]] = {}
@@ -216,7 +221,7 @@ class SyntheticTextMotionDataModule(_TextMotionDataModule):
         if split not in self._clips:
             train = split == "train"
             count, seed = (self.train_clips, self.seed) if train else (self.val_clips, self.seed + 1)
-            self._clips[split] = synthetic_clips(count, seed, self.min_frames, self.max_frames)
+            self._clips[split] = synthetic_clips(count, seed, self.min_frames, self.max_frames, self.kinds)
         return self._clips[split]
 
     def _statistics(self) -> tuple[np.ndarray, np.ndarray]:

@@ -39,8 +39,17 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     held_out_dynamics_checks,
 )
 from skeleton_mamba.tasks.motion.view import write_view
-from skeleton_mamba.tasks.text2motion.demo_scores import caption_checks, caption_scores, format_caption_scores
+from skeleton_mamba.tasks.text2motion.actions import PARAPHRASES
+from skeleton_mamba.tasks.text2motion.demo_scores import (
+    action_checks,
+    action_scores,
+    caption_checks,
+    caption_scores,
+    format_action_scores,
+    format_caption_scores,
+)
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length, save_generated, slug
+from skeleton_mamba.tasks.text2motion.synthetic import LABEL as LABEL_PREFIX
 from skeleton_mamba.tasks.training.demo_callback import DemoCallback
 from skeleton_mamba.tasks.training.diffusion import SamplingOptions
 
@@ -69,6 +78,9 @@ class TextToMotionDemo(DemoCallback):
         seed: noise seed.
         score_captions: held-out captions (of the data module's val split) to score (0: no scores).
         score_samples: motions generated per scored caption (at least 2).
+        action_samples: motions generated per paraphrased prompt of :data:`~.actions.PARAPHRASES` (0: none),
+            each read back by :func:`~.actions.read_action` (:func:`~.demo_scores.action_scores`), when the
+            data module's clips hold every action (``kinds``).
     """
 
     def __init__(
@@ -82,6 +94,7 @@ class TextToMotionDemo(DemoCallback):
         score_captions: int = 2,
         score_samples: int = 2,
         sampler: str | None = None,
+        action_samples: int = 0,
     ) -> None:
         self.prompts = list(prompts or ["a person waves both arms up and down."])
         self.frames = parse_length(length)
@@ -95,6 +108,9 @@ class TextToMotionDemo(DemoCallback):
             raise ValueError("scoring needs score_captions >= 2 and score_samples >= 2 (or score_captions 0)")
         self.score_captions = score_captions
         self.score_samples = score_samples
+        if action_samples < 0:
+            raise ValueError(f"action_samples must be >= 0, got {action_samples}")
+        self.action_samples = action_samples
 
     def on_fit_end(self, trainer: Trainer, pl_module: LightningModule) -> None:
         if not trainer.is_global_zero:
@@ -110,6 +126,10 @@ class TextToMotionDemo(DemoCallback):
             **dataclasses.asdict(sampling),
         )
         scored = self._score(trainer, pl_module, sampling)
+        kinds = set(getattr(trainer.datamodule, "kinds", ()) or ())  # action scores: a set of every action
+        acted = None
+        if self.action_samples and kinds >= set(PARAPHRASES):
+            acted = self._actions(pl_module, sampling)
         if was_training:
             pl_module.train()
         records = []
@@ -128,6 +148,9 @@ class TextToMotionDemo(DemoCallback):
         }
         if scored is not None:
             summary["scores"], summary["checks"], _ = scored
+        if acted is not None:
+            summary["actions"] = acted[0]
+            summary["checks"] = {**summary.get("checks", {}), **acted[1]}
         out.mkdir(parents=True, exist_ok=True)
         with atomic_open(out / "demo.json", "w", encoding="utf-8") as f:
             f.write(json.dumps(summary, indent=2))
@@ -150,7 +173,30 @@ class TextToMotionDemo(DemoCallback):
             motions = [(name, from_joints(j.numpy(), HUMANML3D22.name, FPS)) for name, j in pair]
             view = write_view(motions, out / "view.html", metrics=summary["scores"])
             lines.append(f"[text2motion demo] viewer: {view}")
+        if acted is not None:
+            lines += [
+                f"[text2motion demo] does the motion show the prompt's action? {self.action_samples} "
+                f"motion(s) for each of {len(acted[0]['prompts'])} prompts worded as no training caption is, "
+                "the action read from the joints (pelvis height, path, heading, wrists, knees, ankles):",
+                format_action_scores(acted[0], acted[1]),
+            ]
         print("\n".join(lines), flush=True)
+
+    def _actions(self, pl_module: LightningModule, sampling: SamplingOptions) -> tuple[dict, dict[str, bool]]:
+        """Generate for every paraphrased prompt and read each motion's action back
+        (:func:`~.demo_scores.action_scores`): ``(scores with the prompts, checks)``."""
+        asked = [(action, LABEL_PREFIX + text) for action, texts in PARAPHRASES.items() for text in texts]
+        prompts = [p for _, p in asked for _ in range(self.action_samples)]
+        features, _ = pl_module.generate(
+            prompts,
+            [self.frames] * len(prompts),
+            generator=torch.Generator().manual_seed(self.seed + 2),
+            **dataclasses.asdict(sampling),
+        )
+        joints = list(recover_from_ric(features.detach().cpu().double()))
+        expected = [a for a, _ in asked for _ in range(self.action_samples)]
+        scores = action_scores(expected, joints)
+        return {"prompts": [p for _, p in asked], **scores}, action_checks(scores)
 
     def _score(
         self, trainer: Trainer, pl_module: LightningModule, sampling: SamplingOptions

@@ -9,7 +9,10 @@ scores them against the training clips' poses:
   between two motions of the same caption, mean over captions and pairs;
 - ``between_captions_m``: the same between motions of different captions.
 
-The caption matters when motions of different captions lie farther apart than motions of one caption.
+The caption matters when motions of different captions lie farther apart than motions of one caption. And
+whether a prompt's action shows: for prompts worded as no training caption is (:data:`~.actions.PARAPHRASES`),
+the action :func:`~.actions.read_action` reads from each generated motion against the prompt's
+(:func:`action_scores`; target: :data:`ACTION_TARGET` of the prompts).
 """
 
 from __future__ import annotations
@@ -20,7 +23,16 @@ import torch
 
 from skeleton_mamba.tasks.motion.metrics.pose_distance import nearest_pose_distance, pose_set_distance
 
-__all__ = ["PLAUSIBILITY_TARGET_M", "caption_scores", "caption_checks", "format_caption_scores"]
+__all__ = [
+    "ACTION_TARGET",
+    "PLAUSIBILITY_TARGET_M",
+    "action_checks",
+    "action_scores",
+    "caption_checks",
+    "caption_scores",
+    "format_action_scores",
+    "format_caption_scores",
+]
 
 PLAUSIBILITY_TARGET_M = 0.08
 
@@ -63,5 +75,38 @@ def format_caption_scores(scores: dict[str, float], checks: dict[str, bool]) -> 
     }
     width = max(len(n) for n in names.values())
     lines = [f"{names[k]:<{width}}{scores[k]:>10.3f}" for k in names]
+    lines += [f"{'reached' if ok else 'NOT reached'}: {check}" for check, ok in checks.items()]
+    return "\n".join(lines)
+
+
+ACTION_TARGET = 0.8  # of the paraphrased prompts whose motion shows their action
+
+
+def action_scores(expected: list[str], joints: list[torch.Tensor]) -> dict:
+    """Which action each generated motion shows (:func:`~.actions.read_action` on its joints (T, 22, 3))
+    against the action its prompt asked for: ``{"shown": fraction, "per_action": {action: [hits, prompts]},
+    "read": [action read or None, ...]}``."""
+    from skeleton_mamba.tasks.text2motion.actions import read_action
+
+    read = [read_action(j.numpy()) for j in joints]
+    per_action: dict[str, list[int]] = {}
+    for want, got in zip(expected, read):
+        tally = per_action.setdefault(want, [0, 0])
+        tally[0] += int(got == want)
+        tally[1] += 1
+    shown = sum(hits for hits, _ in per_action.values()) / max(len(expected), 1)
+    return {"shown": shown, "per_action": per_action, "read": read}
+
+
+def action_checks(scores: dict) -> dict[str, bool]:
+    return {
+        f"paraphrased prompts show their action >= {ACTION_TARGET:.0%}": scores["shown"] >= ACTION_TARGET,
+    }
+
+
+def format_action_scores(scores: dict, checks: dict[str, bool]) -> str:
+    """One line per action (hits / prompts), the fraction shown and the checks."""
+    lines = [f"  {action:<14}{hits} / {count}" for action, (hits, count) in scores["per_action"].items()]
+    lines.append(f"  {'all':<14}{scores['shown']:.0%} of the prompts show their action (read from joints)")
     lines += [f"{'reached' if ok else 'NOT reached'}: {check}" for check, ok in checks.items()]
     return "\n".join(lines)
