@@ -27,7 +27,8 @@ class DancePredictionWriter(BasePredictionWriter):
     """Writes the dances of :meth:`EgoDanceModule.predict_step` (module docstring).
 
     Args:
-        output_dir: the folder (``None``: ``predictions/`` in the trainer's log_dir, else the working folder).
+        output_dir: the folder (``None``: ``predictions/`` in the trainer's log_dir, else in its
+            ``default_root_dir``).
         render: also write the mp4 with the music.
     """
 
@@ -41,7 +42,7 @@ class DancePredictionWriter(BasePredictionWriter):
         if self.output_dir is not None:
             return Path(self.output_dir)
         name = "predictions" if trainer.world_size == 1 else f"predictions_rank{trainer.global_rank}"
-        return Path(trainer.log_dir or ".") / name
+        return Path(trainer.log_dir or trainer.default_root_dir or ".") / name
 
     def on_predict_epoch_start(self, trainer: Trainer, pl_module: LightningModule) -> None:
         self.written = []
