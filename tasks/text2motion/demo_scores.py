@@ -22,6 +22,7 @@ from itertools import combinations
 import torch
 
 from skeleton_mamba.tasks.motion.metrics.pose_distance import nearest_pose_distance, pose_set_distance
+from skeleton_mamba.tasks.text2motion.actions import read_action
 
 __all__ = [
     "ACTION_TARGET",
@@ -86,8 +87,6 @@ def action_scores(expected: list[str], joints: list[torch.Tensor]) -> dict:
     """Which action each generated motion shows (:func:`~.actions.read_action` on its joints (T, 22, 3))
     against the action its prompt asked for: ``{"shown": fraction, "per_action": {action: [hits, prompts]},
     "read": [action read or None, ...]}``."""
-    from skeleton_mamba.tasks.text2motion.actions import read_action
-
     read = [read_action(j.numpy()) for j in joints]
     per_action: dict[str, list[int]] = {}
     for want, got in zip(expected, read):
