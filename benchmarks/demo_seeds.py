@@ -599,9 +599,9 @@ def main(argv: list[str] | None = None) -> int:
         for name in stale:
             print(f"{name}: {'stale' if args.check else 'regenerated'} demo tables", file=sys.stderr)
         return 1 if args.check and stale else 0
-    problems = check_run(args.demo_json, args.log, args.demo, args.seed, args.results, args.strict)
-    published = published_row(args.demo, args.seed, args.results) or {}
     here = float_path()
+    problems = check_run(args.demo_json, args.log, args.demo, args.seed, args.results, args.strict, here)
+    published = published_row(args.demo, args.seed, args.results) or {}
     if published.get("float_path") != here:
         print(f"CI: the published row comes from another float path ({published.get('float_path')}; this "
               f"machine: {here}): scores compared within {OTHER_PATH_RELATIVE:.0%} or {OTHER_PATH_ABSOLUTE}, "

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 
-__all__ = ["CHARACTER_SUFFIXES", "Character", "read_character"]
+__all__ = ["CHARACTER_SUFFIXES", "Character", "is_character", "read_character", "skinned_triangles"]
 
 CHARACTER_SUFFIXES = (".glb", ".vrm")
 _TRIANGLES = (None, 4, 5, 6)  # TRIANGLES (the default), TRIANGLE_STRIP, TRIANGLE_FAN
@@ -29,6 +29,40 @@ class Character:
     animated: bool
 
 
+def skinned_triangles(primitive) -> bool:
+    """Whether a glTF mesh primitive is triangles (a list, strip or fan) with ``JOINTS_0`` / ``WEIGHTS_0``."""
+    a = primitive.attributes
+    return primitive.mode in _TRIANGLES and a.JOINTS_0 is not None and a.WEIGHTS_0 is not None
+
+
+def _skinned_nodes(gltf) -> list:
+    """The nodes binding a mesh with a skinned triangle primitive to a skin (both indices in range)."""
+    return [
+        node
+        for node in gltf.nodes
+        if node.skin is not None
+        and 0 <= node.skin < len(gltf.skins)
+        and node.mesh is not None
+        and 0 <= node.mesh < len(gltf.meshes)
+        and any(skinned_triangles(p) for p in gltf.meshes[node.mesh].primitives)
+    ]
+
+
+def is_character(path: str | PathLike[str]) -> bool:
+    """Whether ``path`` is a ``.glb`` / ``.vrm`` with a skinned triangle mesh (module docstring), its file
+    read once and its bytes not kept.
+
+    Raises:
+        GltfError: a ``.glb`` / ``.vrm`` the bounded reader refuses (naming the file).
+    """
+    path = Path(path)
+    if path.suffix.lower() not in CHARACTER_SUFFIXES:
+        return False
+    from skeleton_mamba.tasks.motion.gltf_read import _load  # lazy: glTF files only
+
+    return bool(_skinned_nodes(_load(path)[0]))
+
+
 def read_character(path: str | PathLike[str]) -> Character | None:
     """``path`` as a :class:`Character`, or None where it is not a ``.glb`` / ``.vrm`` with a skinned
     triangle mesh (module docstring).
@@ -42,19 +76,8 @@ def read_character(path: str | PathLike[str]) -> Character | None:
     from skeleton_mamba.tasks.motion.gltf_read import _load  # lazy: glTF files only
 
     gltf, _ = _load(path)
-    skinned = [
-        node
-        for node in gltf.nodes
-        if node.skin is not None
-        and 0 <= node.skin < len(gltf.skins)
-        and node.mesh is not None
-        and 0 <= node.mesh < len(gltf.meshes)
-    ]
-    if not any(
-        p.mode in _TRIANGLES and p.attributes.JOINTS_0 is not None and p.attributes.WEIGHTS_0 is not None
-        for node in skinned
-        for p in gltf.meshes[node.mesh].primitives
-    ):
+    skinned = _skinned_nodes(gltf)
+    if not skinned:
         return None
     hips = gltf.skins[skinned[0].skin].joints[0] if gltf.skins[skinned[0].skin].joints else 0
     try:

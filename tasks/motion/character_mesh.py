@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.motion.character import skinned_triangles
 from skeleton_mamba.tasks.motion.gltf_read import _animation, _frame_rate, _load, _Reader, check_layout
 from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
 
@@ -141,9 +142,9 @@ def read_character_mesh(path: str | PathLike[str]) -> CharacterMesh:
         if len(ibm) != len(joints):
             raise r.fail(f"skin {node.skin}: {len(ibm)} inverse bind matrices for {len(joints)} joints")
         for primitive in gltf.meshes[r.index(node.mesh, gltf.meshes, "mesh")].primitives:
-            a = primitive.attributes
-            if primitive.mode not in (None, 4, 5, 6) or a.JOINTS_0 is None or a.WEIGHTS_0 is None:
+            if not skinned_triangles(primitive):
                 continue
+            a = primitive.attributes
             position = r.values(a.POSITION, ("VEC3",))
             index = r.values(primitive.indices, ("SCALAR",))[:, 0] if primitive.indices is not None else None
             index = np.arange(len(position)) if index is None else index

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.tasks.motion.atomic import output_file
-from skeleton_mamba.tasks.motion.character import read_character
+from skeleton_mamba.tasks.motion.character import is_character
 from skeleton_mamba.tasks.motion.character_mesh import read_character_mesh
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.motion_reader import load_joints
@@ -53,7 +53,7 @@ def render_file(
     stderr."""
 
     out = output_file(out)
-    if read_character(motion) is not None:  # a skinned .glb / .vrm: its own mesh
+    if is_character(motion):  # a skinned .glb / .vrm: its own mesh
         return _render_character(motion, out, music, fps, title, progress)
     clip = load_joints(motion, skeleton=skeleton, motion_fps=motion_fps, units=units, scale=scale)
     if clip.scale != METRES:

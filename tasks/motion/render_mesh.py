@@ -32,6 +32,7 @@ __all__ = ["mesh_frames", "render_character"]
 
 COLOUR = np.array([150.0, 160.0, 190.0])  # RGB of the lit character
 AMBIENT = 0.35
+LIGHT = np.array([-0.4, 0.6, -0.7]) / np.linalg.norm([-0.4, 0.6, -0.7])  # camera axes: from the upper left
 
 
 def mesh_frames(
@@ -56,8 +57,7 @@ def mesh_frames(
         visible = (corners[..., 2] > near).all(1)
         normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-        light = np.array([-0.4, 0.6, -0.7]) / np.linalg.norm([-0.4, 0.6, -0.7])
-        shade = AMBIENT + (1 - AMBIENT) * np.abs(normal @ light)
+        shade = AMBIENT + (1 - AMBIENT) * np.abs(normal @ LIGHT)
         colours = np.clip(COLOUR[None] * shade[:, None], 0, 255).astype(int)
         pixels = _fixed(camera.pixels(cam))[tri]  # (F, 3, 2)
         for f in np.argsort(-corners[..., 2].mean(1)):

@@ -134,10 +134,11 @@ def write_web_page(
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``sm export-web``; returns 0 (bad input raises: ``sm`` prints one line, exit 2)."""
     args = build_parser().parse_args(list(argv) if argv is not None else None)
-    vrm_rig = args.rig is not None and Path(args.rig).suffix.lower() == ".vrm"
+    suffix = None if args.rig is None else Path(args.rig).suffix.lower()
+    vrm_rig = suffix == ".vrm"
     produced = [PAGE, LICENCE_FILE, THREE_LICENCE, *([VRM_LICENCE_FILE] if vrm_rig else [])]
     out = claim_output_folder(args.out, "sm export-web", produced, overwrite=args.overwrite)
-    if args.rig is not None and Path(args.rig).suffix.lower() not in CHARACTER_SUFFIXES:
+    if suffix is not None and suffix not in CHARACTER_SUFFIXES:
         raise InputError(f"--rig {args.rig}: the page draws a character's mesh: a skinned .glb or .vrm")
     rig = prepare_rig(args, [out / name for name in produced], list(SMPL24.joint_names))  # before the model
     vrm = read_three_vrm(args.three_vrm) if vrm_rig else None  # a .vrm: drawn by three-vrm

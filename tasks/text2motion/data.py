@@ -22,7 +22,7 @@ from torch.utils.data import Dataset
 from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
 from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics, read_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import UNIT_LENGTH, MotionClip, crop_length, load_clips
-from skeleton_mamba.tasks.text2motion.synthetic import KINDS, synthetic_clips
+from skeleton_mamba.tasks.text2motion.synthetic import KINDS, check_kinds, synthetic_clips
 from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, unlinked
 
 __all__ = [
@@ -212,7 +212,7 @@ class SyntheticTextMotionDataModule(_TextMotionDataModule):
     ) -> None:
         super().__init__(batch_size, num_workers)
         self.kinds = tuple(kinds) if kinds else KINDS
-        synthetic_clips(0, kinds=self.kinds)  # unknown kinds refused when the module is made
+        check_kinds(self.kinds)  # unknown kinds refused when the module is made
         self.train_clips, self.val_clips = train_clips, val_clips
         self.min_frames, self.max_frames, self.seed = min_frames, max_frames, seed
         self._clips: dict[str, list[MotionClip]] = {}

@@ -1,14 +1,14 @@
 """A SYNTHETIC captioned motion set for demos without HumanML3D (no download).
 
-Each clip is one of the everyday actions people type (:mod:`skeleton_mamba.tasks.motion.synthetic.actions`:
-walk, turn, jump, squat, kick, wave, run in place; drawn with the clip's seed: tempo, size, side, heading,
-path) of random length at 20 fps, turned into the HumanML3D 263-d representation by
-:func:`~skeleton_mamba.tasks.motion.humanml3d_features.joints_to_features` (the SMPL-24 joints 0..21 as the 22
-HumanML3D joints, the SMPL local rotations as the 6D rotations), with a caption drawn from its action's
-(:data:`~.actions.CAPTIONS`: four wordings each; the demo prompts with paraphrases none of them uses). The
-procedural dances of :mod:`skeleton_mamba.tasks.motion.synthetic.dance` (``bounce``, ``sway``, ``arms``) can
-be drawn too (:data:`DANCE_CAPTIONS`). Every caption starts with "synthetic:" so generated demo data is never
-mistaken for HumanML3D.
+Each clip is, by default (:data:`KINDS`), a procedural dance of
+:mod:`skeleton_mamba.tasks.motion.synthetic.dance` (``bounce``, ``sway``, ``arms``; random tempo 90-140 BPM)
+with a caption of its style (:data:`DANCE_CAPTIONS`), or, when asked for, one of the everyday actions people
+type (:mod:`skeleton_mamba.tasks.motion.synthetic.actions`: walk, turn, jump, squat, kick, wave, run in place;
+drawn with the clip's seed) with a caption of its action (:data:`CAPTIONS`: four wordings each; the demo
+prompts with paraphrases none of them uses). Clips have a random length at 20 fps and are turned into the
+HumanML3D 263-d representation by :func:`~skeleton_mamba.tasks.motion.humanml3d_features.joints_to_features`
+(the SMPL-24 joints 0..21 as the 22 HumanML3D joints, the SMPL local rotations as the 6D rotations). Every
+caption starts with "synthetic:" so generated demo data is never mistaken for HumanML3D.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.text2motion.actions import CAPTIONS as ACTION_CAPTIONS
 from skeleton_mamba.tasks.text2motion.humanml3d import Caption, MotionClip
 
-__all__ = ["CAPTIONS", "DANCE_CAPTIONS", "KINDS", "LABEL", "synthetic_clip", "synthetic_clips"]
+__all__ = ["CAPTIONS", "DANCE_CAPTIONS", "KINDS", "LABEL", "check_kinds", "synthetic_clip", "synthetic_clips"]
 
 LABEL = "synthetic: "  # every synthetic caption and demo prompt starts with it
 DANCE_CAPTIONS: dict[str, tuple[str, ...]] = {
@@ -67,14 +67,20 @@ def synthetic_clip(style: str, frames: int, seed: int) -> MotionClip:
     return MotionClip(f"synthetic_{style}_{seed}", features, [caption])
 
 
+def check_kinds(kinds: Sequence[str]) -> None:
+    """Refuse clip kinds that are neither an action of :data:`CAPTIONS` nor a dance of :data:`DANCE_CAPTIONS`
+    (or none at all)."""
+    unknown = sorted(set(kinds) - set(CAPTIONS) - set(DANCE_CAPTIONS))
+    if unknown or not kinds:
+        raise ValueError(f"unknown clip kinds {unknown}; known: {', '.join([*CAPTIONS, *DANCE_CAPTIONS])}")
+
+
 def synthetic_clips(
     count: int, seed: int = 0, min_frames: int = 40, max_frames: int = 196, kinds: Sequence[str] = KINDS
 ) -> list[MotionClip]:
     """``count`` clips of ``kinds`` (actions of :data:`CAPTIONS`, dance styles of :data:`DANCE_CAPTIONS`) in
     turn, lengths uniform in ``[min_frames, max_frames]``."""
-    unknown = sorted(set(kinds) - set(CAPTIONS) - set(DANCE_CAPTIONS))
-    if unknown or not kinds:
-        raise ValueError(f"unknown clip kinds {unknown}; known: {', '.join([*CAPTIONS, *DANCE_CAPTIONS])}")
+    check_kinds(kinds)
     rng = np.random.default_rng(seed)
     styles = list(kinds)
     clips = []

@@ -52,7 +52,6 @@ class PredictionRig(Callback):
 
     def __init__(self, rig: RigOutput) -> None:
         self.rig = rig
-        self.written: list[Path] = []
 
     @staticmethod
     def of(trainer: Trainer | None) -> PredictionRig | None:
@@ -63,6 +62,4 @@ class PredictionRig(Callback):
     def write(self, motion_file: str | Path, stem: str) -> Path:
         """``motion_file`` (an ``.npz`` just written) on the character, ``<stem>_rig<suffix>`` beside it."""
         motion_file = Path(motion_file)
-        out = self.rig.write_file(motion_file, motion_file.with_name(self.rig.file_name(stem)), stem)
-        self.written.append(out)
-        return out
+        return self.rig.write_file(motion_file, motion_file.with_name(self.rig.file_name(stem)), stem)
