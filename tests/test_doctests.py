@@ -25,6 +25,7 @@ MODULES = sorted(
         "skeleton_mamba.pretrained_card",
         "skeleton_mamba.pretrained_codec",
         "skeleton_mamba.pretrained_hub",
+        "skeleton_mamba.ssd.minimal",
     }
 )
 
