@@ -30,12 +30,12 @@ from common import machine_info
 
 from skeleton_mamba.tasks.egodance.data import data_module_from_hparams
 from skeleton_mamba.tasks.egodance.head_estimator import estimate_window_trajectories
+from skeleton_mamba.tasks.egodance.heading_frames import head_heading, head_rotation
 from skeleton_mamba.tasks.egodance.long_demo import _segment_starts, _windows_alone, score_long_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm
 from skeleton_mamba.tasks.egodance.long_form_scores import segments
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.window_frames import head_heading, head_rotation
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
 from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 

@@ -7,8 +7,8 @@ within one file system, which is why the temporary file lives in the target's ow
 The temporary name keeps the target's suffix (``.render.mp4`` -> ``.render.<random>.mp4``), so writers
 that choose the format by extension (ffmpeg, PIL, ``np.save`` adding ``.npy``) behave as for the target.
 The file gets the mode :func:`open` gives a new file (0666 less the umask), not the temporary file's 0600.
-Every writer of the project goes through here: the backbone's ``save_pretrained`` and the toolkit
-(``skeleton_mamba.tasks.motion.atomic``); standard library only.
+Every writer of the project goes through here: the backbone's ``save_pretrained`` and the toolkit's
+commands; standard library only.
 """
 
 from __future__ import annotations

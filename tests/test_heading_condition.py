@@ -10,10 +10,10 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.tasks.egodance.heading_frames import relative_headings, yaw_matrices
 from skeleton_mamba.tasks.egodance.losses import emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.egodance.window_frames import relative_headings, yaw_matrices
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion
 
 

@@ -1,4 +1,4 @@
-"""Long-form sampling of EMM windows in their own canonical frames (tasks/egodance/window_frames.py,
+"""Long-form sampling of EMM windows in their own canonical frames (tasks/egodance/heading_frames.py,
 tasks/training/diffusion/stitching.py): the frames against the data module's canonicalisation, the noisy
 transform, and whole sequences rebuilt from oracle windows, in one batch and in several."""
 
@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
+from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames, head_heading, head_rotation
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, ROOT, encode_motion
-from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames, head_heading, head_rotation
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets

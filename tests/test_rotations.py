@@ -9,7 +9,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from skeleton_mamba.tasks.motion import axes, resample
+from skeleton_mamba.tasks.motion import resample
 from skeleton_mamba.tasks.motion import rotations as rot
 
 RZ90 = torch.tensor([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
@@ -81,21 +81,6 @@ def test_euler_hand_value_and_bad_order():
     assert torch.allclose(rot.euler_to_matrix(angles, "ZXY"), RZ90, atol=1e-12)
     with pytest.raises(ValueError, match="Euler order"):
         rot.euler_to_matrix(angles, "ZQY")
-
-
-def test_y_up_z_up_hand_values_and_round_trip():
-    up = torch.tensor([0.0, 1.0, 0.0])
-    forward = torch.tensor([0.0, 0.0, 1.0])
-    assert torch.allclose(axes.y_up_to_z_up(up), torch.tensor([0.0, 0.0, 1.0]))
-    assert torch.allclose(axes.y_up_to_z_up(forward), torch.tensor([0.0, -1.0, 0.0]))
-    points = torch.randn(4, 24, 3)
-    assert torch.allclose(axes.z_up_to_y_up(axes.y_up_to_z_up(points)), points, atol=1e-6)
-    # EDGE rotates the root by the quaternion (w, x, y, z) = (0.7071068, 0.7071068, 0, 0).
-    edge = rot.quaternion_to_matrix(torch.tensor([0.7071068, 0.7071068, 0.0, 0.0], dtype=torch.float64))
-    root = rot.axis_angle_to_matrix(random_axis_angle(5))
-    assert torch.allclose(axes.root_rotation_y_up_to_z_up(root), edge @ root, atol=1e-7)
-    back = axes.root_rotation_z_up_to_y_up(axes.root_rotation_y_up_to_z_up(root))
-    assert torch.allclose(back, root, atol=1e-12)
 
 
 def test_resample_keeps_a_constant_rotation_and_picks_every_second_frame():

@@ -15,13 +15,13 @@ from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import complete_samples
 from skeleton_mamba.tasks.egodance.frames import iter_video_frames
 from skeleton_mamba.tasks.egodance.guidance import HeadingGuidance, head_pose_from_camera
+from skeleton_mamba.tasks.egodance.heading_frames import head_heading, head_rotation, yaw_matrices
 from skeleton_mamba.tasks.egodance.video_rotation import (
     HeadRotationStream,
     align_rotations,
     head_headings,
     intrinsics_for,
 )
-from skeleton_mamba.tasks.egodance.window_frames import head_heading, head_rotation, yaw_matrices
 from skeleton_mamba.tasks.motion.motion_file import save_motion
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
@@ -121,7 +121,7 @@ def test_heading_guidance_turns_the_body_to_the_target():
 
 def test_anchors_replace_the_frames_read_from_the_motion():
     """A known heading between window starts is used as it is; the unknown numbers come from x0_hat."""
-    from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames
+    from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames
 
     x0 = _tokens(torch.full((3, 8), 0.4, dtype=torch.float64))
     x0[..., 0, 6:9] = torch.tensor([0.3, 0.9, -0.2], dtype=torch.float64)  # the root's position

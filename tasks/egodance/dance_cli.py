@@ -23,7 +23,7 @@ video is decoded); a video of another frame rate is taken at the model's. ``--ou
 writes the dance on that character, ``<name>_rig.glb`` / ``.vrm`` / ``.bvh``. A checkpoint trained with
 ``canonicalize_init_head`` (the demo's), whose windows face their first frame's head heading, samples each
 window in that frame, found from the previous window's dance, with head targets estimated per window; the
-windows are turned back and joined (:mod:`.window_frames`).
+windows are turned back and joined (:mod:`.heading_frames`).
 """
 
 from __future__ import annotations

@@ -38,6 +38,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames, read_meta
@@ -46,7 +47,6 @@ from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import FPS, encode_motion
 from skeleton_mamba.tasks.motion import aistpp
-from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.cli_options import progress_default
 from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.motion_file import load_motion

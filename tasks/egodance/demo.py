@@ -32,12 +32,12 @@ from pathlib import Path
 import torch
 from lightning.pytorch import LightningModule, Trainer
 
+from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.tasks.egodance.builder.layout import read_meta
 from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_demo import format_long_scores, long_sample, score_long_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.music import BEAT
 from skeleton_mamba.tasks.motion.view import write_view

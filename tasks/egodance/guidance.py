@@ -13,8 +13,8 @@ import numpy as np
 import torch
 
 from skeleton_mamba.tasks.egodance.builder.camera import HEAD_TO_CAMERA
+from skeleton_mamba.tasks.egodance.heading_frames import head_heading, head_rotation, yaw_matrices
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, ROT, motion_joints
-from skeleton_mamba.tasks.egodance.window_frames import head_heading, head_rotation, yaw_matrices
 from skeleton_mamba.tasks.training.diffusion.samplers import GuidanceTerm
 
 ROOT_JOINT = 0
@@ -103,7 +103,7 @@ class HeadingGuidance(GuidanceTerm):
 
     At every sampling step each frame's root orientation (and so the whole body, the head with it) is turned
     by ``weight`` times the gap between the target heading and the head's heading in x0_hat
-    (:func:`.window_frames.head_heading`): ``weight = 1`` sets every frame's heading to the target,
+    (:func:`.heading_frames.head_heading`): ``weight = 1`` sets every frame's heading to the target,
     smaller weights pull towards it. The root's position is left as sampled, so the body turns in place.
     The targets come from the egocentric video (:mod:`.video_rotation`), in the window's own frame.
 

@@ -320,7 +320,7 @@ def estimate_window_trajectories(
     window: int,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Each window's head trajectory in that window's own canonical frame (what the estimator was trained
-    to give; :mod:`.window_frames`): frames (T, 3, H, W) or their :class:`HeadFrameFeatures` (prepared with
+    to give; :mod:`.heading_frames`): frames (T, 3, H, W) or their :class:`HeadFrameFeatures` (prepared with
     the windows' hop) -> positions (B, window, 3), rotations (B, window, 3, 3) for the windows starting at
     ``starts``. A window that runs past the video is estimated on the frames there are, and its last
     estimate repeated (as the music of such a window repeats its last frame).

@@ -10,7 +10,7 @@ A track longer than the training window is sampled as overlapping windows
   targets in its own frame, known before sampling without the sampled motion: estimated from that window's
   frames alone (:func:`.head_estimator.estimate_window_trajectories`, what the estimator was trained to do),
   or, for the oracle, the ground-truth head moved into the frame of the true pose at the window's first frame,
-  as the data module canonicalises a training window (:class:`.window_frames.HeadingFrames`).
+  as the data module canonicalises a training window (:class:`.heading_frames.HeadingFrames`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     estimate_long_trajectory,
     estimate_window_trajectories,
 )
-from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames
+from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, window_starts
 

@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import torch
 
+from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames, head_heading, head_rotation
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames, head_heading, head_rotation
 
 __all__ = [
     "SEAM_METRICS",
@@ -97,7 +97,7 @@ def seam_ratios(joints: torch.Tensor, seams: list[int], fps: float, root: int = 
 
 def segments(tokens: torch.Tensor, starts: list[int], window: int, turn: bool) -> torch.Tensor:
     """(T, 24, 10) motion tokens -> (S, window, 24, 10): the segments starting at ``starts``, each in its own
-    first frame's canonical frame (:class:`.window_frames.HeadingFrames`; ``turn``: facing +z)."""
+    first frame's canonical frame (:class:`.heading_frames.HeadingFrames`; ``turn``: facing +z)."""
     frames = HeadingFrames(turn)
     cut = torch.stack([tokens[s : s + window] for s in starts])
     return frames.to_frame(cut, frames.relative_frame(cut[:, 0]))

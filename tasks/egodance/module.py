@@ -42,13 +42,13 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     head_trajectory_errors,
     head_trajectory_loss,
 )
+from skeleton_mamba.tasks.egodance.heading_frames import relative_headings
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.losses import KinematicLossWeights, alignment_loss, emm_losses
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.prediction_writer import DancePredictionWriter
 from skeleton_mamba.tasks.egodance.representation import FPS, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
-from skeleton_mamba.tasks.egodance.window_frames import relative_headings
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
 from skeleton_mamba.tasks.motion.music import record_audio_stack
@@ -158,7 +158,7 @@ class EgoDanceModule(BackboneModule):
         window: the training window (frames). Linked from the data module: longer test and predict
             sequences are danced long-form in windows of this length (:func:`.sampling.sample_long_dance`).
         canonicalize_init_head: the data's windows face their first frame's head heading. Linked from the
-            data module: long-form windows are then sampled each in that frame (:mod:`.window_frames`).
+            data module: long-form windows are then sampled each in that frame (:mod:`.heading_frames`).
         inpaint_overlaps: long-form windows in-paint the overlap they share with the window before at every
             denoising step ([EDGE]); False: each window is sampled from its own conditions and the windows
             are joined by the cross-fade (:func:`.sampling.sample_long_dance`; the demo's choice, measured in

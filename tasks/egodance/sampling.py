@@ -15,6 +15,7 @@ import torch
 from skeleton_mamba.compiling import compile_for_inference
 from skeleton_mamba.tasks.egodance.dance_args import DEFAULT_BATCH_WINDOWS  # torch-free, for sm dance --help
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance, HeadingGuidance
+from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames
 from skeleton_mamba.tasks.egodance.model import EMM
 from skeleton_mamba.tasks.egodance.representation import (
     FPS,
@@ -23,7 +24,6 @@ from skeleton_mamba.tasks.egodance.representation import (
     decode_motion,
     motion_joints,
 )
-from skeleton_mamba.tasks.egodance.window_frames import HeadingFrames
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.rotations import matrix_to_axis_angle
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, sample, sample_long
@@ -150,7 +150,7 @@ def sample_long_dance(
     window when the track is shorter) and sampled by
     :func:`~skeleton_mamba.tasks.training.diffusion.sample_long`, ``batch_windows`` windows at a time
     (memory bounded whatever the track's length): every overlap is in-painted after every denoising step in
-    the frame of the window it belongs to, as the model was trained (:class:`.window_frames.HeadingFrames`):
+    the frame of the window it belongs to, as the model was trained (:class:`.heading_frames.HeadingFrames`):
     the root's horizontal position relative to the window's first frame and, for a model trained with
     ``canonicalize_init_head`` (``canonical``), the window turned to face its first frame's head heading,
     both taken from the previous window's sampled motion. The windows are then turned back and joined, their

@@ -266,7 +266,7 @@ class HeadRotationStream:
 def head_headings(camera: torch.Tensor) -> torch.Tensor:
     """(T, 3, 3) camera rotations relative to frame 0 (:meth:`HeadRotationStream.finish`) -> (T,)
     the head's heading change since frame 0 (radians, about the vertical, positive as
-    :func:`.window_frames.head_heading`: from +z towards +x), unwrapped. The vertical is taken as frame 0's
+    :func:`.heading_frames.head_heading`: from +z towards +x), unwrapped. The vertical is taken as frame 0's
     camera up (a camera within a few degrees of level; its pitch scales the turn by its cosine)."""
     forward = camera[:, :, 2]  # camera t's optical axis in camera 0's axes (x right, y down, z forward)
     # the head's frame is the camera's with x and y flipped (x left, y up): its heading is atan2(-x, z)

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
+from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.audio_io import read_audio
 from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
 from skeleton_mamba.tasks.motion.gltf import from_motion_data, write_glb

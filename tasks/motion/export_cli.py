@@ -15,13 +15,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from skeleton_mamba.tasks.motion.atomic import output_file
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.export_args import build_parser
 from skeleton_mamba.tasks.motion.gltf import write_glb
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.output_folder import claim_output_files
+from skeleton_mamba.tasks.motion.output_folder import claim_output_files, output_file
 from skeleton_mamba.tasks.motion.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.motion.units import METRES
 

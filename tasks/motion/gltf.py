@@ -37,8 +37,8 @@ import numpy as np
 import pygltflib
 import torch
 
+from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.skeletons import get_skeleton, parents_first_order
-from skeleton_mamba.tasks.motion.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData

@@ -24,7 +24,8 @@ A command told to write one named file and files beside it (``sm dance --out FIL
 ``FILE.bvh``, ``FILE.glb``, ...) checks those others with :func:`claim_output_files`: an existing one is
 refused unless ``--overwrite`` is given (the named file itself was asked for). Names given on the command
 line (``--name``) are plain file names (:func:`~.option_types.file_name_option`). The files themselves
-are written atomically (:mod:`.atomic`).
+are written atomically (:mod:`skeleton_mamba.atomic`); a command's one output *file* goes into an existing
+folder (:func:`output_file`).
 """
 
 from __future__ import annotations
@@ -37,10 +38,11 @@ import secrets
 import stat
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from os import PathLike
 from pathlib import Path
 
+from skeleton_mamba.atomic import atomic_open, check_writable
 from skeleton_mamba.bounded_read import read_json
-from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.cache import default_cache_root, file_sha256
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import is_plain_name
@@ -50,6 +52,7 @@ __all__ = [
     "OVERWRITE_HELP",
     "claim_output_files",
     "claim_output_folder",
+    "output_file",
     "output_key",
     "verified_outputs",
     "writing_outputs",
@@ -257,3 +260,21 @@ def claim_output_files(
             f"{existing[0]}: exists and would be replaced (written beside {asked}); remove it, choose another"
             " name, or pass --overwrite"
         )
+
+
+def output_file(path: str | PathLike[str], option: str = "--out") -> Path:
+    """A user's output *file* (``sm render --out clip.mp4``): its folder must exist.
+
+    The commands' policy: an output file goes into an existing folder (a typo such as ``/nonexistnt/x.mp4``
+    must not create folders at the root); a command whose ``--out`` is a folder (``sm dance --out DIR``)
+    creates that folder, with its parents. Raises a one-line :class:`OSError` (``sm`` exits with 2).
+    """
+    path = Path(path)
+    parent = path.parent
+    if not parent.is_dir():
+        what = "is not a folder" if parent.exists() else "does not exist"
+        raise FileNotFoundError(
+            2, f"the folder {parent} {what}; create it first ({option} FILE must be in an existing folder)",
+            str(path),
+        )  # fmt: skip
+    return check_writable(path)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
-from skeleton_mamba.tasks.motion.atomic import atomic_path
+from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.retarget_rig import BONES, Rig
 

@@ -15,11 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.atomic import output_file
 from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.output_folder import claim_output_files
+from skeleton_mamba.tasks.motion.output_folder import claim_output_files, output_file
 from skeleton_mamba.tasks.motion.retarget import bone_direction_errors
 from skeleton_mamba.tasks.motion.retarget_args import build_parser
 from skeleton_mamba.tasks.motion.retarget_rig import load_rig, read_map

@@ -29,8 +29,8 @@ import re
 import torch
 from lightning.pytorch import LightningModule, Trainer
 
+from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.gltf import from_joints
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (

@@ -150,6 +150,10 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         time_embedding_dim: sinusoidal embedding size of the timestep.
         diffusion_steps: T of the noise schedule (scales the skip connection from x_t,
             :mod:`skeleton_mamba.tasks.training.diffusion.parameterisation`).
+        temporal_prior: precondition with a Gaussian process over time (:meth:`set_data_statistics`).
+        pooled_text: also add the caption's pooled embedding (the mean of its token embeddings: the
+            sentence embedding of MiniLM) to the timestep embedding, as [MDM] sums text and timestep, so the
+            caption reaches every joint token's input as well as the cross-attention.
     """
 
     pretrained_task = "Text-to-motion x0 denoiser: HumanML3D 263-d features from caption token embeddings."
@@ -163,6 +167,7 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         time_embedding_dim: int = 128,
         diffusion_steps: int = 1000,
         temporal_prior: bool = False,
+        pooled_text: bool = False,
     ) -> None:
         super().__init__()
         config = derived_backbone(
@@ -180,6 +185,7 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         self.time_to_channels = nn.Linear(time_embedding_dim, time_channels)
         self.time_to_token = nn.Linear(time_embedding_dim, text_dim)
         self.text_proj = nn.Linear(text_dim, text_dim)
+        self.pooled_text = nn.Linear(text_dim, time_embedding_dim) if pooled_text else None
         self.temporal_prior = temporal_prior
         if temporal_prior:
             self.skip_x0 = TemporalPriorSkipX0(diffusion_steps, FEATURE_DIM, segment=PRIOR_SEGMENT_FRAMES)
@@ -207,6 +213,10 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
     ) -> torch.Tensor:
         b, frames, _ = x_t.shape
         emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
+        if self.pooled_text is not None and cond is not None:  # the null caption pools to zero
+            weights = cond.mask.to(x_t.device, x_t.dtype)[..., None]  # (B, S, 1)
+            pooled = (cond.tokens.to(x_t.dtype) * weights).sum(1) / weights.sum(1).clamp(min=1.0)
+            emb = emb + self.pooled_text(pooled)
         channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
         x_in = self.skip_x0.network_input(x_t, t)
         tokens = torch.cat([features_to_tokens(x_in), channels], dim=-1)  # (B, T, 22, 13 + C_t)

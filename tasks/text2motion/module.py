@@ -104,6 +104,7 @@ class TextToMotionModule(BackboneModule):
         eval_sampler: str | None = None,
         eval_sampling_steps: int | None = None,
         temporal_prior: bool = False,
+        pooled_text: bool = False,
     ) -> None:
         super().__init__()
         options = SamplingOptions(sampler, sampling_steps, eta, guidance_weight)
@@ -132,6 +133,7 @@ class TextToMotionModule(BackboneModule):
             time_channels,
             diffusion_steps=diffusion_steps,
             temporal_prior=temporal_prior,
+            pooled_text=pooled_text,
         )
         self.diffusion = GaussianDiffusion(diffusion_steps)
         self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))

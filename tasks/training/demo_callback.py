@@ -13,7 +13,7 @@ from typing import Any
 
 from lightning.pytorch import Callback, Trainer
 
-from skeleton_mamba.tasks.motion.atomic import atomic_open
+from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion

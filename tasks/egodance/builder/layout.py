@@ -61,8 +61,8 @@ import imageio.v3 as iio
 import imageio_ffmpeg
 import numpy as np
 
+from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.bounded_read import read_json
-from skeleton_mamba.tasks.motion.atomic import atomic_open
 from skeleton_mamba.tasks.motion.errors import DataFileError, InputError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.mp4 import write_mp4
