@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.qean.model import QEANConfig, SkeletonMambaMotionEncoder
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.stream.model import StreamDancer

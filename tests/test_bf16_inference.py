@@ -59,8 +59,8 @@ def test_sm_dance_bf16_is_within_the_bound_of_fp32(tmp_path, tiny_egodance_modul
 
 
 def test_sm_dance_refuses_compile_with_bf16(tmp_path, tiny_egodance_module):
+    from skeleton_mamba.errors import InputError
     from skeleton_mamba.tasks.egodance.dance_cli import main
-    from skeleton_mamba.tasks.motion.errors import InputError
 
     module = tiny_egodance_module(use_head_estimator=False, head_source="none", use_vision=False)
     ckpt = _save(module, tmp_path / "emm.ckpt", "skeleton_mamba.tasks.egodance.module.EgoDanceModule")

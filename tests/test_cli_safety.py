@@ -22,8 +22,8 @@ from test_ntu import body_motion, write_skeleton
 from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.atomic import atomic_open, atomic_path
+from skeleton_mamba.errors import CheckpointError, expected_failure, one_line_message
 from skeleton_mamba.tasks.motion import render as render_module
-from skeleton_mamba.tasks.motion.errors import CheckpointError, expected_failure, one_line_message
 from skeleton_mamba.tasks.training.checkpoints import check_class_paths, load_checkpoint
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.run_folders import find_last_checkpoint, remove_if_empty

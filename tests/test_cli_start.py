@@ -14,6 +14,7 @@ import sys
 import pytest
 from test_packaging import HEAVY as PACKAGE_HEAVY
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.cli_options import (
     CommandParser,
     SmHelpFormatter,
@@ -21,7 +22,6 @@ from skeleton_mamba.tasks.motion.cli_options import (
     command_parser,
     progress_default,
 )
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training import cli
 
 # torch, onnxruntime and the heavy libraries of test_packaging's list (jsonargparse is light; sm's command

@@ -15,7 +15,7 @@ import pytest
 import torch
 from lightning.pytorch import LightningDataModule, LightningModule
 
-from skeleton_mamba.tasks.motion.errors import InputError, expected_failure, one_line_message
+from skeleton_mamba.errors import InputError, expected_failure, one_line_message
 from skeleton_mamba.tasks.qean.data import QEANContract
 from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from skeleton_mamba.tasks.motion.errors import DataFileError, SkeletonMambaError, expected_failure
+from skeleton_mamba.errors import DataFileError, SkeletonMambaError, expected_failure
 from skeleton_mamba.tasks.qean.data import DanceWindowDataset
 from skeleton_mamba.tasks.stream.data import WindowDataset
 from skeleton_mamba.tasks.text2motion.humanml3d import read_captions, read_split

@@ -190,8 +190,8 @@ def test_a_checkpoint_loads_without_the_random_resnet_warning(inputs, tiny_egoda
     replace it, it does not."""
     import warnings
 
+    from skeleton_mamba.errors import RandomWeightsWarning
     from skeleton_mamba.tasks.egodance.module import EgoDanceModule
-    from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
     from skeleton_mamba.tasks.training.checkpoints import load_module_and_checkpoint
 
     with pytest.warns(RandomWeightsWarning, match="randomly initialised"):
@@ -208,7 +208,7 @@ def test_a_model_of_the_head_turns_refuses_to_dance_without_them(inputs, tiny_eg
     """An EMM conditioned on the head's turns (``heading_condition``) is refused ``--heading none`` in one
     line,
     and a video whose frames show no turning scene (the fixture's noise) in one line naming the video."""
-    from skeleton_mamba.tasks.motion.errors import InputError
+    from skeleton_mamba.errors import InputError
 
     tmp, _, wav = inputs
     ckpt = tmp_path / "turns.ckpt"

@@ -14,9 +14,9 @@ from lightning.pytorch import Trainer
 from lightning.pytorch.loggers import Logger
 from torch.utils.data import DataLoader
 
+from skeleton_mamba.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.music import audio_stack
 
 

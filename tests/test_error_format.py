@@ -14,7 +14,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 import skeleton_mamba.tasks.training.lightning_cli  # noqa: F401  (Lightning's log handler binds stderr at import)
-from skeleton_mamba.tasks.motion.errors import DataFileError, one_line_message
+from skeleton_mamba.errors import DataFileError, one_line_message
 from skeleton_mamba.tasks.training import cli
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -190,7 +190,7 @@ def test_the_worker_unwrapping_keeps_a_message_spanning_lines_and_leaves_others_
     text = (
         "Caught DataFileError in DataLoader worker process 3.\nOriginal Traceback (most recent call last):\n"
         '  File "x.py", line 1, in f\n    raise DataFileError(msg)\n'
-        "skeleton_mamba.tasks.motion.errors.DataFileError: a.npy: line one\nline two\n"
+        "skeleton_mamba.errors.DataFileError: a.npy: line one\nline two\n"
     )
     assert one_line_message(DataFileError(text)) == "a.npy: line one\nline two"
     plain = "a.npy: Caught DataFileError in DataLoader worker process 3. is a sample's own text"
@@ -204,9 +204,9 @@ def test_load_network_refuses_weights_that_do_not_fit_in_one_line(case, tmp_path
     from safetensors.torch import load_file, save_file
 
     from skeleton_mamba.config import MixerConfig, SkeletonMambaConfig
+    from skeleton_mamba.errors import CheckpointError
     from skeleton_mamba.model import SkeletonMamba
     from skeleton_mamba.pretrained import WEIGHTS_NAME, PretrainedError
-    from skeleton_mamba.tasks.motion.errors import CheckpointError
     from skeleton_mamba.tasks.training.pretrained import load_network
 
     tiny = SkeletonMambaConfig(dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8))

@@ -22,8 +22,8 @@ from conftest import shared_file
 from gltf_reader import accessor, assert_khronos_valid, glb_joint_positions
 from test_gltf import _smpl_motion
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion import view
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.export import write_motion
 from skeleton_mamba.tasks.motion.gltf import MAX_JOINTS, from_joints, from_motion_data, write_glb
 from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion

@@ -13,7 +13,7 @@ import subprocess
 import pytest
 from test_cli import sm_executable
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.training import recipe_resolution
 from skeleton_mamba.tasks.training.recipe_resolution import bounded_yaml_load, check_yaml_bounds
 

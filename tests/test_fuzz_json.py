@@ -19,9 +19,9 @@ import pytest
 from test_cli import sm_executable
 
 from skeleton_mamba.bounded_read import BoundedReadError, parse_json, read_bytes, read_json, read_text
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.pretrained import PretrainedError, read_pretrained_config
 from skeleton_mamba.tasks.egodance.builder.layout import sample_problem
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
 
 MEMORY_LIMIT = 2 << 30  # address space of the `sm` subprocesses: an endless read would pass it

@@ -30,6 +30,7 @@ import torch
 from peak_memory import PEAK_KIB_SOURCE
 from test_cli import sm_executable
 
+from skeleton_mamba.errors import SkeletonMambaError
 from skeleton_mamba.tasks.egodance.frames import (
     MAX_IMAGE_PIXELS,
     iter_video_frames,
@@ -38,7 +39,6 @@ from skeleton_mamba.tasks.egodance.frames import (
     resize_frames,
 )
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
-from skeleton_mamba.tasks.motion.errors import SkeletonMambaError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.safe_pickle import MAX_PICKLE_OBJECT_BYTES, safe_loads_pickle
 from skeleton_mamba.tasks.motion.value_checks import MAX_NPZ_MEMBER_BYTES, load_npz

@@ -19,7 +19,7 @@ import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.output_folder import MANIFEST, claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.cli import main as sm
 

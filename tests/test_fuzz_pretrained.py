@@ -26,9 +26,9 @@ from test_cli import sm_executable
 from test_pretrained import _networks
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.pretrained import CONFIG_NAME, WEIGHTS_NAME, PretrainedError
 from skeleton_mamba.pretrained_checks import MAX_PARAMETERS, MAX_TENSORS, meta_state, read_safetensors_header
-from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.training.cli import main as sm

@@ -17,8 +17,8 @@ from conftest import shared_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.motion.bvh import load_bvh
-from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, read_features
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.kinetics import NUM_JOINTS as KINETICS_JOINTS

@@ -24,7 +24,7 @@ import torch
 from lightning.pytorch import Callback, LightningDataModule, LightningModule
 from test_cli import sm_executable
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules

@@ -8,9 +8,9 @@ import torch
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
+from skeleton_mamba.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion import humanml3d_features as F
-from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
 from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
 from skeleton_mamba.tasks.text2motion.convert_cli import main as convert_main

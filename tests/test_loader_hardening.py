@@ -10,9 +10,9 @@ import pytest
 from conftest import shared_file
 from test_bvh import HAND_BVH
 
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
 from skeleton_mamba.tasks.motion.bvh import BvhError, load_bvh
-from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.humanml3d_features import NonFiniteFeaturesError, read_features
 from skeleton_mamba.tasks.motion.motion_file import MotionData, MotionFileError, load_motion, save_motion
 from skeleton_mamba.tasks.motion.music import load_audio

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from test_egobuilder_resume import _motion
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.output_folder import (
     MANIFEST,
     claim_output_folder,

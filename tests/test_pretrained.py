@@ -18,8 +18,8 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.pretrained import CONFIG_NAME, WEIGHTS_NAME, PretrainedError
-from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.training.cli import main as sm
 
 MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16, dt_limit=(0.0, math.inf), A_init_range=(1.0, 8.0))

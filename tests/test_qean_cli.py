@@ -12,7 +12,7 @@ import torch
 from gltf_reader import glb_joint_positions
 from lightning.pytorch import Trainer
 
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.fact_features import smpl_to_features
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule

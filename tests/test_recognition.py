@@ -17,7 +17,7 @@ import yaml
 from lightning.pytorch import Trainer
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.data import RecognitionDataModule
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, body_presence

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.recognition import ensemble
 from skeleton_mamba.tasks.recognition.scores import SCORES_FILE, load_scores, save_scores
 

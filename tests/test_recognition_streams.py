@@ -13,7 +13,7 @@ import pytest
 from test_recognition import TINY
 from test_recognition_transforms import moved_person, pyskl_test_indices
 
-from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
+from skeleton_mamba.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.recognition import module as module_file
 from skeleton_mamba.tasks.recognition.data import SyntheticRecognitionDataModule
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule

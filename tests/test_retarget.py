@@ -12,7 +12,7 @@ import pytest
 from retarget_rigs import HUMANOID, MIXAMO, PAIRS, SMPL, build_rig, read_animated, rest_positions
 from scipy.spatial.transform import Rotation
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.retarget_cli import main as retarget_main
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance

@@ -361,7 +361,7 @@ def test_a_config_class_refusing_its_settings_names_the_option(work, monkeypatch
 
 
 def test_the_parsed_config_checks_on_their_own():
-    from skeleton_mamba.tasks.motion.errors import InputError
+    from skeleton_mamba.errors import InputError
     from skeleton_mamba.tasks.training.recipe_policy import check_config_values
 
     # the unlimited dt_limit max stays accepted; DDPM takes no step count (its 50 are unused)

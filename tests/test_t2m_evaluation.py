@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from skeleton_mamba.tasks.motion.errors import CheckpointError
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.tasks.text2motion.evaluation import GROUND_TRUTH, MODEL, T2MEvaluation, T2MProtocol
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     NOT_COMPARABLE,

@@ -9,7 +9,7 @@ import pytest
 import torch
 from scipy import linalg
 
-from skeleton_mamba.tasks.motion.errors import CheckpointError
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.tasks.text2motion.metrics import (
     Diversity,
     EmbeddingFID,

@@ -252,7 +252,7 @@ def test_fit_demo_generate_and_evaluate_through_sm(tmp_path, monkeypatch, capsys
 
 
 def test_humanml3d_data_module_batches_and_missing_folder(tmp_path):
-    from skeleton_mamba.tasks.motion.errors import DatasetNotFoundError
+    from skeleton_mamba.errors import DatasetNotFoundError
     from skeleton_mamba.tasks.text2motion.data import HumanML3DDataModule
 
     with pytest.raises(DatasetNotFoundError, match="HumanML3D not found"):

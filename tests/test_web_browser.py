@@ -32,7 +32,7 @@ from browser_page import Page, browser_or_skip
 from checkpoint_files import tiny_stream_checkpoint
 from conftest import SHARED_DATA
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import load_audio
 from skeleton_mamba.tasks.motion.synthetic import synthesize_music

@@ -15,7 +15,7 @@ import torch
 from checkpoint_files import tiny_stream_checkpoint
 from conftest import SHARED_DATA
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.fact_features import nearest_rotation
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import load_audio

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from torch.utils.data import DataLoader, Dataset
 
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.recognition.data import SyntheticRecognitionDataModule
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import torch
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.egodance.dance_args import build_parser
@@ -45,7 +46,6 @@ from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.motion.cli_options import checked_sampling
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.export import dance_files
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_ratios

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataset
 from skeleton_mamba.tasks.egodance.frames import video_header
 from skeleton_mamba.tasks.egodance.long_form import LongForm
@@ -29,7 +30,6 @@ from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for, scale_intrinsics
 from skeleton_mamba.tasks.motion.audio_io import probe_audio
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.music import extract_music_features
 from skeleton_mamba.tasks.motion.value_checks import load_npz
 

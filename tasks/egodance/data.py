@@ -40,6 +40,7 @@ from torch.utils.data import Dataset
 
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames, read_meta
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
@@ -48,7 +49,6 @@ from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import FPS, encode_motion
 from skeleton_mamba.tasks.motion import aistpp
 from skeleton_mamba.tasks.motion.cli_options import progress_default
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle

@@ -23,9 +23,9 @@ import torch
 from torch import nn
 from transformers import ResNetConfig, ResNetModel
 
+from skeleton_mamba.errors import RandomWeightsWarning
 from skeleton_mamba.pretrained_checks import building_on_meta
 from skeleton_mamba.tasks.egodance.frames import resize_frames
-from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding

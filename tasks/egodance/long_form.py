@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import torch
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadFrameFeatures,
     HeadTrajectoryEstimator,
@@ -26,7 +27,6 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     estimate_window_trajectories,
 )
 from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, window_starts
 
 __all__ = ["LongForm", "head_targets"]

@@ -27,11 +27,11 @@ from torch import nn
 from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.errors import RandomWeightsWarning
 from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.heading_frames import head_rotation, relative_headings
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
-from skeleton_mamba.tasks.motion.errors import RandomWeightsWarning
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.motion.statistics import channel_statistics
 from skeleton_mamba.tasks.motion.temporal_filter import smooth_over_time

@@ -25,6 +25,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.egodance.encoders import VisionEncoder
 from skeleton_mamba.tasks.egodance.frames import DECODE_CHUNK, iter_video_frames
 from skeleton_mamba.tasks.egodance.head_estimator import (
@@ -33,7 +34,6 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
     HeadTrajectoryEstimator,
 )
 from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, head_headings
-from skeleton_mamba.tasks.motion.errors import InputError
 
 __all__ = ["VideoFeatures", "encode_video"]
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.cli_options import command_parser
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
 from skeleton_mamba.tasks.motion.music import (
     DANCE_BPM_RANGE,

@@ -43,7 +43,7 @@ from typing import BinaryIO
 import numpy as np
 import soundfile
 
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.errors import DataFileError
 
 __all__ = [
     "BLOCK_FRAMES",

@@ -23,8 +23,8 @@ import numpy as np
 import torch
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
 from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS

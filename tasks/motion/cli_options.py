@@ -13,9 +13,9 @@ import os
 import sys
 from collections.abc import Callable
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.precision_names import PRECISION_HELP, PRECISIONS
 from skeleton_mamba.size_bounds import SIZE_BOUNDS
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import real_option
 
 __all__ = [

@@ -26,8 +26,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.aistpp import music_id
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.evaluate_dance_args import build_parser
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.motion_reader import load_joints

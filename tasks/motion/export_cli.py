@@ -15,7 +15,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.export_args import build_parser
 from skeleton_mamba.tasks.motion.gltf import write_glb

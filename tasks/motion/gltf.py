@@ -38,8 +38,8 @@ import pygltflib
 import torch
 
 from skeleton_mamba.atomic import atomic_path
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.skeletons import get_skeleton, parents_first_order
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_quaternion

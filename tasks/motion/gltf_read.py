@@ -22,8 +22,8 @@ import numpy as np
 import pygltflib
 import torch
 
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.skeletons import parents_first_order
-from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.gltf import SkeletonMotion
 from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
 from skeleton_mamba.tasks.motion.units import METRES

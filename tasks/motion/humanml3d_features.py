@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.rotations import quaternion_to_matrix
 from skeleton_mamba.tasks.motion.value_checks import check_finite, check_magnitude, check_real, load_npy
 
@@ -316,7 +316,7 @@ def read_statistics(root: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
         >>> read_statistics(root)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        skeleton_mamba.tasks.motion.errors.DataFileError: ...Std.npy: Std must be positive, column 0 is 0.0
+        skeleton_mamba.errors.DataFileError: ...Std.npy: Std must be positive, column 0 is 0.0
     """
     root = Path(root)
     mean = read_feature_vector(root / "Mean.npy", "Mean")

@@ -30,8 +30,8 @@ import numpy as np
 import torch
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.motion.errors import DataFileError
 from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
 from skeleton_mamba.tasks.motion.value_checks import (
     MAX_POSITION_M,

@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
 from skeleton_mamba.tasks.motion.bvh import load_bvh
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.gltf import (
     SkeletonMotion,
     check_skeleton_motion,

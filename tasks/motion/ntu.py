@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.errors import DataFileError
 
 __all__ = [
     "BODY_FIELDS",

@@ -43,8 +43,8 @@ from pathlib import Path
 
 from skeleton_mamba.atomic import atomic_open, check_writable
 from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.cache import default_cache_root, file_sha256
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import is_plain_name
 
 __all__ = [

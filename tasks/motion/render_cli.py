@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.character import is_character
 from skeleton_mamba.tasks.motion.character_mesh import read_character_mesh
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.output_folder import output_file
 from skeleton_mamba.tasks.motion.render import render_motion

@@ -29,7 +29,7 @@ import numpy as np
 import pygltflib
 
 from skeleton_mamba.atomic import atomic_path
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.retarget_rig import BONES, Rig
 
 __all__ = ["Retarget", "bone_direction_errors", "driven_tips", "retarget", "write_bvh_rig", "write_gltf_rig"]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import write_music_slice
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.output_folder import claim_output_files, output_file

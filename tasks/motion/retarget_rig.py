@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 
 __all__ = ["BONES", "PRESETS", "REQUIRED", "Rig", "find_bones", "load_rig", "read_map", "separate_torso"]
 

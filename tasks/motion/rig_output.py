@@ -19,7 +19,7 @@ from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.errors import InputError, one_line_message
 
 if TYPE_CHECKING:  # the command lines import this module for their options: numpy and glTF only when used
     from skeleton_mamba.tasks.motion.retarget_rig import Rig

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import SkeletonMambaError
+from skeleton_mamba.errors import SkeletonMambaError
 
 __all__ = [
     "UnsafePickleError",

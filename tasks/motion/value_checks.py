@@ -24,7 +24,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.motion.option_types import FPS_RANGE  # the bound of options and files alike
 
 __all__ = [
@@ -142,7 +142,7 @@ def load_npy(path: str | Path) -> np.ndarray:
         >>> load_npy(path)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        skeleton_mamba.tasks.motion.errors.DataFileError: ...joints.npy: ...
+        skeleton_mamba.errors.DataFileError: ...joints.npy: ...
     """
     path = Path(path)
     if not path.is_file():

@@ -38,9 +38,9 @@ import numpy as np
 
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.bounded_read import read_bytes, read_json
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.character import Character, read_character
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.gltf import SkeletonMotion, glb_bytes
 from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
 from skeleton_mamba.tasks.motion.output_folder import output_file

@@ -49,9 +49,9 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.cli_options import progress_default
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, motion_to_features
 from skeleton_mamba.tasks.motion.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features

@@ -38,8 +38,8 @@ import torch
 from lightning.pytorch.overrides.distributed import UnrepeatedDistributedSampler
 from torch.utils.data import Dataset
 
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.recognition.keypoint_store import KeypointStore, StoreSplit, ensure_store
 from skeleton_mamba.tasks.recognition.pyskl import load_annotations
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations

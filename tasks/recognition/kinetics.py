@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from skeleton_mamba.bounded_read import MAX_INT_DIGITS, read_json
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 
 __all__ = [

@@ -33,7 +33,7 @@ from torchmetrics import MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassConfusionMatrix
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.errors import CheckpointError
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.early import (
     FRACTIONS,

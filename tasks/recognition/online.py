@@ -27,8 +27,8 @@ import torch
 
 from skeleton_mamba.atomic import atomic_open, atomic_path
 from skeleton_mamba.compiling import compile_step_or_eager
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.ssd.precision import inference_precision
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.value_checks import load_npy

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import DataFileError
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.value_checks import check_finite
 

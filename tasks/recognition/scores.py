@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 
 __all__ = ["SCORE_KINDS", "SCORES_FILE", "RunScores", "load_scores", "save_scores"]
 

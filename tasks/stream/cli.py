@@ -34,9 +34,9 @@ import numpy as np
 import soundfile as sf
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.ssd.precision import inference_precision
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.export import dance_files, write_motion
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render import RenderStyle

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 
 __all__ = ["NpmPin", "cache_root"]
 

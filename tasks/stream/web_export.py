@@ -36,9 +36,9 @@ from pathlib import Path
 import torch
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.character import CHARACTER_SUFFIXES
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.rig_output import RigOutput, prepare_rig
 from skeleton_mamba.tasks.motion.view import script_json, three_modules

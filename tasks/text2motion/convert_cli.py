@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.tasks.motion.errors import InputError, one_line_message
+from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.tasks.motion.humanml3d_features import (
     denormalize,
     read_features,

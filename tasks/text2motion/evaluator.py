@@ -24,7 +24,7 @@ import torch
 from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
 
-from skeleton_mamba.tasks.motion.errors import CheckpointError
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.tasks.text2motion.glove import POS_ENUMERATOR
 from skeleton_mamba.tasks.training.checkpoints import (
     check_finite_tensors,

@@ -27,9 +27,9 @@ import numpy as np
 import torch
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import CheckpointError, InputError
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.cli_options import checked_sampling, sampling_overrides
-from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs

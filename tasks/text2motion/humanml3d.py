@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.humanml3d_features import FPS, NonFiniteFeaturesError, read_features
 
 __all__ = [

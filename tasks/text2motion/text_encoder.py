@@ -20,8 +20,8 @@ import torch
 from torch import nn
 
 from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.pretrained_checks import building_on_meta
-from skeleton_mamba.tasks.motion.errors import InputError
 
 __all__ = ["TextEncoder", "default_model_path"]
 

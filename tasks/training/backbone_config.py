@@ -10,7 +10,7 @@ import dataclasses
 from collections.abc import Mapping
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 
 __all__ = ["backbone_config", "config_from", "derived_backbone", "plain_backbone_config"]
 

@@ -26,7 +26,7 @@ from typing import Any
 from lightning.pytorch import LightningDataModule
 from torch.utils.data import DataLoader, Dataset
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 
 __all__ = [
     "LINKED",

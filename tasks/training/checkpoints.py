@@ -52,8 +52,8 @@ import torch
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.errors import CheckpointError, RandomWeightsWarning
 from skeleton_mamba.pretrained_checks import MAX_PARAMETERS, check_finite_weights, check_sizes, dtype_fits
-from skeleton_mamba.tasks.motion.errors import CheckpointError, RandomWeightsWarning
 from skeleton_mamba.tasks.training.registry import task_of_class_path, task_packages
 
 __all__ = [

@@ -12,7 +12,7 @@ and its parser comes from a module that imports no torch (``*_args.py`` beside i
 ``sm --help``, ``sm CMD --help``, a bad argument or a missing input file answer before torch, Lightning or
 a checkpoint loads (``benchmarks/bench_startup.py`` times them).
 Every command shares one error policy:
-an expected failure (:func:`~skeleton_mamba.tasks.motion.errors.expected_failure`) prints one line
+an expected failure (:func:`~skeleton_mamba.errors.expected_failure`) prints one line
 ``sm COMMAND: error: MESSAGE`` (argparse's own form for a bad argument, so every refusal reads alike) and
 exits 2, Ctrl-C prints one line and exits 130, anything else keeps its traceback. The commands raise; they
 print no error line of their own.
@@ -29,7 +29,7 @@ from collections.abc import Callable, Sequence
 
 from skeleton_mamba import __version__
 from skeleton_mamba.allocator import keep_freed_memory
-from skeleton_mamba.tasks.motion.errors import expected_failure, one_line_message
+from skeleton_mamba.errors import expected_failure, one_line_message
 from skeleton_mamba.tasks.training.library_noise import silence_library_noise
 from skeleton_mamba.tasks.training.registry import Command, registered_tasks
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults

@@ -13,7 +13,7 @@ import inspect
 import types
 import typing
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.training.base_data import DataContract, linked_fields
 
 __all__ = ["contract_class_of", "contract_links"]

@@ -27,6 +27,7 @@ from lightning.pytorch import LightningModule
 from safetensors.torch import save
 
 from skeleton_mamba.atomic import atomic_path
+from skeleton_mamba.errors import CheckpointError, InputError
 from skeleton_mamba.pretrained import (
     CARD_NAME,
     CONFIG_NAME,
@@ -35,7 +36,6 @@ from skeleton_mamba.pretrained import (
     push_folder_to_hub,
     read_pretrained_config,
 )
-from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError
 from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.export_pretrained_args import build_parser

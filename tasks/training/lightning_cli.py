@@ -34,7 +34,7 @@ from lightning.pytorch.cli import ArgsType, LightningArgumentParser, LightningCL
 
 from skeleton_mamba import __version__
 from skeleton_mamba.config import ConfigValueError
-from skeleton_mamba.tasks.motion.errors import CheckpointError, InputError, expected_failure
+from skeleton_mamba.errors import CheckpointError, InputError, expected_failure
 from skeleton_mamba.tasks.training.base_data import LINK_PREFIX
 from skeleton_mamba.tasks.training.checkpoints import (
     check_state_fits,
@@ -157,7 +157,7 @@ def one_line_parse_message(message: str) -> str:
 
 
 class OneLineErrorParser(LightningArgumentParser):
-    """A parse error is an :class:`~skeleton_mamba.tasks.motion.errors.InputError` on one line, which ``sm``
+    """A parse error is an :class:`~skeleton_mamba.errors.InputError` on one line, which ``sm``
     prints with exit status 2 like every command's errors (jsonargparse prints the whole usage first).
 
     ``error_source`` (set once the command line is parsed: the checkpoint whose hyper-parameters Lightning

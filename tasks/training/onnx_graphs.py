@@ -23,8 +23,8 @@ import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.streaming import frame_forward
-from skeleton_mamba.tasks.motion.errors import InputError
 
 __all__ = [
     "ExportSpec",

@@ -16,7 +16,7 @@ from pathlib import Path
 from lightning.pytorch import Trainer
 from lightning.pytorch.callbacks import Callback
 
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.rig_output import MAP_HELP, RigOutput, prepare_rig
 
 __all__ = ["PredictionRig", "add_prediction_rig_arguments", "prediction_rig_from"]

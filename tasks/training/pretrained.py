@@ -32,6 +32,7 @@ from lightning.pytorch import LightningModule
 from safetensors import SafetensorError
 from safetensors.torch import load_file
 
+from skeleton_mamba.errors import CheckpointError
 from skeleton_mamba.pretrained import (
     CONFIG_NAME,
     WEIGHTS_NAME,
@@ -42,7 +43,6 @@ from skeleton_mamba.pretrained import (
     resolve_pretrained,
 )
 from skeleton_mamba.pretrained_checks import check_sizes, read_safetensors_header
-from skeleton_mamba.tasks.motion.errors import CheckpointError
 from skeleton_mamba.tasks.training.checkpoints import (
     check_checkpoint_path,
     check_class_paths,

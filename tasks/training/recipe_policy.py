@@ -13,7 +13,7 @@ which looks at the path before the import and at the imported object's defining 
 
 **Numbers.** Values the trainer, the seed and the task modules use are range-checked once parsed, before
 anything uses them (:func:`check_config_values`): a 24-digit seed, ``--trainer.max_epochs 1e30``, a batch
-size of 0 or a frame count of 1e14 are one-line :class:`~skeleton_mamba.tasks.motion.errors.InputError`\\ s
+size of 0 or a frame count of 1e14 are one-line :class:`~skeleton_mamba.errors.InputError`\\ s
 naming the option and the recipes it may come from, instead of a numpy ``ValueError``, an ``OverflowError`` or
 a 728 TiB allocation. Every float is finite (a ``guidance_weight: .nan`` or an ``eta: .inf`` is refused at
 once, not after minutes of training by the demo that samples with it; only a mixer's ``dt_limit`` max may be
@@ -31,9 +31,9 @@ from typing import Any
 
 from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.size_bounds import SIZE_BOUNDS
 from skeleton_mamba.tasks.motion.cli_options import SAMPLERS, SOLVER_NAMES
-from skeleton_mamba.tasks.motion.errors import InputError
 from skeleton_mamba.tasks.motion.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
 from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
 from skeleton_mamba.tasks.training.checkpoints import TRUSTED_CLASS_PREFIXES, trusted_class_prefixes

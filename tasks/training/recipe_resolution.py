@@ -29,7 +29,7 @@ import yaml
 from jsonargparse import ActionConfigFile
 
 from skeleton_mamba.bounded_read import read_text
-from skeleton_mamba.tasks.motion.errors import InputError
+from skeleton_mamba.errors import InputError
 
 RECIPE_PACKAGE = "skeleton_mamba.recipes"
 RECIPE_SUFFIXES = (".yaml", ".yml")

@@ -26,7 +26,7 @@ from typing import Any
 
 from lightning.pytorch.loggers import CSVLogger, Logger
 
-from skeleton_mamba.tasks.motion.errors import CheckpointError
+from skeleton_mamba.errors import CheckpointError
 
 __all__ = [
     "BOOKKEEPING",

@@ -1,7 +1,7 @@
 """Callbacks the ``sm`` Lightning CLI adds to every recipe: stop at a non-finite loss, save on SIGTERM.
 
 :class:`NonFiniteLossGuard` checks the loss before each backward pass: a NaN or infinite loss stops
-training before it reaches the weights, with a :class:`~skeleton_mamba.tasks.motion.errors.NonFiniteLossError`
+training before it reaches the weights, with a :class:`~skeleton_mamba.errors.NonFiniteLossError`
 naming the step, the batch and its samples (the ``sample_id`` / ``name`` entries of a dict batch, and
 the batch rows whose tensors hold NaN or Inf). ``sm`` prints it on one line and exits with status 2.
 
@@ -27,7 +27,7 @@ import torch
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from lightning_utilities.core import rank_zero
 
-from skeleton_mamba.tasks.motion.errors import InputError, NonFiniteLossError
+from skeleton_mamba.errors import InputError, NonFiniteLossError
 
 __all__ = [
     "InterruptRecorder",
@@ -152,7 +152,7 @@ def silence_interrupt_notice() -> None:
 
 
 def check_trained(trainer: pl.Trainer) -> None:
-    """Raise an :class:`~skeleton_mamba.tasks.motion.errors.InputError` when ``fit`` ran no training batch."""
+    """Raise an :class:`~skeleton_mamba.errors.InputError` when ``fit`` ran no training batch."""
     if trainer.num_training_batches != 0:
         return
     loader = trainer.train_dataloader

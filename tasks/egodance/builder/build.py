@@ -37,6 +37,7 @@ import torch
 from tqdm.auto import tqdm
 
 from skeleton_mamba.bounded_read import read_json
+from skeleton_mamba.errors import DataFileError, InputError, worker_ignores_ctrl_c
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
@@ -54,7 +55,6 @@ from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
 from skeleton_mamba.tasks.egodance.builder.scene_check import MAX_SCENE_FACES, check_scene_file
 from skeleton_mamba.tasks.motion import aistpp
-from skeleton_mamba.tasks.motion.errors import DataFileError, InputError, worker_ignores_ctrl_c
 from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
 from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle

@@ -63,7 +63,7 @@ import numpy as np
 
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.bounded_read import read_json
-from skeleton_mamba.tasks.motion.errors import DataFileError, InputError
+from skeleton_mamba.errors import DataFileError, InputError
 from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.bounded_read import parse_json, read_json
+from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.egodance.builder.config import MAX_SCENE_FACES  # plain Python, for --help
-from skeleton_mamba.tasks.motion.errors import DataFileError
 
 __all__ = ["MAX_SCENE_FACES", "SceneFileError", "check_face_count", "check_scene_file", "check_scene_mesh"]
 

@@ -113,7 +113,7 @@ def one_line_message(err: BaseException) -> str:
 
 
 # torch's ExceptionWrapper.reraise: "Caught DataFileError in DataLoader worker process 0.\nOriginal Traceback
-# (most recent call last):\n ... \nskeleton_mamba.tasks.motion.errors.DataFileError: MESSAGE\n"
+# (most recent call last):\n ... \nskeleton_mamba.errors.DataFileError: MESSAGE\n"
 _RERAISED = re.compile(r"Caught \w+ in [^\n]*\.\nOriginal Traceback \(most recent call last\):\n")
 
 
