@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import torch
 
-from skeleton_mamba.allocator import keep_freed_memory  # re-exported: streaming's callers set it
 from skeleton_mamba.frame_ops import FrameOps
 
 
@@ -166,6 +165,5 @@ __all__ = [
     "check_frame",
     "frame_forward",
     "init_state",
-    "keep_freed_memory",
     "step",
 ]

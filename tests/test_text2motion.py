@@ -39,9 +39,10 @@ def test_joint_tokens_put_every_feature_in_its_joint():
     assert torch.equal(tokens_to_features(features_to_tokens(y)), y)
 
 
-def test_denoiser_masks_padding_and_text():
+@pytest.mark.parametrize("pooled_text", [False, True])
+def test_denoiser_masks_padding_and_text(pooled_text):
     torch.manual_seed(0)
-    model = TextToMotionDenoiser(TINY, text_dim=12).eval()
+    model = TextToMotionDenoiser(TINY, text_dim=12, pooled_text=pooled_text).eval()
     x = torch.randn(2, 16, 263)
     t = torch.tensor([10, 900])
     mask = torch.ones(2, 16, dtype=torch.bool)
@@ -60,6 +61,14 @@ def test_denoiser_masks_padding_and_text():
     torch.testing.assert_close(out2, out, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(unc2, unc, atol=1e-5, rtol=1e-5)  # no text token = unconditional
     assert (out - unc).abs().max() > 1e-4  # the caption matters
+    for block in model.backbone.blocks:  # the cross-attention silenced: only the pooled caption is left
+        torch.nn.init.zeros_(block.cross_attention.out.weight)
+    with torch.no_grad():
+        other = TextCondition(torch.randn(2, 4, 12), cond.mask)
+        moved = (model(x, t, cond, mask) - model(x, t, other, mask)).abs().max()
+        unc3 = model(x, t, TextCondition(cond.tokens, torch.zeros_like(cond.mask)), mask)
+    assert (moved > 1e-4) == pooled_text  # the pooled caption reaches every joint token's input
+    torch.testing.assert_close(unc3, model(x, t, None, mask), atol=1e-5, rtol=1e-5)
 
 
 @pytest.mark.parametrize("kind", ["skeleton_mamba", "mdm_transformer"])

@@ -213,10 +213,11 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
     ) -> torch.Tensor:
         b, frames, _ = x_t.shape
         emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
-        if self.pooled_text is not None and cond is not None:  # the null caption pools to zero
+        if self.pooled_text is not None and cond is not None:
             weights = cond.mask.to(x_t.device, x_t.dtype)[..., None]  # (B, S, 1)
-            pooled = (cond.tokens.to(x_t.dtype) * weights).sum(1) / weights.sum(1).clamp(min=1.0)
-            emb = emb + self.pooled_text(pooled)
+            count = weights.sum(1)  # (B, 1): 0 for the null caption, which adds nothing (as no caption)
+            pooled = (cond.tokens.to(x_t.dtype) * weights).sum(1) / count.clamp(min=1.0)
+            emb = emb + self.pooled_text(pooled) * (count > 0).to(x_t.dtype)
         channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
         x_in = self.skip_x0.network_input(x_t, t)
         tokens = torch.cat([features_to_tokens(x_in), channels], dim=-1)  # (B, T, 22, 13 + C_t)

@@ -84,6 +84,10 @@ class TextToMotionModule(BackboneModule):
         eval_sampler: the evaluation's sampler (``None``: the module's ``sampler``).
         eval_sampling_steps: the evaluation's DDIM steps (``None``: the module's; a number alone selects
             DDIM).
+        temporal_prior: precondition the denoiser with a Gaussian process over time with the training data's
+            spectrum (:class:`~.model.TextToMotionDenoiser`).
+        pooled_text: also add the caption's pooled embedding to the timestep embedding ([MDM]'s sum), so it
+            reaches every joint token's input besides the cross-attention ([EgoMusic]'s only path).
     """
 
     def __init__(
