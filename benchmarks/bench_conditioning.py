@@ -40,9 +40,9 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, write_report  # noqa: E402
 
-from skeleton_mamba.tasks.motion.fact_features import features_to_joints  # noqa: E402
+from skeleton_mamba.tasks.motion.formats.fact_features import features_to_joints  # noqa: E402
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion  # noqa: E402
 from skeleton_mamba.tasks.motion.metrics.beat_align import beat_align_over_chance  # noqa: E402
-from skeleton_mamba.tasks.motion.motion_file import load_motion  # noqa: E402
 from skeleton_mamba.tasks.stream.data import StreamDanceDataModule  # noqa: E402
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR  # noqa: E402
 from skeleton_mamba.tasks.stream.live import LiveDancer  # noqa: E402

@@ -36,7 +36,7 @@ from common import machine_info, median_ms, operator_profile  # noqa: E402
 
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule  # noqa: E402
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS  # noqa: E402
-from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES  # noqa: E402
+from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES  # noqa: E402
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipe_dir  # noqa: E402
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults  # noqa: E402
 

@@ -45,7 +45,7 @@ from skeleton_mamba.tasks.egodance.builder.camera import CameraTrajectory, head_
 from skeleton_mamba.tasks.egodance.builder.placement import Placement, place_points  # noqa: E402
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room  # noqa: E402
 from skeleton_mamba.tasks.egodance.builder.raycast import Renderer  # noqa: E402
-from skeleton_mamba.tasks.motion.motion_file import save_motion  # noqa: E402
+from skeleton_mamba.tasks.motion.formats.motion_file import save_motion  # noqa: E402
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance  # noqa: E402
 
 
@@ -54,9 +54,9 @@ def _trajectory(frames: int, size: int) -> CameraTrajectory:
     import torch
 
     from skeleton_mamba.skeletons import SMPL24
-    from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-    from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix
-    from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
+    from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
+    from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix
+    from skeleton_mamba.tasks.motion.body.smpl import smpl_rest_offsets
 
     motion = synthesize_dance(120, frames / 30, 30, "arms", 0)
     local = axis_angle_to_matrix(torch.from_numpy(motion.poses).double())
@@ -128,7 +128,7 @@ def synthetic_smpl_npz(path: Path, num_vertices: int = 6890) -> Path:
     on capsule surfaces along the bones (radii of the capsule body), skinned to the bone's parent joint."""
     from skeleton_mamba.skeletons import SMPL24
     from skeleton_mamba.tasks.egodance.builder.penetration import BONE_RADII
-    from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+    from skeleton_mamba.tasks.motion.body.smpl import SMPL_REST_OFFSETS
 
     rng = np.random.default_rng(0)
     joints = np.zeros((24, 3))

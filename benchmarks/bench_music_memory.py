@@ -1,5 +1,5 @@
 """Peak memory of the music feature on tracks of 1, 20 and 55 minutes: analysed in windows (long tracks,
-:mod:`skeleton_mamba.tasks.motion.music_windows`) against the whole-track analysis.
+:mod:`skeleton_mamba.tasks.motion.music.music_windows`) against the whole-track analysis.
 
     python benchmarks/bench_music_memory.py [--json] [--minutes 1 20 55] [--fps 30] [--as windowed whole]
 
@@ -27,8 +27,8 @@ from common import machine_info  # noqa: E402
 
 CHILD = """
 import resource, sys
-from skeleton_mamba.tasks.motion import music_windows
-from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.music import music_windows
+from skeleton_mamba.tasks.motion.music.features import extract_music_features
 path, fps, how = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 music_windows.LONG_TRACK_S = 0.0 if how == "windowed" else float("inf")
 analysis = extract_music_features(path, fps=fps, use_cache=False)

@@ -46,7 +46,7 @@ def _audio(path: Path | None, sr: int, seconds: float = 30.0) -> tuple[np.ndarra
 def bench_music(audio: Path | None, repeats: int) -> dict:
     import librosa
 
-    from skeleton_mamba.tasks.motion.music import compute_music_features
+    from skeleton_mamba.tasks.motion.music.features import compute_music_features
 
     out: dict = {}
     start = time.perf_counter()

@@ -23,8 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
 
 from skeleton_mamba.skeletons import SMPL24  # noqa: E402
-from skeleton_mamba.tasks.motion.render import render_frames, render_motion  # noqa: E402
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle  # noqa: E402
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle  # noqa: E402
+from skeleton_mamba.tasks.motion.render.skeleton import render_frames, render_motion  # noqa: E402
 
 
 def synthetic_joints(seconds: float, fps: float) -> np.ndarray:

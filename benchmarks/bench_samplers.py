@@ -33,9 +33,9 @@ from skeleton_mamba.tasks.egodance.data import data_module_from_hparams
 from skeleton_mamba.tasks.egodance.demo_scores import score_held_out
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import held_out_dynamics
-from skeleton_mamba.tasks.motion.music import BEAT
+from skeleton_mamba.tasks.motion.music.features import BEAT
 from skeleton_mamba.tasks.text2motion.data import SyntheticTextMotionDataModule
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.checkpoints import load_module, load_module_and_checkpoint

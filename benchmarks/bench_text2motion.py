@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, median_ms  # noqa: E402
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
-from skeleton_mamba.tasks.motion.humanml3d_features import recover_from_ric  # noqa: E402
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import recover_from_ric  # noqa: E402
 from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser, width_for_parameters  # noqa: E402
 from skeleton_mamba.tasks.text2motion.metrics import RPrecision, embedding_fid  # noqa: E402
 from skeleton_mamba.tasks.text2motion.model import (  # noqa: E402

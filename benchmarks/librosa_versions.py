@@ -2,7 +2,7 @@
 
 The protocol beat recipes (``fact``: the 60 fps 35-d beat column; ``bailando``: the HPSS-percussive
 ``beat_track``; ``edge``: the per-slice 30 fps beat column) run, through the same code
-(``skeleton_mamba.tasks.motion.protocol_music``), under this interpreter's stack and under a second
+(``skeleton_mamba.tasks.motion.music.protocol_music``), under this interpreter's stack and under a second
 interpreter (``--old-python``: a venv with the references' stack, e.g. numpy 1.26.4, librosa 0.9.2,
 resampy 0.4.3, whose default resampler is resampy's ``kaiser_best``; librosa >= 0.10 defaults to
 ``soxr_hq``). Reported per protocol, pooled over the tracks (and EDGE's slices):
@@ -47,7 +47,7 @@ PROTOCOLS = ("fact", "bailando", "edge")
 def _import_beat_code():
     """``protocol_music`` and ``music``: installed, or from this checkout without the torch package."""
     try:
-        import skeleton_mamba.tasks.motion.protocol_music as protocol_music
+        import skeleton_mamba.tasks.motion.music.protocol_music as protocol_music
     except ImportError:  # a bare venv: register the two parent packages without running their __init__
         for name, folder in (
             ("skeleton_mamba", REPO / "skeleton_mamba"),
@@ -56,7 +56,7 @@ def _import_beat_code():
             module = types.ModuleType(name)
             module.__path__ = [str(folder)]
             sys.modules[name] = module
-        import skeleton_mamba.tasks.motion.protocol_music as protocol_music
+        import skeleton_mamba.tasks.motion.music.protocol_music as protocol_music
     import librosa
 
     if not hasattr(librosa.feature, "tempo"):  # librosa < 0.10: same function, older home
@@ -68,7 +68,7 @@ def _import_beat_code():
             return original(*args, filename=path, **kwargs) if path is not None else original(*args, **kwargs)
 
         librosa.get_duration = get_duration
-    from skeleton_mamba.tasks.motion import music
+    from skeleton_mamba.tasks.motion.music import features as music
 
     return protocol_music, music
 
@@ -108,7 +108,7 @@ def compare(old: dict, new: dict, tracks: list[Path]) -> dict:
     import numpy as np
 
     from skeleton_mamba.tasks.motion.metrics.protocols import get_protocol
-    from skeleton_mamba.tasks.motion.music import fold_tempo, tempo_from_beats
+    from skeleton_mamba.tasks.motion.music.features import fold_tempo, tempo_from_beats
     from skeleton_mamba.tasks.motion.synthetic import synthesize_dance
 
     summary = {

@@ -34,7 +34,7 @@ def _remove_keypoint_stores_of_test_files(tmp_path_factory):
     """The recognition data module keeps a memory-mapped copy of each annotation file in the user's cache
     (``keypoints/``): at the end of the session, those of this session's temporary files are removed."""
     yield
-    from skeleton_mamba.tasks.motion.cache import default_cache_root
+    from skeleton_mamba.tasks.motion.io.cache import default_cache_root
 
     base = tmp_path_factory.getbasetemp().resolve()
     root = default_cache_root() / "keypoints"
@@ -132,11 +132,11 @@ def _librosa_kernels_compiled() -> None:
     """Compile librosa's numba kernels once, under the inter-process lock, before any test runs.
 
     Tests also call librosa directly (outside our lock); without this, two xdist workers compiling the
-    same kernels at once on a fresh install can crash (see ``tasks/motion/jit_lock.py``).
+    same kernels at once on a fresh install can crash (see ``tasks/motion/music/jit_lock.py``).
     """
     import numpy as np
 
-    from skeleton_mamba.tasks.motion.music import compute_music_features
+    from skeleton_mamba.tasks.motion.music.features import compute_music_features
 
     noise = np.random.default_rng(0).standard_normal(4 * 30 * 512).astype(np.float32)
     for fps in (60, 30):

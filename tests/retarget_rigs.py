@@ -1,5 +1,5 @@
 """Humanoid rigs built in code for the retarget tests, and an independent glTF forward kinematics (pygltflib
-and numpy only, sharing no code with :mod:`skeleton_mamba.tasks.motion.retarget`)."""
+and numpy only, sharing no code with :mod:`skeleton_mamba.tasks.motion.retarget.transfer`)."""
 
 from __future__ import annotations
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from skeleton_mamba.tasks.motion.aistpp import (
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.formats.aistpp import (
     load_aistpp_motion,
     load_split,
     motion_windows,
@@ -19,9 +20,13 @@ from skeleton_mamba.tasks.motion.aistpp import (
     split_sequences,
     window_starts,
 )
-from skeleton_mamba.tasks.motion.motion_file import MotionData, MotionFileError, load_motion, save_motion
-from skeleton_mamba.tasks.motion.safe_pickle import UnsafePickleError, safe_load_pickle
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.formats.motion_file import (
+    MotionData,
+    MotionFileError,
+    load_motion,
+    save_motion,
+)
+from skeleton_mamba.tasks.motion.io.safe_pickle import UnsafePickleError, safe_load_pickle
 
 
 def write_aistpp(path, frames=30, flat=True, scaling=93.7, seed=0):

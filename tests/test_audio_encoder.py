@@ -7,7 +7,7 @@ import pytest
 import soundfile as sf
 import torch
 
-from skeleton_mamba.tasks.motion.audio_encoder import PretrainedAudioEncoder, resample_frames
+from skeleton_mamba.tasks.motion.music.audio_encoder import PretrainedAudioEncoder, resample_frames
 
 SR = 16000
 

@@ -11,8 +11,8 @@ import pytest
 from test_evaluate_dance import folders  # noqa: F401 (fixture)
 from test_music import click_track
 
-from skeleton_mamba.tasks.motion.analyze_music import main as analyze_main
-from skeleton_mamba.tasks.motion.music import audio_stack
+from skeleton_mamba.tasks.motion.commands.analyze_music import main as analyze_main
+from skeleton_mamba.tasks.motion.music.features import audio_stack
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
 KEYS = {"librosa", "numpy", "soundfile", "libsndfile", "resampler", "resampler_package"}

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 
 TINY = SkeletonMambaConfig(

@@ -11,9 +11,9 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.bvh import BvhError, bvh_to_smpl, load_bvh, save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
+from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics
+from skeleton_mamba.tasks.motion.formats.bvh import BvhError, bvh_to_smpl, load_bvh, save_bvh, smpl_to_bvh
 
 
 @pytest.fixture(scope="module")

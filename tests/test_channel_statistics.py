@@ -1,4 +1,4 @@
-"""Per-channel training statistics (``tasks/motion/statistics.py``) against numpy."""
+"""Per-channel training statistics (``tasks/motion/body/statistics.py``) against numpy."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from skeleton_mamba.tasks.motion.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
 
 
 def test_statistics_per_channel_over_every_other_axis_as_numpy():

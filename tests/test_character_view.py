@@ -15,9 +15,9 @@ import pytest
 from browser_page import Page, browser_or_skip
 from retarget_rigs import MIXAMO, build_rig, read_animated, rest_positions
 
-from skeleton_mamba.tasks.motion.character import read_character
-from skeleton_mamba.tasks.motion.gltf import write_glb
-from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.formats.gltf import write_glb
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.render.character import read_character
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -102,9 +102,9 @@ def test_sm_render_draws_the_characters_mesh_where_the_skin_puts_it(character, t
     (8 vertices around its bone) drawn in the mesh's colour where the file's skinning puts it."""
     import imageio
 
-    from skeleton_mamba.tasks.motion.character_mesh import read_character_mesh
-    from skeleton_mamba.tasks.motion.render import RenderStyle, fit_cameras
-    from skeleton_mamba.tasks.motion.render_mesh import mesh_frames
+    from skeleton_mamba.tasks.motion.render.character_mesh import read_character_mesh
+    from skeleton_mamba.tasks.motion.render.mesh import mesh_frames
+    from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle, fit_cameras
 
     out = tmp_path / "hero.mp4"
     assert sm_main(["render", str(character), "--out", str(out)]) == 0

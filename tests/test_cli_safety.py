@@ -23,7 +23,7 @@ from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.atomic import atomic_open, atomic_path
 from skeleton_mamba.errors import CheckpointError, expected_failure, one_line_message
-from skeleton_mamba.tasks.motion import render as render_module
+from skeleton_mamba.tasks.motion.render import skeleton as render_module
 from skeleton_mamba.tasks.training.checkpoints import check_class_paths, load_checkpoint
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.run_folders import find_last_checkpoint, remove_if_empty
@@ -273,7 +273,7 @@ def test_ctrl_c_stops_training_with_one_line_and_130(tmp_path):
 
 
 def test_ctrl_c_stops_make_ego_and_its_workers(tmp_path):
-    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
     from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
     motion = save_motion(tmp_path / "m.npz", synthesize_dance(120, 40.0, 10.0, "bounce", 1))
@@ -457,7 +457,7 @@ def test_a_directory_or_a_file_in_the_way_is_a_one_line_error(tmp_path, capsys):
 
 
 def test_undecodable_audio_unreadable_arrays_and_files_in_the_way_are_one_line_errors(tmp_path, capsys):
-    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
     from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
     motion = save_motion(tmp_path / "m.npz", synthesize_dance(120, 1.0, 10.0, "bounce", 1))

@@ -15,7 +15,7 @@ import pytest
 from test_packaging import HEAVY as PACKAGE_HEAVY
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.cli_options import (
+from skeleton_mamba.tasks.motion.commands.cli_options import (
     CommandParser,
     SmHelpFormatter,
     add_quiet_argument,
@@ -119,7 +119,7 @@ def test_help_texts_say_what_they_should(name):
 
 
 def test_one_quiet_spelling_and_the_old_ones_still_work_once_noted(capsys, monkeypatch):
-    from skeleton_mamba.tasks.motion import cli_options
+    from skeleton_mamba.tasks.motion.commands import cli_options
 
     monkeypatch.setattr(cli_options, "_noted", set())  # a fresh process: other tests may have been noted
     with_bars = {name for name, parser in PARSERS.items() if "--quiet" in parser.format_help()}
@@ -185,7 +185,7 @@ def test_input_paths_are_checked_when_parsed(tmp_path):
 
 
 def test_the_protocol_names_of_the_light_parser_are_the_metrics_own():
-    from skeleton_mamba.tasks.motion.evaluate_dance_args import PROTOCOL_NAMES
+    from skeleton_mamba.tasks.motion.commands.evaluate_dance_args import PROTOCOL_NAMES
     from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS
 
     assert PROTOCOL_NAMES == tuple(PROTOCOLS)

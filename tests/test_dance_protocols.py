@@ -21,7 +21,7 @@ from skeleton_mamba.tasks.motion.metrics import BeatAlign
 from skeleton_mamba.tasks.motion.metrics.beat_align import kinematic_beats
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import get_protocol
-from skeleton_mamba.tasks.motion.music import BEAT, compute_music_features
+from skeleton_mamba.tasks.motion.music.features import BEAT, compute_music_features
 
 
 def v_motion(speeds: np.ndarray) -> np.ndarray:
@@ -163,7 +163,7 @@ def test_edge_music_features_are_computed_per_slice(tmp_path):
 
     wav = tmp_path / "clicks.wav"
     click_track(wav, bpm=120.0, seconds=10.0, sr=22050)
-    from skeleton_mamba.tasks.motion.protocol_music import edge_slice_features
+    from skeleton_mamba.tasks.motion.music.protocol_music import edge_slice_features
 
     slices = edge_slice_features(wav, cache_dir=tmp_path / "cache")
     assert slices.shape == (3, 150, 35)  # 10 s: slices start at 0, 2.5, 5 s (EDGE: start <= len - window)

@@ -17,8 +17,8 @@ from precision_cases import TRAINING_PRECISIONS, forward_context
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.egodance.losses import reconstruction_loss
 from skeleton_mamba.tasks.egodance.representation import encode_motion
+from skeleton_mamba.tasks.motion.body.temporal_filter import smooth_over_time
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
-from skeleton_mamba.tasks.motion.temporal_filter import smooth_over_time
 
 STEPS = 200
 MIDDLE_T = 10  # of 20 diffusion steps

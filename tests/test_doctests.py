@@ -57,16 +57,16 @@ def test_every_public_name_has_an_example(name):
 MOTION = "skeleton_mamba.tasks.motion"
 READERS = {
     "skeleton_mamba.bounded_read": ("check_json_depth", "parse_json", "read_bytes", "read_json", "read_text"),
-    f"{MOTION}.aistpp": ("load_aistpp_motion", "load_split"),
-    f"{MOTION}.audio_io": ("open_audio", "open_wav_stream", "probe_audio", "read_audio"),
-    f"{MOTION}.bvh": ("load_bvh", "save_bvh"),
-    f"{MOTION}.gltf_read": ("read_glb",),
-    f"{MOTION}.humanml3d_features": ("read_feature_vector", "read_features", "read_statistics"),
-    f"{MOTION}.motion_file": ("load_motion", "save_motion"),
-    f"{MOTION}.motion_reader": ("load_joints", "load_skeleton_motion"),
-    f"{MOTION}.ntu": ("parse_ntu_name", "read_skeleton_file"),
-    f"{MOTION}.safe_pickle": ("safe_load_pickle", "safe_loads_pickle"),
-    f"{MOTION}.value_checks": ("load_npy", "load_npz"),
+    f"{MOTION}.formats.aistpp": ("load_aistpp_motion", "load_split"),
+    f"{MOTION}.music.audio_io": ("open_audio", "open_wav_stream", "probe_audio", "read_audio"),
+    f"{MOTION}.formats.bvh": ("load_bvh", "save_bvh"),
+    f"{MOTION}.formats.gltf_read": ("read_glb",),
+    f"{MOTION}.formats.humanml3d_features": ("read_feature_vector", "read_features", "read_statistics"),
+    f"{MOTION}.formats.motion_file": ("load_motion", "save_motion"),
+    f"{MOTION}.formats.motion_reader": ("load_joints", "load_skeleton_motion"),
+    f"{MOTION}.formats.ntu": ("parse_ntu_name", "read_skeleton_file"),
+    f"{MOTION}.io.safe_pickle": ("safe_load_pickle", "safe_loads_pickle"),
+    f"{MOTION}.io.value_checks": ("load_npy", "load_npz"),
 }
 METRICS = {
     f"{MOTION}.metrics.beat_align": (

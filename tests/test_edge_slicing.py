@@ -92,7 +92,7 @@ def test_edge_pairs_clip_i_with_audio_slice_i_and_stops_at_the_shorter():
 
 
 def test_edge_audio_slice_starts_follow_slice_audio():
-    from skeleton_mamba.tasks.motion.protocol_music import edge_slice_starts
+    from skeleton_mamba.tasks.motion.music.protocol_music import edge_slice_starts
 
     for sr in (8000, 22050, 44100, 44101, 48000):
         window = int(5 * sr)
@@ -106,7 +106,7 @@ def test_edge_audio_slice_starts_follow_slice_audio():
 @pytest.mark.parametrize("extra", [-1, 0])
 def test_edge_music_slices_pair_with_motion_of_the_same_duration(tmp_path, extra):
     """A 10 s track cut 1 sample short gives 2 slices, a full one 3: as EDGE, and as the motion of 10 s."""
-    from skeleton_mamba.tasks.motion.protocol_music import edge_slice_features
+    from skeleton_mamba.tasks.motion.music.protocol_music import edge_slice_features
 
     sr = 8000
     n = 10 * sr + extra

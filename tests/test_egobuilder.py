@@ -27,9 +27,9 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.egodance.builder.raycast import render_view
 from skeleton_mamba.tasks.egodance.builder.scene import load_scene, make_scene
-from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle, smpl_rest_offsets
+from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle, smpl_rest_offsets
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
 FEET = [7, 8, 10, 11]

@@ -20,7 +20,7 @@ from skeleton_mamba.tasks.egodance.builder.placement_checks import (
     view_hit_share,
 )
 from skeleton_mamba.tasks.egodance.builder.scene import load_scene
-from skeleton_mamba.tasks.motion.motion_file import save_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
 

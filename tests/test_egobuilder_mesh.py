@@ -23,7 +23,7 @@ from skeleton_mamba.tasks.egodance.builder.penetration import (
 )
 from skeleton_mamba.tasks.egodance.builder.placement import place_points, random_placement
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
-from skeleton_mamba.tasks.motion.motion_file import save_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
 WALL = ([1.0, 0.0, -3.0], [1.6, 2.8, 3.0])  # a 60 cm thick wall, its face at x = 1

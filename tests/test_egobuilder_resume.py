@@ -9,7 +9,7 @@ from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
-from skeleton_mamba.tasks.motion.motion_file import save_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
 

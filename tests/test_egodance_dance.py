@@ -64,8 +64,8 @@ def _audio_streams(path) -> int:
 def test_sm_dance_writes_npz_bvh_and_mp4_with_music(inputs, capsys):
     import imageio.v3 as iio
 
-    from skeleton_mamba.tasks.motion.bvh import load_bvh
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.bvh import load_bvh
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 
     tmp, ckpt, wav = inputs
     assert _dance(tmp, ckpt, wav, tmp / "out") == 0
@@ -90,7 +90,7 @@ def test_sm_dance_says_when_the_video_is_shorter_than_the_music(inputs, capsys):
     import imageio.v3 as iio
 
     from skeleton_mamba.tasks.egodance.dance_cli import main
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 
     tmp, ckpt, wav = inputs  # a 12 s track
     short = (np.random.default_rng(1).random((150, 32, 32, 3)) * 255).astype(np.uint8)
@@ -107,7 +107,7 @@ def test_sm_dance_says_when_the_video_is_shorter_than_the_music(inputs, capsys):
 @pytest.mark.parametrize("sampler", ["ddim", "dpmpp", "unipc"])
 def test_sm_dance_root_is_continuous_across_window_seams(inputs, monkeypatch, sampler):
     """Long-form stitching (in-painted overlaps) through every sampler that takes steps."""
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 
     tmp, ckpt, wav = inputs
     monkeypatch.setattr(EMM, "forward", _walking_forward)
@@ -149,7 +149,7 @@ def test_sm_dance_joins_heading_canonical_windows_into_one_turning_walk(inputs, 
     """A checkpoint trained with canonicalize_init_head dances a 12 s track (4 windows): each window is
     sampled facing its first heading, found from the previous window's dance, and the windows joined give
     the one walk on a circle the oracle describes: heading TURN * t, position sum of the steps along it."""
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 
     tmp, ckpt, wav = inputs
     checkpoint = torch.load(ckpt, weights_only=True)

@@ -12,7 +12,7 @@ from skeleton_mamba.tasks.egodance.encoders import FusionModule
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance, head_guidance_objective
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.body.smpl import SMPL_REST_OFFSETS
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, sinusoidal_embedding
 
 PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]

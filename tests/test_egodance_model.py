@@ -23,7 +23,7 @@ from skeleton_mamba.tasks.egodance.losses import (
 )
 from skeleton_mamba.tasks.egodance.model import EMM, EMMConfig
 from skeleton_mamba.tasks.egodance.representation import decode_motion, encode_motion, motion_joints
-from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.body.smpl import SMPL_REST_OFFSETS
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, ddim_sample
 
 IDENTITY_6D = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]  # first two columns of the identity

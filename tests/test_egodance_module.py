@@ -17,7 +17,7 @@ from torch.utils.data import DataLoader
 from skeleton_mamba.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.tasks.egodance.data import EgoDanceDataModule, assign_splits
 from skeleton_mamba.tasks.egodance.representation import encode_motion
-from skeleton_mamba.tasks.motion.music import audio_stack
+from skeleton_mamba.tasks.motion.music.features import audio_stack
 
 
 def test_data_module_explains_what_is_missing(tmp_path):
@@ -172,7 +172,7 @@ def test_module_trains_tests_and_predicts(tmp_path, tiny_egodance_module, song, 
     import imageio.v3 as iio
 
     from skeleton_mamba.tasks.egodance.dance_cli import main as dance_main
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 
     trainer.save_checkpoint(tmp_path / "emm.ckpt")
@@ -247,8 +247,8 @@ def test_demo_recipe_through_sm(tmp_path):
     # written as npz + bvh + mp4, labelled
     import imageio.v3 as iio
 
-    from skeleton_mamba.tasks.motion.bvh import load_bvh
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.bvh import load_bvh
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 
     demo = run / "demo"
     summary = json.loads((demo / "demo.json").read_text())

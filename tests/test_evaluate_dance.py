@@ -10,9 +10,9 @@ import pytest
 from test_dance_metrics import rest_pose
 from test_music import click_track
 
-from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
+from skeleton_mamba.tasks.motion.formats.aistpp import load_aistpp_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
-from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
 REAL_NAMES = ["gBR_sBM_cAll_d04_mBR0_ch01", "gBR_sBM_cAll_d05_mBR0_ch02", "gBR_sBM_cAll_d06_mBR0_ch03"]

@@ -29,9 +29,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_cli import sm_executable
 
-from skeleton_mamba.tasks.motion import audio_io
-from skeleton_mamba.tasks.motion.audio_io import AudioFileError, AudioWarning, read_audio
-from skeleton_mamba.tasks.motion.mp4 import Mp4WriteError, write_mp4
+from skeleton_mamba.tasks.motion.formats.mp4 import Mp4WriteError, write_mp4
+from skeleton_mamba.tasks.motion.music import audio_io
+from skeleton_mamba.tasks.motion.music.audio_io import AudioFileError, AudioWarning, read_audio
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -121,7 +121,7 @@ def test_the_reader_refuses_hostile_audio_naming_the_file(tmp_path, case):
 
 
 def _motion(folder: Path) -> Path:
-    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
     from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 
     return save_motion(folder / "m.npz", synthesize_dance(120, 1.0, 10.0, "bounce", 1))
@@ -385,7 +385,7 @@ def test_ffmpeg_failures_are_one_line_errors_naming_the_target(tmp_path):
 
 
 def test_an_mp4_with_music_has_its_sound_stream(tmp_path):
-    from skeleton_mamba.tasks.motion.mp4 import _has_stream
+    from skeleton_mamba.tasks.motion.formats.mp4 import _has_stream
 
     wav = tmp_path / "m.wav"
     sf.write(wav, _tone(RATE).astype(np.float32), RATE)

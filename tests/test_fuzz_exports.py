@@ -23,11 +23,11 @@ from gltf_reader import accessor, assert_khronos_valid, glb_joint_positions
 from test_gltf import _smpl_motion
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion import view
-from skeleton_mamba.tasks.motion.export import write_motion
-from skeleton_mamba.tasks.motion.gltf import MAX_JOINTS, from_joints, from_motion_data, write_glb
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.view import script_json, write_view
+from skeleton_mamba.tasks.motion.formats.export import write_motion
+from skeleton_mamba.tasks.motion.formats.gltf import MAX_JOINTS, from_joints, from_motion_data, write_glb
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.render import view
+from skeleton_mamba.tasks.motion.render.view import script_json, write_view
 from skeleton_mamba.tasks.training.cli import main as sm
 
 HOSTILE_NAME = "</script><!--<script>alert(1)//\u2028__DATA__&amp;"

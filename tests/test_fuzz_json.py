@@ -153,7 +153,7 @@ def test_sm_refuses_a_fifo_or_an_endless_link_on_one_line(tmp_path, option):
     """``sm view --metrics FIFO`` and ``sm fit --recipe LINK-TO-/dev/zero``: one line, at once, no memory."""
     from test_gltf import _smpl_motion
 
-    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 
     if option == "--metrics":
         os.mkfifo(tmp_path / "metrics.json")

@@ -38,10 +38,10 @@ from skeleton_mamba.tasks.egodance.frames import (
     read_video_frames,
     resize_frames,
 )
-from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
-from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
-from skeleton_mamba.tasks.motion.safe_pickle import MAX_PICKLE_OBJECT_BYTES, safe_loads_pickle
-from skeleton_mamba.tasks.motion.value_checks import MAX_NPZ_MEMBER_BYTES, load_npz
+from skeleton_mamba.tasks.motion.formats.aistpp import load_aistpp_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, load_motion, save_motion
+from skeleton_mamba.tasks.motion.io.safe_pickle import MAX_PICKLE_OBJECT_BYTES, safe_loads_pickle
+from skeleton_mamba.tasks.motion.io.value_checks import MAX_NPZ_MEMBER_BYTES, load_npz
 from skeleton_mamba.tasks.recognition.kinetics import read_kinetics_clip, read_kinetics_labels
 
 MEMORY_LIMIT = 3 << 30  # bytes of address space for the `sm` subprocess (each bomb claims 6 GB or more)
@@ -126,7 +126,7 @@ def test_pickle_bounds_admit_real_data_in_every_protocol():
 
 
 def test_pickle_object_bound_is_exact(monkeypatch):
-    from skeleton_mamba.tasks.motion import safe_pickle
+    from skeleton_mamba.tasks.motion.io import safe_pickle
 
     monkeypatch.setattr(safe_pickle, "MAX_PICKLE_OBJECT_BYTES", 16)
     assert safe_loads_pickle(pickle.dumps(b"x" * 16, protocol=3)) == b"x" * 16  # protocol 3: no frames

@@ -20,7 +20,7 @@ import torch
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.output_folder import MANIFEST, claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.io.output_folder import MANIFEST, claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.cli import main as sm
 
 MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)
@@ -148,7 +148,7 @@ def test_every_folder_command_refuses_a_users_folder_before_any_work(
 def test_sm_export_does_not_replace_a_wav_beside_the_glb(tmp_path, capsys):
     from test_gltf import _smpl_motion
 
-    from skeleton_mamba.tasks.motion.motion_file import save_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 
     save_motion(tmp_path / "m.npz", _smpl_motion(4))

@@ -18,9 +18,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from skeleton_mamba.errors import DataFileError
-from skeleton_mamba.tasks.motion.bvh import load_bvh
-from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, read_features
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.formats.bvh import load_bvh
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FEATURE_DIM, read_features
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.kinetics import NUM_JOINTS as KINETICS_JOINTS
 from skeleton_mamba.tasks.recognition.kinetics import read_kinetics_clip
 

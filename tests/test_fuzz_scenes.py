@@ -19,7 +19,7 @@ from skeleton_mamba.tasks.egodance.builder.scene_check import (
     SceneFileError,
     check_scene_file,
 )
-from skeleton_mamba.tasks.motion.motion_file import save_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.training.cli import main as sm
 

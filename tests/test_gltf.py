@@ -13,14 +13,14 @@ import torch
 from conftest import shared_file
 from gltf_reader import accessor, assert_khronos_valid, glb_joint_positions
 
-from skeleton_mamba.tasks.motion.bvh import load_bvh, save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.export_cli import main as export_main
-from skeleton_mamba.tasks.motion.gltf import from_joints, from_motion_data, write_glb
-from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.motion_reader import load_joints, load_skeleton_motion
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.commands.export_cli import main as export_main
+from skeleton_mamba.tasks.motion.formats.bvh import load_bvh, save_bvh, smpl_to_bvh
+from skeleton_mamba.tasks.motion.formats.gltf import from_joints, from_motion_data, write_glb
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import read_statistics
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints, load_skeleton_motion
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.text2motion.convert_cli import convert_file
 from skeleton_mamba.tasks.training.cli import main as sm_main
 

@@ -11,12 +11,12 @@ import torch
 from conftest import shared_file
 from gltf_reader import glb_joint_positions
 
-from skeleton_mamba.tasks.motion.gltf import from_joints, from_motion_data, write_glb
-from skeleton_mamba.tasks.motion.gltf_read import GltfError, read_glb
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.motion_reader import load_joints
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.formats.gltf import from_joints, from_motion_data, write_glb
+from skeleton_mamba.tasks.motion.formats.gltf_read import GltfError, read_glb
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
 

@@ -10,9 +10,9 @@ from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.errors import DatasetNotFoundError, InputError
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.motion import humanml3d_features as F
-from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
-from skeleton_mamba.tasks.motion.render import RenderStyle, render_motion
+from skeleton_mamba.tasks.motion.formats import humanml3d_features as F
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import read_statistics
+from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle, render_motion
 from skeleton_mamba.tasks.text2motion.convert_cli import main as convert_main
 from skeleton_mamba.tasks.text2motion.humanml3d import (
     crop_length,

@@ -62,7 +62,7 @@ def test_the_contracts_fail_on_a_wrong_way_import(installed_layout, tmp_path):
     """A toolkit module importing a task, and one task importing another, each break a contract."""
     broken = tmp_path / "broken"
     shutil.copytree(installed_layout, broken)
-    toolkit = broken / "skeleton_mamba" / "tasks" / "motion" / "bvh.py"
+    toolkit = broken / "skeleton_mamba" / "tasks" / "motion" / "formats" / "bvh.py"
     toolkit.write_text(toolkit.read_text() + "\nimport skeleton_mamba.tasks.qean.model  # noqa\n")
     task = broken / "skeleton_mamba" / "tasks" / "stream" / "model.py"
     task.write_text(task.read_text() + "\nimport skeleton_mamba.tasks.egodance.model  # noqa\n")
@@ -72,7 +72,7 @@ def test_the_contracts_fail_on_a_wrong_way_import(installed_layout, tmp_path):
     assert proc.returncode != 0
     assert "Contracts: 0 kept, 2 broken." in proc.stdout, proc.stdout[-4000:]
     for edge in (
-        "skeleton_mamba.tasks.motion.bvh -> skeleton_mamba.tasks.qean.model",
+        "skeleton_mamba.tasks.motion.formats.bvh -> skeleton_mamba.tasks.qean.model",
         "skeleton_mamba.tasks.stream.model -> skeleton_mamba.tasks.egodance.model",
         "skeleton_mamba.mixer -> numpy",
     ):

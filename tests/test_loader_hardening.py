@@ -11,14 +11,19 @@ from conftest import shared_file
 from test_bvh import HAND_BVH
 
 from skeleton_mamba.errors import DataFileError
-from skeleton_mamba.tasks.motion.aistpp import load_aistpp_motion
-from skeleton_mamba.tasks.motion.bvh import BvhError, load_bvh
-from skeleton_mamba.tasks.motion.humanml3d_features import NonFiniteFeaturesError, read_features
-from skeleton_mamba.tasks.motion.motion_file import MotionData, MotionFileError, load_motion, save_motion
-from skeleton_mamba.tasks.motion.music import load_audio
-from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, read_skeleton_file
-from skeleton_mamba.tasks.motion.render import render_motion
-from skeleton_mamba.tasks.motion.value_checks import check_fps, load_npy, non_finite_message
+from skeleton_mamba.tasks.motion.formats.aistpp import load_aistpp_motion
+from skeleton_mamba.tasks.motion.formats.bvh import BvhError, load_bvh
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import NonFiniteFeaturesError, read_features
+from skeleton_mamba.tasks.motion.formats.motion_file import (
+    MotionData,
+    MotionFileError,
+    load_motion,
+    save_motion,
+)
+from skeleton_mamba.tasks.motion.formats.ntu import SkeletonFileError, read_skeleton_file
+from skeleton_mamba.tasks.motion.io.value_checks import check_fps, load_npy, non_finite_message
+from skeleton_mamba.tasks.motion.music.features import load_audio
+from skeleton_mamba.tasks.motion.render.skeleton import render_motion
 from skeleton_mamba.tasks.recognition.kinetics import KineticsFileError, read_kinetics_clip
 from skeleton_mamba.tasks.recognition.pyskl import AnnotationFileError, save_annotations
 from skeleton_mamba.tasks.text2motion.humanml3d import load_clips
@@ -267,7 +272,7 @@ def test_audio_with_nan_samples_is_refused_with_the_time(tmp_path):
 
 
 def test_humanml3d_statistics_must_be_finite_and_std_positive(tmp_path):
-    from skeleton_mamba.tasks.motion.humanml3d_features import read_statistics
+    from skeleton_mamba.tasks.motion.formats.humanml3d_features import read_statistics
 
     np.save(tmp_path / "Mean.npy", np.zeros(263, np.float32))
     std = np.ones(263, np.float32)

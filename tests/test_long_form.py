@@ -13,9 +13,9 @@ import torch
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames, head_heading, head_rotation
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, ROOT, encode_motion
-from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
-from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
+from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.smpl import smpl_rest_offsets
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, WindowConsistency, sample_long
 from skeleton_mamba.tasks.training.diffusion.samplers import ddim_sample, ddpm_sample
 from skeleton_mamba.tasks.training.diffusion.stitching import stitch_windows

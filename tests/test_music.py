@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from skeleton_mamba.tasks.motion import music
-from skeleton_mamba.tasks.motion.analyze_music import main as analyze_main
-from skeleton_mamba.tasks.motion.cache import FeatureCache
-from skeleton_mamba.tasks.motion.music import (
+from skeleton_mamba.tasks.motion.commands.analyze_music import main as analyze_main
+from skeleton_mamba.tasks.motion.io.cache import FeatureCache
+from skeleton_mamba.tasks.motion.music import features as music
+from skeleton_mamba.tasks.motion.music.features import (
     BEAT,
     CHROMA,
     ENVELOPE,

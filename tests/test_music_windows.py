@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from conftest import SHARED_DATA
 
-from skeleton_mamba.tasks.motion import music_windows
-from skeleton_mamba.tasks.motion.music import (
+from skeleton_mamba.tasks.motion.music import music_windows
+from skeleton_mamba.tasks.motion.music.features import (
     BEAT,
     HOP_LENGTH,
     extract_music_features,

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
+from skeleton_mamba.tasks.motion.formats.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
 from skeleton_mamba.tasks.recognition.splits import (
     benchmark_splits,
     in_dataset,

@@ -12,7 +12,7 @@ import threading
 import numpy as np
 import pytest
 
-from skeleton_mamba.tasks.motion import jit_lock
+from skeleton_mamba.tasks.motion.music import jit_lock
 from skeleton_mamba.tasks.motion.synthetic import synthesize_music
 from skeleton_mamba.tasks.motion.synthetic.music import write_music
 

@@ -17,7 +17,7 @@ import pytest
 from test_egobuilder_resume import _motion
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.output_folder import (
+from skeleton_mamba.tasks.motion.io.output_folder import (
     MANIFEST,
     claim_output_folder,
     output_key,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_ntu import as_written, body_motion, write_skeleton
 
-from skeleton_mamba.tasks.motion.safe_pickle import UnsafePickleError
+from skeleton_mamba.tasks.motion.io.safe_pickle import UnsafePickleError
 from skeleton_mamba.tasks.recognition.pyskl import AnnotationFileError, load_annotations, save_annotations
 from skeleton_mamba.tasks.training.cli import main as sm_main
 

@@ -337,7 +337,7 @@ def test_sm_dance_from_the_folder_and_from_a_hub_id_equals_the_checkpoint(
 ):
     import huggingface_hub.constants
 
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 
     tmp, _, ckpt, wav = dance_inputs
     # the folder as a Hub repository in a cache, read offline (HF_HUB_OFFLINE=1 in this process)
@@ -356,7 +356,7 @@ def test_sm_dance_from_the_folder_and_from_a_hub_id_equals_the_checkpoint(
 
 
 def test_sm_stream_from_an_exported_folder_equals_the_checkpoint(tmp_path):
-    from skeleton_mamba.tasks.motion.motion_file import load_motion
+    from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
     from skeleton_mamba.tasks.stream.module import StreamDanceModule
 

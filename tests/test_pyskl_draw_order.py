@@ -22,7 +22,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.data import RecognitionDataModule, SyntheticRecognitionDataModule
 from skeleton_mamba.tasks.recognition.transforms import (
     SkeletonPipeline,

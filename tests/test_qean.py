@@ -12,7 +12,7 @@ from scipy.linalg import polar
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.fact_features import (
+from skeleton_mamba.tasks.motion.formats.fact_features import (
     features_to_joints,
     features_to_smpl,
     nearest_rotation,

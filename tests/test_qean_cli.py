@@ -13,8 +13,8 @@ from gltf_reader import glb_joint_positions
 from lightning.pytorch import Trainer
 
 from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
-from skeleton_mamba.tasks.motion.fact_features import smpl_to_features
-from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.formats.fact_features import smpl_to_features
+from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
 from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule
@@ -106,7 +106,7 @@ def test_test_splits_come_from_the_annotations_val_plus_test(aistpp, tmp_path):
     assert dm.test_splits == ["val", "test"]  # default: [QEAN]'s 40 = crossmodal val + test
     with pytest.raises(FileNotFoundError, match="crossmodal_val.txt"):
         dm.split_names("val")
-    packaged = files("skeleton_mamba.tasks.motion") / "aistpp_splits" / "crossmodal_test.txt"
+    packaged = files("skeleton_mamba.tasks.motion.formats") / "aistpp_splits" / "crossmodal_test.txt"
     lines = [n for n in packaged.read_text().split() if n.startswith("g")]  # the file's own text
     assert dm.split_names("test") == lines and len(lines) == 20 and "gLH_sBM_cAll_d17_mLH4_ch02" in lines
     (root / "splits" / "crossmodal_val.txt").write_text(f"# val\n{NAMES[0]}\n")

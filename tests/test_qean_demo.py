@@ -15,8 +15,8 @@ import torch
 import torch.nn.functional as F
 import yaml
 
-from skeleton_mamba.tasks.motion.fact_features import features_to_joints
-from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.formats.fact_features import features_to_joints
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
 from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule

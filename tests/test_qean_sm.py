@@ -21,8 +21,8 @@ import pytest
 from retarget_rigs import HUMANOID, MIXAMO, build_rig, read_animated, rest_positions
 from scipy.spatial.transform import Rotation
 
-from skeleton_mamba.tasks.motion.music import extract_music_features
-from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.music.features import extract_music_features
 from skeleton_mamba.tasks.motion.synthetic import synthesize_dance, synthesize_music, write_music
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.lightning_cli import run

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_ntu import STANDING
 
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.transforms import (
     SkeletonPipeline,
     keep_bodies,

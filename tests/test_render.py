@@ -11,17 +11,17 @@ from PIL import Image
 from scipy.io import wavfile
 
 from skeleton_mamba.skeletons import HUMANML3D22, SMPL24
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.motion_reader import load_joints
-from skeleton_mamba.tasks.motion.render import (
+from skeleton_mamba.tasks.motion.body.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.commands.render_cli import main
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, save_motion
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints
+from skeleton_mamba.tasks.motion.render.skeleton import (
     RenderStyle,
     fit_cameras,
     joint_sides,
     render_frames,
     render_motion,
 )
-from skeleton_mamba.tasks.motion.render_cli import main
-from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
 

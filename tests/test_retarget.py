@@ -13,8 +13,8 @@ from retarget_rigs import HUMANOID, MIXAMO, PAIRS, SMPL, build_rig, read_animate
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.motion_reader import load_joints
-from skeleton_mamba.tasks.motion.retarget_cli import main as retarget_main
+from skeleton_mamba.tasks.motion.commands.retarget_cli import main as retarget_main
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -217,8 +217,8 @@ def test_cmu_walk_onto_vrm(tmp_path):
 
 @pytest.mark.skipif(not CMU.is_file(), reason=f"no CMU BVH at {CMU} (the shared data folder)")
 def test_bvh_rig(dance, tmp_path):
-    from skeleton_mamba.tasks.motion.bvh import load_bvh
-    from skeleton_mamba.tasks.motion.units import choose_scale
+    from skeleton_mamba.tasks.motion.formats.bvh import load_bvh
+    from skeleton_mamba.tasks.motion.formats.units import choose_scale
 
     out = tmp_path / "cmu_dance.bvh"
     assert retarget_main([str(dance), "--rig", str(CMU), "--out", str(out)]) == 0

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from retarget_rigs import HUMANOID, MIXAMO, build_rig, read_animated, rest_positions
 
-from skeleton_mamba.tasks.motion.bvh import load_bvh
-from skeleton_mamba.tasks.motion.retarget_cli import main as retarget_main
+from skeleton_mamba.tasks.motion.commands.retarget_cli import main as retarget_main
+from skeleton_mamba.tasks.motion.formats.bvh import load_bvh
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance
 
 pytestmark = [

@@ -16,9 +16,9 @@ from checkpoint_files import save_module_checkpoint, tiny_stream_checkpoint
 from retarget_rigs import HUMANOID, MIXAMO, build_rig, read_animated, rest_positions
 
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.motion.bvh import load_bvh, save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.output_folder import verified_outputs
+from skeleton_mamba.tasks.motion.formats.bvh import load_bvh, save_bvh, smpl_to_bvh
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.io.output_folder import verified_outputs
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
@@ -78,7 +78,7 @@ def test_sm_export_writes_the_motion_on_a_gltf_and_a_bvh_rig(dance, rigs, tmp_pa
 
 
 def test_sm_export_refuses_a_bad_rig_before_reading_the_motion(dance, rigs, tmp_path, capsys, monkeypatch):
-    import skeleton_mamba.tasks.motion.export_cli as export_cli
+    import skeleton_mamba.tasks.motion.commands.export_cli as export_cli
 
     def never(*args, **kwargs):
         raise AssertionError("the motion was read before the rig was checked")
@@ -200,8 +200,8 @@ def test_sm_generate_writes_each_motion_on_a_bvh_rig(dance, tmp_path, monkeypatc
 
 def test_generated_joints_on_the_rig(dance, rigs, tmp_path):
     """What ``sm generate --rig`` does with each motion it writes: its (T, 22, 3) joints at 20 fps."""
-    from skeleton_mamba.tasks.motion.humanml3d_features import FPS
-    from skeleton_mamba.tasks.motion.rig_output import prepare_rig
+    from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS
+    from skeleton_mamba.tasks.motion.retarget.rig_output import prepare_rig
 
     class Args:
         rig, map = str(rigs["vrm"]), None
@@ -220,7 +220,7 @@ def test_the_options_module_is_light():
     import sys
 
     code = (
-        "import sys; import skeleton_mamba.tasks.motion.rig_output as r; "
+        "import sys; import skeleton_mamba.tasks.motion.retarget.rig_output as r; "
         "print('pygltflib' in sys.modules, r.rig_file_name('dance', 'A.VRM'))"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -9,8 +9,8 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from skeleton_mamba.tasks.motion import resample
-from skeleton_mamba.tasks.motion import rotations as rot
+from skeleton_mamba.tasks.motion.body import resample
+from skeleton_mamba.tasks.motion.body import rotations as rot
 
 RZ90 = torch.tensor([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
 

@@ -10,8 +10,8 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-from skeleton_mamba.tasks.motion.smpl import (
+from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.body.smpl import (
     SMPL_REST_OFFSETS,
     smpl_forward_kinematics,
     smpl_forward_kinematics_axis_angle,
@@ -90,7 +90,7 @@ def test_random_pose_against_scipy_composition():
 
 
 def test_matrix_and_axis_angle_entry_points_agree_and_batch():
-    from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix
+    from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix
 
     poses = torch.randn(2, 5, 72, generator=torch.Generator().manual_seed(3)) * 0.5
     trans = torch.randn(2, 5, 3)

@@ -13,15 +13,15 @@ import scipy.sparse
 import torch
 
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.safe_pickle import (
+from skeleton_mamba.tasks.motion.body.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.body.smpl_model import SMPLModel, load_smpl_model
+from skeleton_mamba.tasks.motion.io.safe_pickle import (
     ChumpyArray,
     SparseMatrix,
     UnsafePickleError,
     safe_load_pickle,
     safe_loads_pickle,
 )
-from skeleton_mamba.tasks.motion.smpl import SMPL_REST_OFFSETS
-from skeleton_mamba.tasks.motion.smpl_model import SMPLModel, load_smpl_model
 
 # 4 corners of a small tetrahedron around each joint; they sum to zero, so their mean is the joint
 TETRA = 0.02 * np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])

@@ -18,8 +18,8 @@ import pytest
 import soundfile as sf
 import torch
 
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic import synthesize_music, write_music
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.stream.features import HOP, N_FFT, SR, CausalMusicFeatures, music_features

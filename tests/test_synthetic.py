@@ -8,8 +8,8 @@ import soundfile as sf
 import torch
 from scipy.signal import argrelmin
 
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 from skeleton_mamba.tasks.motion.synthetic.dance import STYLES, synthesize_dance
 from skeleton_mamba.tasks.motion.synthetic.music import beat_times, synthesize_music
@@ -26,7 +26,7 @@ def _speed(motion) -> np.ndarray:
 
 
 def test_swing_side_music_fixes_the_side_of_the_two_beat_swing():
-    from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_euler
+    from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_euler
 
     def swing(seed: int, swing_side: str) -> float:
         """Left shoulder's z angle (deg) on beat 0 minus beat 1 of an "arms" dance: 2 * scale * side * 50."""

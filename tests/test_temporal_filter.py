@@ -1,4 +1,5 @@
-"""The normalised Gaussian low-pass over time (tasks/motion/temporal_filter.py) against independent sums."""
+"""The normalised Gaussian low-pass over time (tasks/motion/body/temporal_filter.py) against independent
+sums."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from skeleton_mamba.tasks.motion.temporal_filter import gaussian_kernel, smooth_over_time
+from skeleton_mamba.tasks.motion.body.temporal_filter import gaussian_kernel, smooth_over_time
 
 
 def _reference(x: np.ndarray, sigma: float, valid: np.ndarray, truncate: float = 3.0) -> np.ndarray:

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import group_statistics
 from skeleton_mamba.tasks.text2motion.baseline import TransformerDenoiser
 from skeleton_mamba.tasks.text2motion.data import TextMotionDataset, collate_text_motion
 from skeleton_mamba.tasks.text2motion.generate_cli import parse_length

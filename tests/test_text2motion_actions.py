@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from skeleton_mamba.tasks.motion.humanml3d_features import recover_from_ric
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import recover_from_ric
 from skeleton_mamba.tasks.motion.synthetic.actions import ACTIONS, synthesize_action
 from skeleton_mamba.tasks.text2motion.actions import ACTION_WORDS, CAPTIONS, PARAPHRASES, read_action
 from skeleton_mamba.tasks.text2motion.demo_scores import action_checks, action_scores

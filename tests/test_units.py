@@ -13,10 +13,10 @@ import torch
 from conftest import shared_file
 
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.motion_reader import load_joints, load_skeleton_motion
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics_axis_angle
-from skeleton_mamba.tasks.motion.units import CMU_UNIT_M, choose_scale, detect_scale
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.formats.bvh import save_bvh, smpl_to_bvh
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints, load_skeleton_motion
+from skeleton_mamba.tasks.motion.formats.units import CMU_UNIT_M, choose_scale, detect_scale
 from skeleton_mamba.tasks.training.cli import main as sm_main
 
 

@@ -25,8 +25,8 @@ from skeleton_mamba.tasks.egodance.head_estimator import (
 from skeleton_mamba.tasks.egodance.representation import motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import encode_video
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import extract_music_features
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music.features import extract_music_features
 
 
 def _old_estimate_long_trajectory(estimator, frames, window):

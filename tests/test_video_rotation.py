@@ -22,8 +22,8 @@ from skeleton_mamba.tasks.egodance.video_rotation import (
     head_headings,
     intrinsics_for,
 )
-from skeleton_mamba.tasks.motion.motion_file import save_motion
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.training.diffusion.stitching import WindowConsistency
 

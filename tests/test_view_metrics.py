@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from skeleton_mamba.tasks.motion.view import listed_metrics
+from skeleton_mamba.tasks.motion.render.view import listed_metrics
 
 
 def test_nested_scores_flattened_by_name():

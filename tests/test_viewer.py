@@ -15,9 +15,9 @@ import pytest
 import soundfile as sf
 from browser_page import Page, browser_or_skip
 
-from skeleton_mamba.tasks.motion.gltf import from_motion_data
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.view import write_view
+from skeleton_mamba.tasks.motion.formats.gltf import from_motion_data
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
+from skeleton_mamba.tasks.motion.render.view import write_view
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "viewer.png"
 

@@ -2,12 +2,12 @@
 :mod:`retarget_rigs`).
 
 A VRM 1.0 and a VRM 0.x, each with meaningless node names, are drawn by three-vrm's loader. The per-frame
-plan (:mod:`skeleton_mamba.tasks.motion.retarget_live`) gives every frame of a dance the local
-rotations :func:`~skeleton_mamba.tasks.motion.retarget.retarget` gives the whole clip, and the hips' path
-but for the constant floor lift (a Mixamo-named A-pose with rolled rests, a VRM 1.0 with meaningless names).
-In a real headless Chromium (:mod:`browser_page`): the page loads the character with GLTFLoader, a picked
-music file makes its bones move, every bone's local rotation and the hips' position the page sets equal the
-plan applied in Python to the joints the page shows (float32), the character's skinned vertices are where
+plan (:mod:`skeleton_mamba.tasks.motion.retarget.live`) gives every frame of a dance the local
+rotations :func:`~skeleton_mamba.tasks.motion.retarget.transfer.retarget` gives the whole clip, and the hips'
+path but for the constant floor lift (a Mixamo-named A-pose with rolled rests, a VRM 1.0 with meaningless
+names). In a real headless Chromium (:mod:`browser_page`): the page loads the character with GLTFLoader, a
+picked music file makes its bones move, every bone's local rotation and the hips' position the page sets equal
+the plan applied in Python to the joints the page shows (float32), the character's skinned vertices are where
 those rotations put them (the bone-to-tip directions of the rig equal the dancer's), and the page makes no
 request and logs no error. A BVH rig (no mesh) and a rig without feet are refused in one line before the
 checkpoint is read.
@@ -28,10 +28,10 @@ from scipy.spatial.transform import Rotation
 from test_web_browser import READY, only_local, ort_web_or_skip
 
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.retarget import retarget
-from skeleton_mamba.tasks.motion.retarget_live import apply_live_plan, live_plan
-from skeleton_mamba.tasks.motion.retarget_rig import find_bones, load_rig, separate_torso
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.retarget.live import apply_live_plan, live_plan
+from skeleton_mamba.tasks.motion.retarget.rig import find_bones, load_rig, separate_torso
+from skeleton_mamba.tasks.motion.retarget.transfer import retarget
 from skeleton_mamba.tasks.motion.synthetic import synthesize_music
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance
 from skeleton_mamba.tasks.stream.features import SR, music_features

@@ -33,8 +33,8 @@ from checkpoint_files import tiny_stream_checkpoint
 from conftest import SHARED_DATA
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic import synthesize_music
 from skeleton_mamba.tasks.stream.features import HOP, SR, music_features
 from skeleton_mamba.tasks.stream.model import tokens_to_motion

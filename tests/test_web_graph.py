@@ -16,9 +16,9 @@ from checkpoint_files import tiny_stream_checkpoint
 from conftest import SHARED_DATA
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.fact_features import nearest_rotation
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.formats.fact_features import nearest_rotation
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.stream.features import SR, music_features
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
 from skeleton_mamba.tasks.stream.ort_web import VERSION, read_ort_web

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.tasks.motion.cli_options import (
+from skeleton_mamba.tasks.motion.commands.cli_options import (
     add_precision_argument,
     add_quiet_argument,
     add_sampling_arguments,
     command_parser,
 )
-from skeleton_mamba.tasks.motion.option_types import (
+from skeleton_mamba.tasks.motion.io.option_types import (
     MAX_FRAMES,
     file_name_option,
     image_size_option,
@@ -19,8 +19,8 @@ from skeleton_mamba.tasks.motion.option_types import (
     real_option,
     seed_option,
 )
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
-from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
 
 __all__ = ["DANCE_BF16_ERROR", "DEFAULT_BATCH_WINDOWS", "build_parser", "overlap_problem"]
 

@@ -45,15 +45,19 @@ from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.motion.cli_options import checked_sampling
-from skeleton_mamba.tasks.motion.export import dance_files
+from skeleton_mamba.tasks.motion.commands.cli_options import checked_sampling
+from skeleton_mamba.tasks.motion.formats.export import dance_files
+from skeleton_mamba.tasks.motion.io.output_folder import (
+    claim_output_files,
+    claim_output_folder,
+    writing_outputs,
+)
 from skeleton_mamba.tasks.motion.metrics.beat_align import sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.dynamics import DYNAMICS_METRICS, dynamics_ratios
 from skeleton_mamba.tasks.motion.metrics.pose_distance import mpjpe
-from skeleton_mamba.tasks.motion.music import BEAT
-from skeleton_mamba.tasks.motion.output_folder import claim_output_files, claim_output_folder, writing_outputs
-from skeleton_mamba.tasks.motion.render import RenderStyle
-from skeleton_mamba.tasks.motion.rig_output import prepare_rig, rig_file_names
+from skeleton_mamba.tasks.motion.music.features import BEAT
+from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle
+from skeleton_mamba.tasks.motion.retarget.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.training.diffusion.sampling import SamplingOptions
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
 
@@ -168,7 +172,7 @@ def _output_names(out: str, name: str, render: bool, rig: str | None) -> tuple[P
 
 def claim_dance_output(out: str, name: str, render: bool, overwrite: bool, rig: str | None = None) -> None:
     """``--out DIR``: a folder this command may write into; ``--out FILE.npz``: no file beside it replaced
-    (:mod:`~skeleton_mamba.tasks.motion.output_folder`)."""
+    (:mod:`~skeleton_mamba.tasks.motion.io.output_folder`)."""
     path = Path(out)
     folder, _, names = _output_names(out, name, render, rig)
     if path.suffix.lower() == ".npz":

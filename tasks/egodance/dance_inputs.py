@@ -29,9 +29,9 @@ from skeleton_mamba.tasks.egodance.long_form import LongForm
 from skeleton_mamba.tasks.egodance.sampling import sample_long_dance
 from skeleton_mamba.tasks.egodance.video_features import VideoFeatures, encode_video
 from skeleton_mamba.tasks.egodance.video_rotation import HeadRotationStream, intrinsics_for, scale_intrinsics
-from skeleton_mamba.tasks.motion.audio_io import probe_audio
-from skeleton_mamba.tasks.motion.music import extract_music_features
-from skeleton_mamba.tasks.motion.value_checks import load_npz
+from skeleton_mamba.tasks.motion.io.value_checks import load_npz
+from skeleton_mamba.tasks.motion.music.audio_io import probe_audio
+from skeleton_mamba.tasks.motion.music.features import extract_music_features
 
 __all__ = ["DanceInputs", "sample_inputs", "track_inputs"]
 

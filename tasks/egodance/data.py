@@ -47,14 +47,14 @@ from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix
 from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.egodance.guidance import head_pose_from_camera
 from skeleton_mamba.tasks.egodance.representation import FPS, encode_motion
-from skeleton_mamba.tasks.motion import aistpp
-from skeleton_mamba.tasks.motion.cli_options import progress_default
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.commands.cli_options import progress_default
+from skeleton_mamba.tasks.motion.formats import aistpp
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.io.value_checks import check_finite, load_npz
+from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 from skeleton_mamba.tasks.motion.synthetic.splits import stratified_holdout
-from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npz
 from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, unlinked
 
 __all__ = [

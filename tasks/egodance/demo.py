@@ -38,9 +38,9 @@ from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_
 from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_demo import format_long_scores, long_sample, score_long_dance
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.music import BEAT
-from skeleton_mamba.tasks.motion.view import write_view
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.music.features import BEAT
+from skeleton_mamba.tasks.motion.render.view import write_view
 from skeleton_mamba.tasks.training.demo_callback import DemoCallback
 
 __all__ = ["DanceDemo"]

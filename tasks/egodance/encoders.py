@@ -2,7 +2,7 @@
 
 - :class:`MusicEncoder`: per-frame music features (B, T, L) -> Linear -> 2 Transformer encoder layers ->
   (B, T, Dc). The supplement uses Jukebox (L = 4800); the original code and our default use the 35-d
-  librosa feature at 30 fps (``tasks/motion/music.py``); ``music_dim`` selects either.
+  librosa feature at 30 fps (``tasks/motion/music/features.py``); ``music_dim`` selects either.
 - :class:`VisionEncoder`: egocentric frames (B, T, 3, H, W) -> kornia resize + ImageNet normalisation ->
   ResNet (``transformers.ResNetModel``; pretrained from a Hugging Face id such as ``microsoft/resnet-50``
   or a local folder (:func:`load_resnet`), else random init with a warning) -> pooled feature -> MLP ->
@@ -26,8 +26,8 @@ from transformers import ResNetConfig, ResNetModel
 from skeleton_mamba.errors import RandomWeightsWarning
 from skeleton_mamba.pretrained_checks import building_on_meta
 from skeleton_mamba.tasks.egodance.frames import resize_frames
-from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
-from skeleton_mamba.tasks.motion.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 
 __all__ = [

@@ -17,7 +17,7 @@ from torchmetrics import MeanMetric
 
 from skeleton_mamba.tasks.egodance.representation import FPS, HEAD_JOINT
 from skeleton_mamba.tasks.motion.metrics.mmv import MMV, visual_beats
-from skeleton_mamba.tasks.motion.music import BEAT
+from skeleton_mamba.tasks.motion.music.features import BEAT
 
 __all__ = ["DanceMetrics", "video_beats"]
 

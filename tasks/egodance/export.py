@@ -11,8 +11,8 @@ import torch
 
 from skeleton_mamba.tasks.egodance.representation import FPS
 from skeleton_mamba.tasks.egodance.sampling import tokens_to_motion
-from skeleton_mamba.tasks.motion.export import DanceFiles, write_motion
-from skeleton_mamba.tasks.motion.render import RenderStyle
+from skeleton_mamba.tasks.motion.formats.export import DanceFiles, write_motion
+from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle
 
 __all__ = ["write_dance"]
 
@@ -35,7 +35,7 @@ def write_dance(
         tokens: the sampled dance (:mod:`.representation`).
         fps: frame rate of the dance.
 
-    The others as :func:`~skeleton_mamba.tasks.motion.export.write_motion`.
+    The others as :func:`~skeleton_mamba.tasks.motion.formats.export.write_motion`.
     """
     return write_motion(
         tokens_to_motion(tokens, fps), out_dir, name, music, music_start_s, render, style, title, progress

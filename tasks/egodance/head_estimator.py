@@ -45,7 +45,7 @@ import torch
 from torch import nn
 
 from skeleton_mamba.tasks.egodance.frames import resize_frames
-from skeleton_mamba.tasks.motion.rotations import rotation_6d_to_matrix
+from skeleton_mamba.tasks.motion.body.rotations import rotation_6d_to_matrix
 
 __all__ = [
     "HeadEstimatorConfig",

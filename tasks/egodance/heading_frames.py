@@ -21,7 +21,7 @@ from __future__ import annotations
 import torch
 
 from skeleton_mamba.tasks.egodance.representation import HEAD_JOINT, ROOT, ROT
-from skeleton_mamba.tasks.motion.rotations import rotation_6d_to_matrix
+from skeleton_mamba.tasks.motion.body.rotations import rotation_6d_to_matrix
 
 Signal = torch.Tensor | float  # a noisy sample's sqrt(alpha_bar): a number or one per window
 

@@ -32,9 +32,9 @@ from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.heading_frames import head_rotation, relative_headings
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
-from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES
-from skeleton_mamba.tasks.motion.statistics import channel_statistics
-from skeleton_mamba.tasks.motion.temporal_filter import smooth_over_time
+from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.body.temporal_filter import smooth_over_time
+from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0
@@ -65,7 +65,7 @@ class EMMConfig:
             demo's one-block EMM, 200 steps, reached the same x0 error with and without the condition.
             Added per frame, the condition is aligned by construction and the Temporal Scan sees the beats.
         output_smoothing: sigma (frames) of a Gaussian low-pass over time applied to the denoiser's x0
-            (:func:`~skeleton_mamba.tasks.motion.temporal_filter.smooth_over_time`), in training and
+            (:func:`~skeleton_mamba.tasks.motion.body.temporal_filter.smooth_over_time`), in training and
             sampling alike (ours; 0: off, [EgoMusic]). A network trained for a few hundred steps has not
             learned that dance is smooth: its x0 carries 4-15 Hz frame-to-frame trembling, from the noise
             of x_t passed on by the skip connection and from the per-frame condition. The filter makes every

@@ -51,7 +51,7 @@ from skeleton_mamba.tasks.egodance.representation import FPS, motion_joints
 from skeleton_mamba.tasks.egodance.sampling import sample_dance, sample_long_dance
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
-from skeleton_mamba.tasks.motion.music import record_audio_stack
+from skeleton_mamba.tasks.motion.music.features import record_audio_stack
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
 from skeleton_mamba.tasks.training.base_module import BackboneModule
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, SamplingOptions

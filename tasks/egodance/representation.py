@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import torch
 
-from skeleton_mamba.tasks.motion.rotations import (
+from skeleton_mamba.tasks.motion.body.rotations import (
     axis_angle_to_matrix,
     matrix_to_rotation_6d,
     rotation_6d_to_matrix,
 )
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics
 
 __all__ = [
     "FPS",

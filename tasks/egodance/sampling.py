@@ -24,8 +24,8 @@ from skeleton_mamba.tasks.egodance.representation import (
     decode_motion,
     motion_joints,
 )
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.rotations import matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.rotations import matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
 from skeleton_mamba.tasks.training.diffusion import GaussianDiffusion, sample, sample_long
 from skeleton_mamba.tasks.training.diffusion.stitching import split_windows, window_starts
 

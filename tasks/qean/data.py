@@ -50,11 +50,11 @@ from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
 from skeleton_mamba.errors import DataFileError, DatasetNotFoundError, InputError
-from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
-from skeleton_mamba.tasks.motion.cli_options import progress_default
-from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, motion_to_features
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.music import NUM_MUSIC_FEATURES, extract_music_features
+from skeleton_mamba.tasks.motion.commands.cli_options import progress_default
+from skeleton_mamba.tasks.motion.formats.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_joints, motion_to_features
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES, extract_music_features
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.qean.generate import pad_music
 from skeleton_mamba.tasks.training.base_data import ContractDataModule, DataContract, unlinked

@@ -25,7 +25,7 @@ import warnings
 
 from lightning.pytorch import LightningModule, Trainer
 
-from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints
+from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_joints
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,

@@ -30,12 +30,12 @@ import torch.nn.functional as F
 from lightning.pytorch.utilities import rank_zero_info
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.export import write_motion
-from skeleton_mamba.tasks.motion.fact_features import FPS, features_to_joints, features_to_smpl
+from skeleton_mamba.tasks.motion.formats.export import write_motion
+from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_joints, features_to_smpl
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.music import BEAT, describe_audio_stack, record_audio_stack
+from skeleton_mamba.tasks.motion.music.features import BEAT, describe_audio_stack, record_audio_stack
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config

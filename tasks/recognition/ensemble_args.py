@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 
-from skeleton_mamba.tasks.motion.cli_options import command_parser
-from skeleton_mamba.tasks.motion.option_types import real_option
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
+from skeleton_mamba.tasks.motion.io.option_types import real_option
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
 
 __all__ = ["EXAMPLES", "build_parser"]
 

@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from skeleton_mamba.tasks.motion.cache import default_cache_root
-from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.io.cache import default_cache_root
+from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.recognition.pyskl import (
     AnnotationFileError,
     check_structure,

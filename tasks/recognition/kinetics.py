@@ -31,7 +31,7 @@ import numpy as np
 
 from skeleton_mamba.bounded_read import MAX_INT_DIGITS, read_json
 from skeleton_mamba.errors import DataFileError
-from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.motion.io.value_checks import check_finite
 
 __all__ = [
     "MAX_INT_DIGITS",

@@ -29,9 +29,9 @@ from skeleton_mamba.atomic import atomic_open, atomic_path
 from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.ssd.precision import inference_precision
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
-from skeleton_mamba.tasks.motion.value_checks import load_npy
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.io.value_checks import load_npy
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer, pool_bodies
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.recognition.online_args import build_parser

@@ -35,9 +35,13 @@ from pathlib import Path
 from tqdm import tqdm
 
 from skeleton_mamba.errors import SkeletonMambaError, worker_ignores_ctrl_c
-from skeleton_mamba.tasks.motion.cli_options import SmHelpFormatter, add_quiet_argument, command_parser
-from skeleton_mamba.tasks.motion.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
-from skeleton_mamba.tasks.motion.option_types import MAX_WORKERS, int_option
+from skeleton_mamba.tasks.motion.commands.cli_options import (
+    SmHelpFormatter,
+    add_quiet_argument,
+    command_parser,
+)
+from skeleton_mamba.tasks.motion.formats.ntu import SkeletonFileError, parse_ntu_name, read_skeleton_file
+from skeleton_mamba.tasks.motion.io.option_types import MAX_WORKERS, int_option
 from skeleton_mamba.tasks.recognition.kinetics import (
     KineticsFileError,
     read_kinetics_clip,

@@ -4,7 +4,7 @@ A pickle holding ``{"split": {name: [frame_dir, ...]}, "annotations": [annotatio
 annotation has ``frame_dir`` (str), ``label`` (0-based int), ``keypoint`` (M, T, V, C) with C = 3 for 3D
 or 2 for 2D, ``total_frames`` (= T) and, for 2D data, ``keypoint_score`` (M, T, V); other keys
 (``img_shape``, ``original_shape``, ...) are kept as they are. Files from outside are read with the
-restricted unpickler of :mod:`skeleton_mamba.tasks.motion.safe_pickle`, never plain ``pickle.load``.
+restricted unpickler of :mod:`skeleton_mamba.tasks.motion.io.safe_pickle`, never plain ``pickle.load``.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import numpy as np
 
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import DataFileError
-from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
-from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.io.value_checks import check_finite
 
 __all__ = [
     "AnnotationFileError",
@@ -162,7 +162,7 @@ def load_annotations(path: str | PathLike[str]) -> dict:
 
     Raises:
         FileNotFoundError: no such file.
-        skeleton_mamba.tasks.motion.safe_pickle.UnsafePickleError: the pickle names a global other than
+        skeleton_mamba.tasks.motion.io.safe_pickle.UnsafePickleError: the pickle names a global other than
             numpy arrays and plain Python values (nothing in it is run), or is not a pickle.
         AnnotationFileError: the structure is not PYSKL's (see :func:`validate_annotations`).
     """

@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from functools import cache
 from importlib.resources import files
 
-from skeleton_mamba.tasks.motion.ntu import parse_ntu_name
+from skeleton_mamba.tasks.motion.formats.ntu import parse_ntu_name
 
 __all__ = [
     "DATASETS",

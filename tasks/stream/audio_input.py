@@ -1,7 +1,8 @@
 """Music as it arrives: chunks of mono float32 samples from a file or standard input.
 
-* a path: any format the one audio reader opens (:func:`~skeleton_mamba.tasks.motion.audio_io.open_audio`:
-  wav, flac, ogg, mp3), checked and read block by block;
+* a path: any format the one audio reader opens
+  (:func:`~skeleton_mamba.tasks.motion.music.audio_io.open_audio`: wav, flac, ogg, mp3), checked and read
+  block by block;
 * ``-`` : a WAV stream on standard input (PCM 8/16/24/32-bit or float, 1 to 8 channels, any rate in the
   reader's bounds), read as it comes (the RIFF header is parsed sequentially, so a pipe works);
 * ``-`` with ``raw_rate``: headerless signed 16-bit little-endian mono PCM at ``raw_rate`` Hz.
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.audio_io import (
+from skeleton_mamba.tasks.motion.music.audio_io import (
     MAX_DURATION_S,
     AudioFileError,
     AudioReader,

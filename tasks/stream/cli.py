@@ -37,10 +37,10 @@ from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.ssd.precision import inference_precision
-from skeleton_mamba.tasks.motion.export import dance_files, write_motion
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
-from skeleton_mamba.tasks.motion.render import RenderStyle
-from skeleton_mamba.tasks.motion.rig_output import RigOutput, prepare_rig, rig_file_names
+from skeleton_mamba.tasks.motion.formats.export import dance_files, write_motion
+from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle
+from skeleton_mamba.tasks.motion.retarget.rig_output import RigOutput, prepare_rig, rig_file_names
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.stream.cli_args import build_parser
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.tasks.motion.cli_options import add_precision_argument, command_parser
-from skeleton_mamba.tasks.motion.option_types import (
+from skeleton_mamba.tasks.motion.commands.cli_options import add_precision_argument, command_parser
+from skeleton_mamba.tasks.motion.io.option_types import (
     MAX_WORKERS,
     file_name_option,
     image_size_option,
     int_option,
     real_option,
 )
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
-from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
 from skeleton_mamba.tasks.training.threads import THREADS_HELP
 
 __all__ = ["STREAM_BF16_ERROR", "build_parser"]

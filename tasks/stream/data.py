@@ -23,9 +23,9 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
-from skeleton_mamba.tasks.motion.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
-from skeleton_mamba.tasks.motion.audio_io import probe_audio
-from skeleton_mamba.tasks.motion.music import load_audio
+from skeleton_mamba.tasks.motion.formats.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
+from skeleton_mamba.tasks.motion.music.audio_io import probe_audio
+from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens

@@ -13,7 +13,7 @@ frame, fed its own previous pose (no teacher forcing, no look-ahead). It writes 
   random training sequence (:mod:`~skeleton_mamba.tasks.motion.metrics.held_out_dynamics`), with
   ``checks`` against the targets. The same table is printed;
 - ``view.html``: the first dance beside its ground truth, with the music, in a browser
-  (:mod:`~skeleton_mamba.tasks.motion.view`; its path is printed).
+  (:mod:`~skeleton_mamba.tasks.motion.render.view`; its path is printed).
 
 Everything is labelled synthetic: the demo set is procedural dances and synthesised drum tracks.
 """
@@ -25,8 +25,8 @@ import warnings
 import torch
 from lightning.pytorch import LightningModule, Trainer
 
-from skeleton_mamba.tasks.motion.aistpp import music_id
-from skeleton_mamba.tasks.motion.fact_features import features_to_joints
+from skeleton_mamba.tasks.motion.formats.aistpp import music_id
+from skeleton_mamba.tasks.motion.formats.fact_features import features_to_joints
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,

@@ -1,6 +1,6 @@
 """Causal music features for live music-to-dance: frame t uses audio up to the end of frame t only.
 
-The offline 35-d FACT / EDGE feature (``tasks.motion.music``) looks ahead: centred STFT frames,
+The offline 35-d FACT / EDGE feature (``tasks.motion.music.features``) looks ahead: centred STFT frames,
 ``chroma_cens`` smoothing, and beat tracking over the whole track. Here every frame is computed from
 one window that *ends* at the frame's last sample, and nothing else:
 
@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 import soxr
 
-from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
+from skeleton_mamba.tasks.motion.music.jit_lock import librosa_calls
 
 __all__ = ["FPS", "HOP", "N_FFT", "NUM_FEATURES", "SR", "CausalMusicFeatures", "music_features"]
 

@@ -29,9 +29,13 @@ from torch import nn
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
 from skeleton_mamba.streaming import StreamState
-from skeleton_mamba.tasks.motion.fact_features import features_to_joints, features_to_smpl, motion_to_features
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.formats.fact_features import (
+    features_to_joints,
+    features_to_smpl,
+    motion_to_features,
+)
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
 from skeleton_mamba.tasks.stream.features import FPS, NUM_FEATURES
 from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.causal_smoothing import CausalSmoothing

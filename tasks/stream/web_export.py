@@ -7,8 +7,8 @@ and makes no network request, with the licences of what it embeds beside it:
   one 512-sample hop at 15360 Hz, the dancer's step, the joints) as one ONNX graph, base64;
 - onnxruntime-web's wasm-only ES module and its wasm binary (:mod:`.ort_web`; the binary handed to it as
   ``env.wasm.wasmBinary``, so nothing is fetched), ``LICENSE-onnxruntime-web.txt``;
-- three.js r170 and its OrbitControls as ``sm view`` embeds them (:mod:`skeleton_mamba.tasks.motion.viewer`),
-  ``LICENSE-three.txt``.
+- three.js r170 and its OrbitControls as ``sm view`` embeds them
+  (:mod:`skeleton_mamba.tasks.motion.render.viewer`), ``LICENSE-three.txt``.
 
 The page (``web/dancer.html``) dances to a picked music file as it plays (decoded and resampled to 15360 Hz
 by the browser) or to the microphone (an AudioWorklet at 15360 Hz), steps the graph once per hop with its
@@ -38,10 +38,10 @@ import torch
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
 from skeleton_mamba.skeletons import SMPL24
-from skeleton_mamba.tasks.motion.character import CHARACTER_SUFFIXES
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
-from skeleton_mamba.tasks.motion.rig_output import RigOutput, prepare_rig
-from skeleton_mamba.tasks.motion.view import script_json, three_modules
+from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.render.character import CHARACTER_SUFFIXES
+from skeleton_mamba.tasks.motion.render.view import script_json, three_modules
+from skeleton_mamba.tasks.motion.retarget.rig_output import RigOutput, prepare_rig
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
@@ -74,11 +74,11 @@ def export_web_graph(dancer: StreamDancer, path: Path) -> tuple[dict[str, list[i
 
 def avatar_plan(rig: RigOutput) -> dict:
     """The plan by which the page drives ``rig`` from the dancer's SMPL-24 joints
-    (:func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`, from SMPL's rest pose, feet on the
+    (:func:`~skeleton_mamba.tasks.motion.retarget.live.live_plan`, from SMPL's rest pose, feet on the
     floor)."""
-    from skeleton_mamba.tasks.motion.retarget_live import live_plan  # lazy: with --rig only
-    from skeleton_mamba.tasks.motion.retarget_rig import find_bones, separate_torso  # lazy: with --rig only
-    from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics  # lazy: with --rig only
+    from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics  # lazy: with --rig only
+    from skeleton_mamba.tasks.motion.retarget.live import live_plan  # lazy: with --rig only
+    from skeleton_mamba.tasks.motion.retarget.rig import find_bones, separate_torso  # lazy: with --rig only
 
     eye = torch.eye(3, dtype=torch.float64).expand(len(SMPL24.parents), 3, 3)
     rest = smpl_forward_kinematics(eye, torch.zeros(3, dtype=torch.float64)).numpy()
@@ -94,14 +94,14 @@ def write_web_page(
 ) -> tuple[Path, float]:  # fmt: skip
     """Export ``dancer`` and write the page into the (claimed) folder ``out``; the page's path and the
     graph's onnxruntime-vs-eager difference. ``rig``: the character the page's dancer drives (its file
-    embedded, and the plan of :func:`~skeleton_mamba.tasks.motion.retarget_live.live_plan`); ``vrm``:
+    embedded, and the plan of :func:`~skeleton_mamba.tasks.motion.retarget.live.live_plan`); ``vrm``:
     three-vrm, for a VRM character (its licence written beside the page)."""
     out = Path(out)
     with tempfile.TemporaryDirectory() as tmp:
         graph = Path(tmp) / "dancer.onnx"
         shapes, diff = export_web_graph(dancer, graph)
         model = graph.read_bytes()
-    viewer, web = files("skeleton_mamba.tasks.motion.viewer"), files("skeleton_mamba.tasks.stream.web")
+    viewer, web = files("skeleton_mamba.tasks.motion.render.viewer"), files("skeleton_mamba.tasks.stream.web")
     data = {"title": title, "sr": SR, "hop": HOP, "fps": FPS, "parents": list(SMPL24.parents),
             "inputs": shapes, "ort_version": VERSION,
             "avatar": None if rig is None else {**avatar_plan(rig), "vrm": vrm is not None}}  # fmt: skip

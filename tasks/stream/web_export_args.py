@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.tasks.motion.cli_options import command_parser
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
-from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
+from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
 
 __all__ = ["build_parser"]
 

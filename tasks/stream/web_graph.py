@@ -34,8 +34,8 @@ import onnxruntime
 import torch
 from torch import nn
 
-from skeleton_mamba.tasks.motion.jit_lock import librosa_calls
-from skeleton_mamba.tasks.motion.smpl import smpl_forward_kinematics
+from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics
+from skeleton_mamba.tasks.motion.music.jit_lock import librosa_calls
 from skeleton_mamba.tasks.stream.features import HOP, N_FFT, N_MELS, SR, CausalMusicFeatures
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer, tokens_to_features
 from skeleton_mamba.tasks.stream.onnx_graphs import DancerStepGraph
@@ -125,7 +125,8 @@ def polar_rotation(m: torch.Tensor, iterations: int = POLAR_ITERATIONS) -> torch
 
 def nearest_rotation_graph(m: torch.Tensor, squarings: int = SQUARINGS) -> torch.Tensor:
     """The rotation nearest each (..., 3, 3) block, ``U diag(1, 1, det(U V^T)) V^T`` as
-    :func:`~skeleton_mamba.tasks.motion.fact_features.nearest_rotation` takes it by SVD, in ops ONNX has.
+    :func:`~skeleton_mamba.tasks.motion.formats.fact_features.nearest_rotation` takes it by SVD, in ops ONNX
+    has.
 
     The polar factor ``Q = U V^T`` (:func:`polar_rotation`) where ``det M > 0``; else ``Q (I - 2 v v^T)``
     with ``v`` the right singular vector of the smallest singular value: the dominant eigenvector of the

@@ -19,7 +19,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FEATURE_DIM
 from skeleton_mamba.tasks.text2motion.model import TextCondition, timestep_embedding
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
 
 __all__ = ["build_parser"]
 

@@ -1,10 +1,10 @@
 """``sm convert FEATURES.npy --out JOINTS.npy [--normalized --stats DIR]``.
 
 Turns HumanML3D 263-d features (T, 263) into joint positions (T, 22, 3) with
-:func:`~skeleton_mamba.tasks.motion.humanml3d_features.recover_from_ric`. Features written by the dataset
-(``new_joint_vecs``) are de-normalised already; ``--normalized`` first maps ``x * Std + Mean`` with
-``DIR/Mean.npy`` and ``DIR/Std.npy``. The result renders with ``sm render JOINTS.npy --out clip.mp4``
-(22 joints are read as the HumanML3D skeleton at 20 fps).
+:func:`~skeleton_mamba.tasks.motion.formats.humanml3d_features.recover_from_ric`. Features written by the
+dataset (``new_joint_vecs``) are de-normalised already; ``--normalized`` first maps ``x * Std + Mean`` with
+``DIR/Mean.npy`` and ``DIR/Std.npy``. The result renders with ``sm render JOINTS.npy --out clip.mp4`` (22
+joints are read as the HumanML3D skeleton at 20 fps).
 """
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ import torch
 
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError, one_line_message
-from skeleton_mamba.tasks.motion.humanml3d_features import (
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import (
     denormalize,
     read_features,
     read_statistics,
     recover_from_ric,
 )
-from skeleton_mamba.tasks.motion.value_checks import check_finite
+from skeleton_mamba.tasks.motion.io.value_checks import check_finite
 from skeleton_mamba.tasks.text2motion.convert_args import build_parser
 
 __all__ = ["convert_file", "main"]

@@ -20,7 +20,7 @@ import torch
 from torch.utils.data import Dataset
 
 from skeleton_mamba.errors import DatasetNotFoundError
-from skeleton_mamba.tasks.motion.humanml3d_features import group_statistics, read_statistics
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import group_statistics, read_statistics
 from skeleton_mamba.tasks.text2motion.humanml3d import UNIT_LENGTH, MotionClip, crop_length, load_clips
 from skeleton_mamba.tasks.text2motion.synthetic import KINDS, check_kinds, synthetic_clips
 from skeleton_mamba.tasks.training.base_data import DataContract, SplitDataModule, unlinked

@@ -31,14 +31,14 @@ from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.motion.gltf import from_joints
-from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
+from skeleton_mamba.tasks.motion.formats.gltf import from_joints
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,
     held_out_dynamics_checks,
 )
-from skeleton_mamba.tasks.motion.view import write_view
+from skeleton_mamba.tasks.motion.render.view import write_view
 from skeleton_mamba.tasks.text2motion.actions import PARAPHRASES
 from skeleton_mamba.tasks.text2motion.demo_scores import (
     action_checks,

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.tasks.motion.cli_options import add_quiet_argument, add_sampling_arguments, command_parser
-from skeleton_mamba.tasks.motion.option_types import int_option, seed_option
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
-from skeleton_mamba.tasks.motion.rig_output import add_rig_arguments
+from skeleton_mamba.tasks.motion.commands.cli_options import (
+    add_quiet_argument,
+    add_sampling_arguments,
+    command_parser,
+)
+from skeleton_mamba.tasks.motion.io.option_types import int_option, seed_option
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
 
 __all__ = ["build_parser"]
 

@@ -7,7 +7,7 @@ repetition it writes, in ``DIR``:
 - ``NNN_<words>_features.npy``: the de-normalised HumanML3D features (T, 263);
 - ``NNN_<words>.gif`` / ``.mp4`` with ``--render gif|mp4``;
 - ``NNN_<words>_rig.glb`` / ``.vrm`` / ``.bvh`` with ``--rig RIG`` (``--map``): the motion on that character
-  (:mod:`~skeleton_mamba.tasks.motion.rig_output`).
+  (:mod:`~skeleton_mamba.tasks.motion.retarget.rig_output`).
 
 ``--length`` is seconds with an ``s`` suffix (``6s`` = 120 frames) or a frame count (``120``).
 Sampling takes the checkpoint's settings unless ``--sampler ddim|ddpm|dpmpp|unipc``, ``--steps`` (alone on a
@@ -29,13 +29,13 @@ import torch
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import CheckpointError, InputError
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.motion.cli_options import checked_sampling, sampling_overrides
-from skeleton_mamba.tasks.motion.gltf import from_joints, write_glb
-from skeleton_mamba.tasks.motion.humanml3d_features import FPS, recover_from_ric
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
-from skeleton_mamba.tasks.motion.render import render_motion
-from skeleton_mamba.tasks.motion.rig_output import prepare_rig, rig_file_names
-from skeleton_mamba.tasks.motion.value_checks import non_finite_message
+from skeleton_mamba.tasks.motion.commands.cli_options import checked_sampling, sampling_overrides
+from skeleton_mamba.tasks.motion.formats.gltf import from_joints, write_glb
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, recover_from_ric
+from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.io.value_checks import non_finite_message
+from skeleton_mamba.tasks.motion.render.skeleton import render_motion
+from skeleton_mamba.tasks.motion.retarget.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.text2motion.generate_args import build_parser
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.tasks.motion.safe_pickle import safe_load_pickle
-from skeleton_mamba.tasks.motion.value_checks import check_finite, load_npy
+from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
+from skeleton_mamba.tasks.motion.io.value_checks import check_finite, load_npy
 
 __all__ = [
     "POS_ENUMERATOR",

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
-from skeleton_mamba.tasks.motion.humanml3d_features import FPS, NonFiniteFeaturesError, read_features
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, NonFiniteFeaturesError, read_features
 
 __all__ = [
     "Caption",

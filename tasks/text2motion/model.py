@@ -32,8 +32,8 @@ from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.pretrained import PretrainedMixin
-from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, NUM_JOINTS
-from skeleton_mamba.tasks.motion.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FEATURE_DIM, NUM_JOINTS
 from skeleton_mamba.tasks.training.backbone_config import derived_backbone
 from skeleton_mamba.tasks.training.diffusion.embedding import sinusoidal_embedding
 from skeleton_mamba.tasks.training.diffusion.parameterisation import SkipX0

@@ -31,7 +31,7 @@ from pathlib import Path
 import torch
 
 from skeleton_mamba import SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.humanml3d_features import FEATURE_DIM, read_feature_vector
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FEATURE_DIM, read_feature_vector
 from skeleton_mamba.tasks.text2motion.evaluation import T2MEvalConfig, T2MEvaluation
 from skeleton_mamba.tasks.text2motion.evaluation_report import (
     COMPARABLE,

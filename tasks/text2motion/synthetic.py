@@ -6,9 +6,10 @@ with a caption of its style (:data:`DANCE_CAPTIONS`), or, when asked for, one of
 type (:mod:`skeleton_mamba.tasks.motion.synthetic.actions`: walk, turn, jump, squat, kick, wave, run in place;
 drawn with the clip's seed) with a caption of its action (:data:`CAPTIONS`: four wordings each; the demo
 prompts with paraphrases none of them uses). Clips have a random length at 20 fps and are turned into the
-HumanML3D 263-d representation by :func:`~skeleton_mamba.tasks.motion.humanml3d_features.joints_to_features`
-(the SMPL-24 joints 0..21 as the 22 HumanML3D joints, the SMPL local rotations as the 6D rotations). Every
-caption starts with "synthetic:" so generated demo data is never mistaken for HumanML3D.
+HumanML3D 263-d representation by
+:func:`~skeleton_mamba.tasks.motion.formats.humanml3d_features.joints_to_features` (the SMPL-24 joints 0..21
+as the 22 HumanML3D joints, the SMPL local rotations as the 6D rotations). Every caption starts with
+"synthetic:" so generated demo data is never mistaken for HumanML3D.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.motion.humanml3d_features import FPS, NUM_JOINTS, joints_to_features
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_rotation_6d
+from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_rotation_6d
+from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, NUM_JOINTS, joints_to_features
 from skeleton_mamba.tasks.motion.synthetic.actions import ACTIONS, synthesize_action
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.text2motion.actions import CAPTIONS as ACTION_CAPTIONS

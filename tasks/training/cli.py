@@ -8,7 +8,7 @@ entry point), so this module names no task. The registry is read when :func:`mai
 table, not when this module is imported: a plugin that is broken or takes a built-in's name is left out
 with one warning line, and the built-in commands keep working. A command is imported only when it runs,
 and its parser comes from a module that imports no torch (``*_args.py`` beside it, with the shared options of
-:mod:`~skeleton_mamba.tasks.motion.cli_options`): ``sm`` parses the command line with it first, so
+:mod:`~skeleton_mamba.tasks.motion.commands.cli_options`): ``sm`` parses the command line with it first, so
 ``sm --help``, ``sm CMD --help``, a bad argument or a missing input file answer before torch, Lightning or
 a checkpoint loads (``benchmarks/bench_startup.py`` times them).
 Every command shares one error policy:
@@ -47,34 +47,34 @@ MACHINERY_COMMANDS: dict[str, Command] = {
         f"{_PKG}.training.recipes_cli:build_parser",
     ),
     "analyze-music": Command(
-        f"{_PKG}.motion.analyze_music:main",
+        f"{_PKG}.motion.commands.analyze_music:main",
         "tempo, beats and features of a track",
-        f"{_PKG}.motion.analyze_music:build_parser",
+        f"{_PKG}.motion.commands.analyze_music:build_parser",
     ),
     "evaluate-dance": Command(
-        f"{_PKG}.motion.evaluate_dance:main",
+        f"{_PKG}.motion.commands.evaluate_dance:main",
         "dance metrics, paper protocols",
-        f"{_PKG}.motion.evaluate_dance_args:build_parser",
+        f"{_PKG}.motion.commands.evaluate_dance_args:build_parser",
     ),
     "render": Command(
-        f"{_PKG}.motion.render_cli:main",
+        f"{_PKG}.motion.commands.render_cli:main",
         "render a motion file to mp4 / gif",
-        f"{_PKG}.motion.render_args:build_parser",
+        f"{_PKG}.motion.commands.render_args:build_parser",
     ),
     "export": Command(
-        f"{_PKG}.motion.export_cli:main",
+        f"{_PKG}.motion.commands.export_cli:main",
         "write a motion file as glTF 2.0 (.glb)",
-        f"{_PKG}.motion.export_args:build_parser",
+        f"{_PKG}.motion.commands.export_args:build_parser",
     ),
     "retarget": Command(
-        f"{_PKG}.motion.retarget_cli:main",
+        f"{_PKG}.motion.commands.retarget_cli:main",
         "put a motion on your character (skinned glTF, VRM or BVH rig)",
-        f"{_PKG}.motion.retarget_args:build_parser",
+        f"{_PKG}.motion.commands.retarget_args:build_parser",
     ),
     "view": Command(
-        f"{_PKG}.motion.view:main",
+        f"{_PKG}.motion.render.view:main",
         "motions in one self-contained HTML viewer",
-        f"{_PKG}.motion.view_args:build_parser",
+        f"{_PKG}.motion.commands.view_args:build_parser",
     ),
     "export-onnx": Command(
         f"{_PKG}.training.onnx_export:main",

@@ -14,11 +14,11 @@ from typing import Any
 from lightning.pytorch import Callback, Trainer
 
 from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.tasks.motion.export import write_motion
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.motion_reader import load_skeleton_motion
-from skeleton_mamba.tasks.motion.render import RenderStyle
-from skeleton_mamba.tasks.motion.view import write_view
+from skeleton_mamba.tasks.motion.formats.export import write_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_skeleton_motion
+from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle
+from skeleton_mamba.tasks.motion.render.view import write_view
 
 __all__ = ["DemoCallback", "write_summary"]
 
@@ -48,8 +48,8 @@ class DemoCallback(Callback):
         self, out: Path, name: str, wav: Path, motions: Iterable[tuple[str, MotionData, str]]
     ) -> dict[str, Any]:
         """Write each ``(kind, motion, title)`` of the held-out sequence ``name`` as ``<stem>_<kind>`` files
-        in ``out`` with the music ``wav`` (:func:`~skeleton_mamba.tasks.motion.export.write_motion`; the
-        stem is ``name``, prefixed ``synthetic_`` unless it starts so).
+        in ``out`` with the music ``wav`` (:func:`~skeleton_mamba.tasks.motion.formats.export.write_motion`;
+        the stem is ``name``, prefixed ``synthetic_`` unless it starts so).
 
         Returns:
             The sample's record for ``demo.json``: its sequence, music and, per kind, the paths written.

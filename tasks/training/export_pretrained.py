@@ -36,7 +36,7 @@ from skeleton_mamba.pretrained import (
     push_folder_to_hub,
     read_pretrained_config,
 )
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.export_pretrained_args import build_parser
 from skeleton_mamba.tasks.training.pretrained import MODULE_WEIGHTS_NAME, import_project_class, module_record
@@ -90,7 +90,7 @@ def export_pretrained(
     """Write the folder of the checkpoint ``ckpt`` into ``out``; returns ``out``.
 
     ``out`` must be missing, empty or this command's earlier export (its four files and nothing else), unless
-    ``overwrite`` (:func:`~skeleton_mamba.tasks.motion.output_folder.claim_output_folder`).
+    ``overwrite`` (:func:`~skeleton_mamba.tasks.motion.io.output_folder.claim_output_folder`).
 
     Raises:
         CheckpointError: as the checker, or a checkpoint that does not name its module class.

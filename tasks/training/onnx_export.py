@@ -35,7 +35,7 @@ from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.errors import CheckpointError, InputError
 from skeleton_mamba.pretrained import PretrainedError, decode_value
 from skeleton_mamba.pretrained_checks import check_sizes
-from skeleton_mamba.tasks.motion.output_folder import claim_output_folder, writing_outputs
+from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.onnx_export_args import build_parser
 from skeleton_mamba.tasks.training.onnx_graphs import (

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.size_bounds import SIZE_BOUNDS
-from skeleton_mamba.tasks.motion.cli_options import command_parser
-from skeleton_mamba.tasks.motion.option_types import int_option
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
+from skeleton_mamba.tasks.motion.io.option_types import int_option
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
 
 __all__ = ["MAX_EXAMPLE_FRAMES", "PART_HELP", "build_parser"]
 

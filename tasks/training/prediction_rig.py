@@ -1,11 +1,11 @@
 """``sm predict --rig RIG [--map map.yaml]``: every dance ``sm predict`` writes also on the user's character.
 
 The rig is read and its bones mapped when the command line is parsed, before the model, the data or the
-checkpoint are touched (:func:`~skeleton_mamba.tasks.motion.rig_output.prepare_rig`: a bad rig or a missing
-bone is refused in one line). It travels to the task's prediction writers as a trainer callback,
-:class:`PredictionRig`; a writer that has just written ``<stem>.npz`` calls :meth:`PredictionRig.write`
-(found with :meth:`PredictionRig.of`), which writes ``<stem>_rig.glb`` / ``.vrm`` / ``.bvh`` beside it, read
-back from that file as ``sm retarget`` reads it (same frame count and frame rate).
+checkpoint are touched (:func:`~skeleton_mamba.tasks.motion.retarget.rig_output.prepare_rig`: a bad rig or a
+missing bone is refused in one line). It travels to the task's prediction writers as a trainer callback,
+:class:`PredictionRig`; a writer that has just written ``<stem>.npz`` calls :meth:`PredictionRig.write` (found
+with :meth:`PredictionRig.of`), which writes ``<stem>_rig.glb`` / ``.vrm`` / ``.bvh`` beside it, read back
+from that file as ``sm retarget`` reads it (same frame count and frame rate).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from lightning.pytorch import Trainer
 from lightning.pytorch.callbacks import Callback
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.tasks.motion.rig_output import MAP_HELP, RigOutput, prepare_rig
+from skeleton_mamba.tasks.motion.retarget.rig_output import MAP_HELP, RigOutput, prepare_rig
 
 __all__ = ["PredictionRig", "add_prediction_rig_arguments", "prediction_rig_from"]
 

@@ -25,7 +25,7 @@ import lightning.pytorch as pl
 from lightning.pytorch.callbacks import Callback, ProgressBar, RichProgressBar, TQDMProgressBar
 from lightning.pytorch.callbacks.timer import Timer
 
-from skeleton_mamba.tasks.motion.cli_options import progress_default
+from skeleton_mamba.tasks.motion.commands.cli_options import progress_default
 
 __all__ = [
     "EpochTotalRichProgressBar",

@@ -18,8 +18,8 @@ naming the option and the recipes it may come from, instead of a numpy ``ValueEr
 a 728 TiB allocation. Every float is finite (a ``guidance_weight: .nan`` or an ``eta: .inf`` is refused at
 once, not after minutes of training by the demo that samples with it; only a mixer's ``dt_limit`` max may be
 ``inf``), every diffusion sampler named (``sampler``, ``eval_sampler``) is one of
-:data:`~skeleton_mamba.tasks.motion.cli_options.SAMPLERS`, and every sampling step count fits the model's
-``diffusion_steps``.
+:data:`~skeleton_mamba.tasks.motion.commands.cli_options.SAMPLERS`, and every sampling step count fits the
+model's ``diffusion_steps``.
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 
 from skeleton_mamba.errors import InputError
 from skeleton_mamba.size_bounds import SIZE_BOUNDS
-from skeleton_mamba.tasks.motion.cli_options import SAMPLERS, SOLVER_NAMES
-from skeleton_mamba.tasks.motion.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
-from skeleton_mamba.tasks.motion.value_checks import FPS_RANGE
+from skeleton_mamba.tasks.motion.commands.cli_options import SAMPLERS, SOLVER_NAMES
+from skeleton_mamba.tasks.motion.io.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
+from skeleton_mamba.tasks.motion.io.value_checks import FPS_RANGE
 from skeleton_mamba.tasks.training.checkpoints import TRUSTED_CLASS_PREFIXES, trusted_class_prefixes
 
 __all__ = [

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from skeleton_mamba.tasks.motion.cli_options import command_parser
+from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipes, recipe_description
 
 __all__ = ["build_parser", "main"]

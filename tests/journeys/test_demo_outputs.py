@@ -18,8 +18,8 @@ from gltf_reader import glb_joint_positions
 from retarget_rigs import MIXAMO, build_rig, read_animated, rest_positions
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.tasks.motion.motion_file import load_motion
-from skeleton_mamba.tasks.motion.motion_reader import load_joints
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule

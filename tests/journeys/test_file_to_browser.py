@@ -23,8 +23,8 @@ from browser_page import Page, browser_or_skip
 from conftest import SHARED_DATA
 from gltf_reader import glb_joint_positions
 
-from skeleton_mamba.tasks.motion.bvh import save_bvh, smpl_to_bvh
-from skeleton_mamba.tasks.motion.motion_reader import load_joints
+from skeleton_mamba.tasks.motion.formats.bvh import save_bvh, smpl_to_bvh
+from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.training.cli import main as sm_main
 

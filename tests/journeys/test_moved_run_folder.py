@@ -18,7 +18,7 @@ import torch
 
 from skeleton_mamba.tasks.egodance.builder.layout import read_meta
 from skeleton_mamba.tasks.egodance.data import SyntheticEgoDanceDataModule
-from skeleton_mamba.tasks.motion.motion_file import load_motion
+from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 from skeleton_mamba.tasks.training.checkpoints import RELATIVE_PATHS_KEY, CheckedCheckpointIO
 from skeleton_mamba.tasks.training.cli import main as sm_main
 

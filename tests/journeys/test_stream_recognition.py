@@ -13,7 +13,7 @@ import torch
 from checkpoint_files import save_module_checkpoint
 from conftest import shared_file
 
-from skeleton_mamba.tasks.motion.ntu import read_skeleton_file
+from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.recognition.transforms import pre_normalize_3d
 from skeleton_mamba.tasks.training.cli import main as sm_main

@@ -2,7 +2,7 @@
 
 The builder's joints, placement and camera come from the toolkit's offset-table FK, which puts the pelvis
 at the motion's root position. The mesh is posed by the user's SMPL model
-(:mod:`skeleton_mamba.tasks.motion.smpl_model`, mean shape: AIST++ has no betas) and translated so that
+(:mod:`skeleton_mamba.tasks.motion.body.smpl_model`, mean shape: AIST++ has no betas) and translated so that
 its pelvis joint coincides with that root: ``trans = root - J_0`` (the SMPL model adds the rest pelvis
 ``J_0`` to ``trans``; the two skeletons then differ only by the model's slightly different bone lengths).
 
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.motion.smpl_model import SMPLModel, load_smpl_model
+from skeleton_mamba.tasks.motion.body.smpl_model import SMPLModel, load_smpl_model
 
 __all__ = ["PosedBody", "pose_body", "get_body_model"]
 

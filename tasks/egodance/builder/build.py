@@ -54,11 +54,11 @@ from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_ro
 from skeleton_mamba.tasks.egodance.builder.raycast import render_trajectory
 from skeleton_mamba.tasks.egodance.builder.scene import SceneMesh, load_scene
 from skeleton_mamba.tasks.egodance.builder.scene_check import MAX_SCENE_FACES, check_scene_file
-from skeleton_mamba.tasks.motion import aistpp
-from skeleton_mamba.tasks.motion.kinematics import forward_kinematics
-from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion
-from skeleton_mamba.tasks.motion.rotations import axis_angle_to_matrix, matrix_to_axis_angle
-from skeleton_mamba.tasks.motion.smpl import smpl_rest_offsets
+from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
+from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.smpl import smpl_rest_offsets
+from skeleton_mamba.tasks.motion.formats import aistpp
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, load_motion
 
 __all__ = ["BuildConfig", "WindowTask", "plan_windows", "build_window", "run_build", "SCENE_SUFFIXES"]
 

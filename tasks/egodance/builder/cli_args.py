@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from skeleton_mamba.tasks.egodance.builder.config import BuildConfig, default_workers
-from skeleton_mamba.tasks.motion.cli_options import add_quiet_argument, command_parser
-from skeleton_mamba.tasks.motion.option_types import (
+from skeleton_mamba.tasks.motion.commands.cli_options import add_quiet_argument, command_parser
+from skeleton_mamba.tasks.motion.io.option_types import (
     MAX_FRAMES,
     MAX_IMAGE_SIZE,
     MAX_WORKERS,
@@ -15,7 +15,7 @@ from skeleton_mamba.tasks.motion.option_types import (
     real_option,
     seed_option,
 )
-from skeleton_mamba.tasks.motion.output_folder import OVERWRITE_HELP
+from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
 
 __all__ = ["build_parser"]
 

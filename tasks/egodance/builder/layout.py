@@ -12,7 +12,7 @@
       samples/<sample_id>/       ONE COMPLETE SAMPLE (the folder exists only once the sample is complete)
         meta.json                see below
         motion.npz               the placed motion window, our motion format
-                                 (:mod:`skeleton_mamba.tasks.motion.motion_file`): smpl_poses (T, 72),
+                                 (:mod:`skeleton_mamba.tasks.motion.formats.motion_file`): smpl_poses (T, 72),
                                  smpl_trans (T, 3) metres with smpl_scaling 1, fps, skeleton "smpl24",
                                  joints (T, 24, 3); y-up SCENE coordinates (the placement applied)
         camera.npz               positions (T, 3) float32 optical centres; rotations (T, 3, 3) float32
@@ -64,9 +64,9 @@ import numpy as np
 from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.errors import DataFileError, InputError
-from skeleton_mamba.tasks.motion.motion_file import MotionData, load_motion, save_motion
-from skeleton_mamba.tasks.motion.mp4 import write_mp4
-from skeleton_mamba.tasks.motion.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, load_motion, save_motion
+from skeleton_mamba.tasks.motion.formats.mp4 import write_mp4
+from skeleton_mamba.tasks.motion.io.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header
 
 __all__ = [
     "COMPLETE",

@@ -32,17 +32,17 @@ from typing import ClassVar
 import numpy as np
 import torch
 
+from skeleton_mamba.tasks.motion.body.resample import resample_linear
 from skeleton_mamba.tasks.motion.metrics.beat_align import Variant, sequence_beat_align
 from skeleton_mamba.tasks.motion.metrics.common import as_sequences
 from skeleton_mamba.tasks.motion.metrics.pfc import pfc_sequence_score
-from skeleton_mamba.tasks.motion.protocol_music import (
+from skeleton_mamba.tasks.motion.music.protocol_music import (
     bailando_beats,
     edge_slice_beats,
     edge_slice_features,
     edge_slice_starts,
     fact_beats,
 )
-from skeleton_mamba.tasks.motion.resample import resample_linear
 
 __all__ = [
     "PROTOCOLS",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from skeleton_mamba.tasks.motion.option_types import int_option, real_option, seed_option
+from skeleton_mamba.tasks.motion.io.option_types import int_option, real_option, seed_option
 from skeleton_mamba.tasks.motion.synthetic import make_demo_set
 
 

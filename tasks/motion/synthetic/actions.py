@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.motion.motion_file import MotionData
-from skeleton_mamba.tasks.motion.rotations import euler_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.rotations import euler_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
 from skeleton_mamba.tasks.motion.synthetic.dance import ROOT_HEIGHT
 
 __all__ = ["ACTIONS", "synthesize_action"]

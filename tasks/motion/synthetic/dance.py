@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.tasks.motion.motion_file import MotionData, save_motion
-from skeleton_mamba.tasks.motion.rotations import euler_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.body.rotations import euler_to_matrix, matrix_to_axis_angle
+from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, save_motion
 
 __all__ = ["STYLES", "ROOT_HEIGHT", "SWING_SIDES", "synthesize_dance", "write_dance", "beat_phase"]
 

@@ -1,6 +1,6 @@
 // The user's character in the dancer page (sm export-web --rig): the skinned glTF / VRM loaded by three.js's
 // GLTFLoader, its bones driven each frame from the dancer's SMPL-24 joints by the plan Python wrote
-// (skeleton_mamba.tasks.motion.retarget_live: the same steps as apply_live_plan, tested against it).
+// (skeleton_mamba.tasks.motion.retarget.live: the same steps as apply_live_plan, tested against it).
 import * as THREE from 'three';
 import { GLTFLoader } from 'sm-gltf';
 

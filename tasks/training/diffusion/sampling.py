@@ -19,7 +19,9 @@ from typing import Any
 
 import torch
 
-from skeleton_mamba.tasks.motion.cli_options import SAMPLERS  # torch-free: the commands' --help lists them
+from skeleton_mamba.tasks.motion.commands.cli_options import (
+    SAMPLERS,  # torch-free: the commands' --help lists them
+)
 from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion
 from skeleton_mamba.tasks.training.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
 from skeleton_mamba.tasks.training.diffusion.solvers import SOLVERS, solver_sample

@@ -1,1 +1,0 @@
-"""AIST++ split name lists (package data read by ``skeleton_mamba.tasks.motion.aistpp``)."""
