@@ -4,7 +4,7 @@ Builds the recipe's EgoDanceModule (tiny backbone, tiny random ResNet, head-traj
 batch of the recipe's shape (4 windows of 150 frames: motion tokens, 35 music features, frames at the
 recipe's ``image_size`` (32 px), head targets; random values, which cost the same as real ones), with the
 process settings ``sm fit`` uses (one thread by default on a small machine, the training allocator
-settings of :mod:`skeleton_mamba.allocator` where the installed version has them), then
+settings of :mod:`skeleton_mamba.runtime.allocator` where the installed version has them), then
 times, median over ``--repeats``:
 
 - ``train_step_ms``: what Lightning runs per step: the module's ``training_step`` (EMM diffusion, kinematic
@@ -41,7 +41,7 @@ from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipe_dir 
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults  # noqa: E402
 
 try:  # what `sm fit` sets, where this version has it (a side-by-side run may time an older one)
-    from skeleton_mamba.allocator import keep_freed_memory
+    from skeleton_mamba.runtime.allocator import keep_freed_memory
 except ImportError:
     keep_freed_memory = None
 

@@ -23,7 +23,7 @@ batched as one denoiser call on a doubled batch, ``torch.inference_mode``):
 - ``gemm``: this machine's fp32 matrix-product rate timed in the same process (before and after the
   models), and ``*_fraction_of_gemm``: each model's achieved matrix-product rate as a fraction of it;
 - ``--compile``: also the guided step of each denoiser compiled (``torch.compile``, inductor, weights
-  frozen: ``skeleton_mamba/compiling.py``) in the same run: ``compiled_sample_step_ms``, its
+  frozen: ``skeleton_mamba/runtime/compiling.py``) in the same run: ``compiled_sample_step_ms``, its
   ``fraction_of_gemm``, ``compile_s`` (the first call) and ``compiled_max_abs_diff`` (against the
   eager step's output);
 - ``gemm.bf16``: the same rate in bf16 (``torch.matmul`` of bf16 matrices);

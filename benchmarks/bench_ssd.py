@@ -15,7 +15,7 @@ divides it by ``ssd_ms``. The recurrence
 per-step cost measured so far predicts less than ``--recurrence-budget-s``; otherwise it is null.
 ``ssd_ms`` and ``sdpa_ms`` are medians of ``--repeats`` runs taken in turn, after three untimed rounds.
 As ``sm fit`` does, the run keeps the memory a step frees in the heap (``malloc_kept``:
-``skeleton_mamba.allocator.keep_freed_memory``), so that every step does not fault in fresh pages;
+``skeleton_mamba.runtime.allocator.keep_freed_memory``), so that every step does not fault in fresh pages;
 ``--default-malloc`` leaves glibc's defaults. ``--compile`` adds the SSD compiled by inductor
 (``compiled_*``: compile seconds, median ms, error, ratios) in the same run.
 
@@ -40,7 +40,7 @@ from torch.utils.flop_counter import sdpa_backward_flop_count, sdpa_flop_count
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import alternate_ms, gemm_gflop_per_s, machine_info, matmul_gflop, median_ms, rate  # noqa: E402
 
-from skeleton_mamba.allocator import keep_freed_memory  # noqa: E402
+from skeleton_mamba.runtime.allocator import keep_freed_memory  # noqa: E402
 from skeleton_mamba.ssd import ssd, ssd_recurrence  # noqa: E402
 from skeleton_mamba.ssd.non_finite import inputs_finite  # noqa: E402
 
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         "--default-malloc",
         action="store_true",
         help="leave glibc's malloc thresholds at their defaults (by default they are set as sm fit sets "
-        "them: skeleton_mamba.allocator.keep_freed_memory)",
+        "them: skeleton_mamba.runtime.allocator.keep_freed_memory)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(

@@ -15,13 +15,13 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
 - ``step_sequence_path``: the same step with the frame-wise scans through the modules' sequence path
   (``streaming.step(..., ops=None)``, the path before ``FrameOps``), timed on alternate frames of
   the same run with its own state, and ``sequence_path_over_step`` the ratio of the medians;
-- ``compiled`` (``--compile [MODE]``): the step compiled with :mod:`skeleton_mamba.compiling` (inductor,
-  frozen weights, as ``sm stream --compile``): ``compile_seconds``, then compiled and eager steps on
-  alternate frames of the same run, each with its own state and both fed the eager step's previous pose:
-  median / p99 / max / fps of both, the ratios eager over compiled (median, p99), frames over 33 ms, and
-  the largest difference of their outputs (fp32 rounding); ``compiled.alone``: the compiled step by
-  itself, frame after frame as ``sm stream --compile`` runs it (no eager step in between to evict its
-  weights from the caches); the memory run below then streams compiled;
+- ``compiled`` (``--compile [MODE]``): the step compiled with :mod:`skeleton_mamba.runtime.compiling`
+  (inductor, frozen weights, as ``sm stream --compile``): ``compile_seconds``, then compiled and eager steps
+  on alternate frames of the same run, each with its own state and both fed the eager step's previous pose:
+  median / p99 / max / fps of both, the ratios eager over compiled (median, p99), frames over 33 ms, and the
+  largest difference of their outputs (fp32 rounding); ``compiled.alone``: the compiled step by itself, frame
+  after frame as ``sm stream --compile`` runs it (no eager step in between to evict its weights from the
+  caches); the memory run below then streams compiled;
 - ``windowed``: what a windowed model pays per new frame, re-running the same network's forward on
   the last ``--window`` frames (5 s) and keeping the last output; median over ``--window-repeats``;
 - ``onnx`` (``--onnx``): the dancer's step graph of ``sm export-onnx`` (the state as explicit inputs and
@@ -286,7 +286,7 @@ def measure(
     import numpy as np
     import torch
 
-    from skeleton_mamba import streaming
+    from skeleton_mamba.runtime import streaming
     from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
     from skeleton_mamba.tasks.training.frame_timing import latency_summary
 
@@ -299,7 +299,7 @@ def measure(
     backbone_step = None  # the eager step
     result = {"width": width, "parameters": params, "threads": torch.get_num_threads()}
     if compile_mode:  # under inference_mode as the timed steps (inference tensors: one signature)
-        from skeleton_mamba.compiling import compile_step_or_eager
+        from skeleton_mamba.runtime.compiling import compile_step_or_eager
 
         mode = None if compile_mode == "default" else compile_mode
         print(f"[{width}] compiling the step ({compile_mode})...", file=sys.stderr, flush=True)
@@ -466,7 +466,7 @@ def main() -> int:
         const="default",
         default=None,
         metavar="MODE",
-        help="also time the step compiled with torch.compile (skeleton_mamba.compiling; MODE: a "
+        help="also time the step compiled with torch.compile (skeleton_mamba.runtime.compiling; MODE: a "
         "torch.compile mode, default 'default') side by side with the eager step; memory run compiled",
     )
     p.add_argument(
@@ -485,7 +485,7 @@ def main() -> int:
     if args.width_only:
         import torch
 
-        from skeleton_mamba.streaming import keep_freed_memory
+        from skeleton_mamba.runtime.allocator import keep_freed_memory
 
         torch.set_num_threads(args.threads)
         if not args.adaptive_malloc:

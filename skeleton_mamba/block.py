@@ -11,7 +11,7 @@
 Pre-norm residual sublayers; the paper fixes the order of the scans but not the residual layout,
 which is this project's (and the authors' released code's) reconstruction. The frame-wise part (up
 to the Joint Scan) and the token-wise part (cross-attention, MLP) run on slices of frames on a CPU,
-the Temporal Scan on slices of joint sequences (``skeleton_mamba.slicing``; exact).
+the Temporal Scan on slices of joint sequences (``skeleton_mamba.runtime.slicing``; exact).
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.cross_attention import CrossAttention
 from skeleton_mamba.group_scan import GroupScan
 from skeleton_mamba.joint_scan import JointScan
+from skeleton_mamba.runtime.slicing import map_slices, slice_length
 from skeleton_mamba.skeletons import Skeleton
-from skeleton_mamba.slicing import map_slices, slice_length
 from skeleton_mamba.temporal_scan import TemporalScan
 from skeleton_mamba.tokenizer import HumanTokenizer, InverseHumanTokenizer
 
@@ -106,8 +106,9 @@ class SkeletonMambaBlock(nn.Module):
     def spatial(self, x: torch.Tensor, ops=None) -> torch.Tensor:
         """The frame-wise sublayers: Group Scan, then Joint Scan back to joints. (B, T, J, D).
 
-        ``ops``: the scans' projections and mixers for one frame (:class:`~skeleton_mamba.frame_ops.FrameOps`,
-        see :meth:`GroupScan.forward`); ``None``: the modules' own.
+        ``ops``: the scans' projections and mixers for one frame
+        (:class:`~skeleton_mamba.runtime.frame_ops.FrameOps`, see :meth:`GroupScan.forward`); ``None``: the
+        modules' own.
         """
         g = self.tokenizer(self.norm_group(x))
         g = g + self.group_scan(g, ops)

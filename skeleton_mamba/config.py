@@ -15,7 +15,7 @@ class ConfigValueError(ValueError):
     """A config field outside its range, raised when the config is made: ``owner.field = value: rule``.
 
     ``owner`` (the dataclass), ``field``, ``value`` and ``rule`` are kept so that a reader of a file (a
-    pretrained folder's ``config.json``, :mod:`skeleton_mamba.pretrained_codec`) names the field by its
+    pretrained folder's ``config.json``, :mod:`skeleton_mamba.pretrained.codec`) names the field by its
     place in the file instead.
     """
 
@@ -146,7 +146,7 @@ class SkeletonMambaConfig:
         mixer: settings of every Mamba-2 mixer.
         causal: a forward-only Temporal Scan (no backward direction), so frame t depends on frames
             <= t only; such a backbone also runs frame by frame (``init_state`` / ``step``,
-            ``skeleton_mamba.streaming``). ``False`` (default): the paper's bidirectional scan.
+            ``skeleton_mamba.runtime.streaming``). ``False`` (default): the paper's bidirectional scan.
         cpu_slice_elements: on a CPU, frame-wise sublayers run on slices of frames and the Temporal
             Scan on slices of joint sequences, each slice holding at most about this many elements
             of its widest intermediate (4 Mi elements: 16 MB in fp32), so intermediates stay in

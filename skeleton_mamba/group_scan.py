@@ -70,7 +70,7 @@ class GroupScan(nn.Module):
         sequence's projections are computed on the G distinct group tokens and gathered, and the n
         path outputs are averaged before ``out_proj`` (mean and a linear map commute). Only the
         causal conv, the SSD and the gated norm see the full n*G-token sequence. ``ops`` (the frame-by-frame
-        path passes :class:`~skeleton_mamba.frame_ops.FrameOps`) replaces the projections by
+        path passes :class:`~skeleton_mamba.runtime.frame_ops.FrameOps`) replaces the projections by
         ``ops.linear(layer, x)`` and ``mixer.mix`` by ``ops.mix(mixer, zxbcdt)``.
         """
         mixer = self.mixer

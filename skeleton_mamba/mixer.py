@@ -11,8 +11,8 @@ The mixer owns its math in every form: :meth:`Mamba2Mixer.forward` / :meth:`~Mam
 sequence, :meth:`~Mamba2Mixer.step` for one token with the states of
 :meth:`~Mamba2Mixer.allocate_inference_cache` (as ``mamba_ssm.Mamba2``), and the pieces every form shares
 (:meth:`~Mamba2Mixer.split`, :meth:`~Mamba2Mixer.split_xbc`, :meth:`~Mamba2Mixer.skip`,
-:meth:`~Mamba2Mixer.output`), which the frame path (:func:`skeleton_mamba.frame_ops.short_mix`) uses too.
-The one-token recurrence ([Mamba-2] SSD):
+:meth:`~Mamba2Mixer.output`), which the frame path (:func:`skeleton_mamba.runtime.frame_ops.short_mix`) uses
+too. The one-token recurrence ([Mamba-2] SSD):
 
     h_t = exp(Δ_t A) h_{t-1} + (Δ_t x_t) ⊗ B_t,   y_t = h_t C_t + D ⊙ x_t
 """
@@ -227,10 +227,11 @@ def _state_update_pointwise(
     """Compiled twin of :func:`~skeleton_mamba.ssd.recurrence.recurrence_step` (kept: a second copy of
     the step): h <- exp(Δ A) h + (Δ x) ⊗ B in place and y = h C, as element-wise work and a reduction.
 
-    The form of :meth:`Mamba2Mixer.step` in compiled code (:class:`~skeleton_mamba.compiling.CompiledStep`):
-    inductor computes the new state directly into ``ssm_state``'s storage (no matrix product whose result
-    is copied back). ``tests/test_streaming.py`` runs both forms and checks they equal the sequence mixer.
-    ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G, N) -> y (B, H, P).
+    The form of :meth:`Mamba2Mixer.step` in compiled code
+    (:class:`~skeleton_mamba.runtime.compiling.CompiledStep`): inductor computes the new state directly into
+    ``ssm_state``'s storage (no matrix product whose result is copied back). ``tests/test_streaming.py`` runs
+    both forms and checks they equal the sequence mixer. ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B
+    and C (B, G, N) -> y (B, H, P).
     """
     b, h, p, n = ssm_state.shape
     g = B.shape[1]

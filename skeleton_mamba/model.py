@@ -6,14 +6,14 @@ import torch
 from torch import nn
 from torch.utils.checkpoint import checkpoint
 
-from skeleton_mamba import streaming
 from skeleton_mamba.block import SkeletonMambaBlock
-from skeleton_mamba.compiling import CompiledStep
 from skeleton_mamba.config import SkeletonMambaConfig
 from skeleton_mamba.padding import zero_padding
-from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
+from skeleton_mamba.runtime import streaming
+from skeleton_mamba.runtime.compiling import CompiledStep
+from skeleton_mamba.runtime.streaming import StreamState
 from skeleton_mamba.skeletons import get_skeleton
-from skeleton_mamba.streaming import StreamState
 from skeleton_mamba.temporal_scan import check_prefix_mask
 
 
@@ -28,7 +28,7 @@ class SkeletonMamba(PretrainedMixin, nn.Module):
     Args:
         config: a :class:`SkeletonMambaConfig` (defaults: [EgoMusic] supp. Table 2, D 128, G 5, P 6, N 8).
 
-    ``save_pretrained`` / ``from_pretrained`` / ``push_to_hub``: :mod:`skeleton_mamba.pretrained`.
+    ``save_pretrained`` / ``from_pretrained`` / ``push_to_hub``: :mod:`skeleton_mamba.pretrained.mixin`.
 
     Examples:
         >>> import torch
@@ -114,7 +114,8 @@ class SkeletonMamba(PretrainedMixin, nn.Module):
     def init_state(
         self, batch: int, dtype: torch.dtype | None = None, device: torch.device | None = None
     ) -> StreamState:
-        """Zero recurrent state for ``batch`` streams (causal backbones; see ``skeleton_mamba.streaming``)."""
+        """Zero recurrent state for ``batch`` streams (causal backbones; see
+        ``skeleton_mamba.runtime.streaming``)."""
         return streaming.init_state(self, batch, dtype, device)
 
     def step(
@@ -134,6 +135,6 @@ class SkeletonMamba(PretrainedMixin, nn.Module):
     def compile_step(self, freezing: bool = True, mode: str | None = None) -> CompiledStep:
         """:meth:`step` through ``torch.compile`` (inductor, frozen weights; compiles on the first call).
 
-        Same signature and results as :meth:`step`; see :mod:`skeleton_mamba.compiling`.
+        Same signature and results as :meth:`step`; see :mod:`skeleton_mamba.runtime.compiling`.
         """
         return CompiledStep(self, freezing, mode)

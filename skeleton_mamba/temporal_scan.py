@@ -4,10 +4,10 @@ Independent forward and backward mixers, summed and projected by a Linear. Varia
 are right-padded; the backward direction reverses only the valid prefix of each sequence, so it
 starts at the last valid frame and padded frames (which stay at the end in both directions) can
 never reach a valid frame through the causal scans. On a CPU the joint sequences go through in
-slices of at most ``slice_elements`` projected elements (``skeleton_mamba.slicing``).
+slices of at most ``slice_elements`` projected elements (``skeleton_mamba.runtime.slicing``).
 
 ``causal=True`` keeps only the forward mixer (frame t sees frames <= t), the form that also runs
-frame by frame (``skeleton_mamba.streaming``).
+frame by frame (``skeleton_mamba.runtime.streaming``).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from torch import nn
 from skeleton_mamba.config import MixerConfig
 from skeleton_mamba.mixer import Mamba2Mixer
 from skeleton_mamba.padding import zero_padding
-from skeleton_mamba.slicing import map_slices, slice_length
+from skeleton_mamba.runtime.slicing import map_slices, slice_length
 
 
 def valid_prefix_reversal(mask: torch.Tensor) -> torch.Tensor:

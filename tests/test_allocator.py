@@ -1,4 +1,4 @@
-"""The allocator settings (skeleton_mamba/allocator.py): memory a step frees is reused, not faulted
+"""The allocator settings (skeleton_mamba/runtime/allocator.py): memory a step frees is reused, not faulted
 in again; nothing changes where the user chose malloc settings, off glibc, or outside training commands."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from skeleton_mamba import allocator
+from skeleton_mamba.runtime import allocator
 from skeleton_mamba.tasks.training import cli
 
 GLIBC = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
@@ -21,7 +21,7 @@ GLIBC = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
 # every page, on another none), and the comparison would not be about keep_freed_memory.
 STEPS = """
 import ctypes, resource, sys, torch
-from skeleton_mamba.allocator import keep_freed_memory
+from skeleton_mamba.runtime.allocator import keep_freed_memory
 mallopt = ctypes.CDLL(None).mallopt
 assert mallopt(-3, 128 << 10) == 1 and mallopt(-1, 128 << 10) == 1  # M_MMAP_THRESHOLD, M_TRIM_THRESHOLD
 print(keep_freed_memory() if sys.argv[1] == "tuned" else False)

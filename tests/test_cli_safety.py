@@ -21,8 +21,8 @@ from test_cli import run_sm, sm_executable
 from test_ntu import body_motion, write_skeleton
 from torch.utils.data import DataLoader, Dataset
 
-from skeleton_mamba.atomic import atomic_open, atomic_path
 from skeleton_mamba.errors import CheckpointError, expected_failure, one_line_message
+from skeleton_mamba.io.atomic import atomic_open, atomic_path
 from skeleton_mamba.tasks.motion.render import skeleton as render_module
 from skeleton_mamba.tasks.training.checkpoints import check_class_paths, load_checkpoint
 from skeleton_mamba.tasks.training.cli import main as sm_main

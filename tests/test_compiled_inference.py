@@ -1,4 +1,4 @@
-"""Compiled SSD and EMM denoiser (skeleton_mamba/compiling.py): the eager results to fp32 rounding.
+"""Compiled SSD and EMM denoiser (skeleton_mamba/runtime/compiling.py): the eager results to fp32 rounding.
 
 Inductor on a CPU compiles generated C++: without a C++ compiler the tests skip.
 """
@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.compiling import compile_for_inference
+from skeleton_mamba.runtime.compiling import compile_for_inference
 from skeleton_mamba.ssd.quadratic import ssd_quadratic
 from skeleton_mamba.ssd.recurrence import ssd_recurrence
 

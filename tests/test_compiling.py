@@ -1,10 +1,10 @@
-"""The compiled frame step (skeleton_mamba.compiling) equals the eager step and the causal forward."""
+"""The compiled frame step (skeleton_mamba.runtime.compiling) equals the eager step and the causal forward."""
 
 import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.compiling import CompiledStep, compile_step_or_eager, inductor_unavailable
+from skeleton_mamba.runtime.compiling import CompiledStep, compile_step_or_eager, inductor_unavailable
 
 needs_inductor = pytest.mark.skipif(inductor_unavailable() is not None, reason=str(inductor_unavailable()))
 
@@ -105,8 +105,8 @@ def test_a_failing_compile_falls_back_to_the_eager_step(monkeypatch):
 def test_the_frame_linear_compiles_for_large_float32_weights():
     """Eagerly, large fp32 weights go through oneDNN's eager op (which inductor cannot lower); compiled,
     ``frame_ops.linear`` is ``F.linear`` and inductor packs the frozen weight for oneDNN itself."""
-    from skeleton_mamba.compiling import compile_for_inference
-    from skeleton_mamba.frame_ops import ONEDNN_MIN_WEIGHT, linear
+    from skeleton_mamba.runtime.compiling import compile_for_inference
+    from skeleton_mamba.runtime.frame_ops import ONEDNN_MIN_WEIGHT, linear
 
     torch.manual_seed(0)
     layer = torch.nn.Linear(768, 1024).eval()
@@ -123,7 +123,7 @@ def test_the_frame_linear_compiles_for_large_float32_weights():
 def test_compile_for_inference_freezes_the_weights():
     """Frozen means the weights are constants of the compiled graph (what lets inductor prepack them):
     changing a parameter in place afterwards does not change the compiled function's output."""
-    from skeleton_mamba.compiling import compile_for_inference
+    from skeleton_mamba.runtime.compiling import compile_for_inference
 
     torch.manual_seed(0)
     layer = torch.nn.Linear(64, 32).eval()

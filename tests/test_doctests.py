@@ -1,43 +1,62 @@
-"""Every public name of the backbone, and every reader and metric of the toolkit, has a short example in
-its docstring, and every example runs.
+"""Every example runs, and every public name of the backbone, and every reader and metric of the toolkit, has
+one in its docstring.
 
-The examples are doctests (``>>>``); this module runs them with :mod:`doctest` so the README's test command
-(and CI) checks them (``python -m pytest --doctest-modules skeleton_mamba`` runs the backbone's examples,
-``python -m pytest --doctest-modules tasks/motion`` the toolkit's). The examples that need a file write it
-under :func:`tempfile.mkdtemp`, pointed here at the test's temporary folder.
+The examples are doctests (``>>>``). The modules that hold them are found by walking the installed packages
+(the backbone, the tasks and the toolkit), so no list is kept by hand and every ``>>>`` line runs under the
+README's test command (and CI). The examples that need a file write it under :func:`tempfile.mkdtemp`, pointed
+here at the test's temporary folder.
 """
 
 from __future__ import annotations
 
 import doctest
 import importlib
+import importlib.util
+import pkgutil
+from pathlib import Path
 
 import pytest
 
 import skeleton_mamba
+import skeleton_mamba.tasks
 import skeleton_mamba.tasks.motion.metrics as toolkit_metrics
 
 API = skeleton_mamba._API  # public name -> the module that defines it
-MODULES = sorted(
-    set(API.values())
-    | {
-        "skeleton_mamba.allocator",
-        "skeleton_mamba.pretrained_card",
-        "skeleton_mamba.pretrained_codec",
-        "skeleton_mamba.pretrained_hub",
-        "skeleton_mamba.ssd.minimal",
-    }
-)
 
 
-@pytest.mark.parametrize("module_name", MODULES)
-def test_the_examples_of_each_backbone_module_run(module_name, tmp_path, monkeypatch):
-    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # the examples' folders land in the test's folder
+def _modules_with_examples() -> list[str]:
+    """Every module of the installed packages whose source holds an example (``>>>``): the backbone's, and the
+    tasks' and the toolkit's (``skeleton_mamba.tasks`` is installed from a folder of its own: walked too)."""
+    found = []
+    for package, prefix in (
+        (skeleton_mamba, "skeleton_mamba."),
+        (skeleton_mamba.tasks, "skeleton_mamba.tasks."),
+    ):
+        for info in pkgutil.walk_packages(package.__path__, prefix):
+            spec = importlib.util.find_spec(info.name)
+            if spec is not None and spec.origin and spec.origin.endswith(".py"):
+                if ">>>" in Path(spec.origin).read_text(encoding="utf-8"):
+                    found.append(info.name)
+    return sorted(set(found))
+
+
+EXAMPLES = _modules_with_examples()
+
+
+def test_the_walk_reaches_the_examples_of_every_layer():
+    assert {"skeleton_mamba.model", "skeleton_mamba.ssd.minimal", "skeleton_mamba.pretrained.codec"} <= set(
+        EXAMPLES
+    )
+    for room in ("formats", "io", "music", "metrics"):
+        assert any(name.startswith(f"skeleton_mamba.tasks.motion.{room}.") for name in EXAMPLES), room
+
+
+@pytest.mark.parametrize("module_name", EXAMPLES)
+def test_every_example_of_every_module_runs(module_name, tmp_path, monkeypatch):
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # the examples' files land in the test's folder
     module = importlib.import_module(module_name)
-    if module_name == "skeleton_mamba.ssd":  # the package re-exports; its examples live in dispatch
-        module = importlib.import_module("skeleton_mamba.ssd.dispatch")
     result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE, verbose=False)
-    assert result.attempted > 0, f"{module_name} has no example"
+    assert result.attempted > 0, f"{module_name} holds '>>>' but doctest finds no example in it"
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {module_name} failed"
 
 
@@ -52,11 +71,17 @@ def test_every_public_name_has_an_example(name):
     )
 
 
-# The toolkit's readers and metrics (and the backbone's bounded reader they use): module -> the names whose
-# examples run here.
+# The toolkit's readers and metrics (and the backbone's bounded reader they use): module -> the names that
+# must each have an example.
 MOTION = "skeleton_mamba.tasks.motion"
 READERS = {
-    "skeleton_mamba.bounded_read": ("check_json_depth", "parse_json", "read_bytes", "read_json", "read_text"),
+    "skeleton_mamba.io.bounded_read": (
+        "check_json_depth",
+        "parse_json",
+        "read_bytes",
+        "read_json",
+        "read_text",
+    ),
     f"{MOTION}.formats.aistpp": ("load_aistpp_motion", "load_split"),
     f"{MOTION}.music.audio_io": ("open_audio", "open_wav_stream", "probe_audio", "read_audio"),
     f"{MOTION}.formats.bvh": ("load_bvh", "save_bvh"),
@@ -110,15 +135,6 @@ METRICS = {
     f"{MOTION}.metrics.protocols": ("get_protocol",),
 }
 TOOLKIT = {**READERS, **METRICS}
-
-
-@pytest.mark.parametrize("module_name", sorted(TOOLKIT))
-def test_the_examples_of_each_toolkit_reader_and_metric_module_run(module_name, tmp_path, monkeypatch):
-    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))  # the examples' files land in the test's folder
-    module = importlib.import_module(module_name)
-    result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE, verbose=False)
-    assert result.attempted > 0, f"{module_name} has no example"
-    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {module_name} failed"
 
 
 @pytest.mark.parametrize(

@@ -206,7 +206,7 @@ def test_load_network_refuses_weights_that_do_not_fit_in_one_line(case, tmp_path
     from skeleton_mamba.config import MixerConfig, SkeletonMambaConfig
     from skeleton_mamba.errors import CheckpointError
     from skeleton_mamba.model import SkeletonMamba
-    from skeleton_mamba.pretrained import WEIGHTS_NAME, PretrainedError
+    from skeleton_mamba.pretrained.mixin import WEIGHTS_NAME, PretrainedError
     from skeleton_mamba.tasks.training.pretrained import load_network
 
     tiny = SkeletonMambaConfig(dim=16, depth=1, heads=2, mlp_dim=32, mixer=MixerConfig(d_state=8, headdim=8))

@@ -1,7 +1,7 @@
 """Hostile JSON and YAML files (issue 43): one bounded reader for all of them.
 
-:mod:`skeleton_mamba.bounded_read` reads regular files only (a FIFO, a link to an endless device, a link loop
-are refused without blocking or growing), at most a stated size, JSON nested at most a stated depth and
+:mod:`skeleton_mamba.io.bounded_read` reads regular files only (a FIFO, a link to an endless device, a link
+loop are refused without blocking or growing), at most a stated size, JSON nested at most a stated depth and
 holding finite numbers. Each of the project's readers is checked to go through it: a pretrained folder's
 ``config.json``, the viewer's ``--metrics``, a sample's ``meta.json``, a recipe and a backbone file.
 """
@@ -18,9 +18,9 @@ import time
 import pytest
 from test_cli import sm_executable
 
-from skeleton_mamba.bounded_read import BoundedReadError, parse_json, read_bytes, read_json, read_text
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.pretrained import PretrainedError, read_pretrained_config
+from skeleton_mamba.io.bounded_read import BoundedReadError, parse_json, read_bytes, read_json, read_text
+from skeleton_mamba.pretrained.mixin import PretrainedError, read_pretrained_config
 from skeleton_mamba.tasks.egodance.builder.layout import sample_problem
 from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
 

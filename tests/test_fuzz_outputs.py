@@ -18,8 +18,8 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.io.output_folder import MANIFEST, claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.cli import main as sm
 

@@ -27,8 +27,8 @@ from test_pretrained import _networks
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.errors import CheckpointError
-from skeleton_mamba.pretrained import CONFIG_NAME, WEIGHTS_NAME, PretrainedError
-from skeleton_mamba.pretrained_checks import MAX_PARAMETERS, MAX_TENSORS, meta_state, read_safetensors_header
+from skeleton_mamba.pretrained.checks import MAX_PARAMETERS, MAX_TENSORS, meta_state, read_safetensors_header
+from skeleton_mamba.pretrained.mixin import CONFIG_NAME, WEIGHTS_NAME, PretrainedError
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.training.cli import main as sm
@@ -233,8 +233,8 @@ def _stream_folder(tmp_path: Path) -> Path:
         ("module.hparams.optimizer", {"class_path": "builtins.exec"}, "names 'builtins.exec', outside"),
         (
             "module.class_path",
-            "skeleton_mamba.pretrained.PretrainedMixin",
-            "holds a skeleton_mamba.pretrained",
+            "skeleton_mamba.pretrained.mixin.PretrainedMixin",
+            "holds a skeleton_mamba.pretrained.mixin",
         ),
         ("module.hparams.backbone.dim", 10**8, "dim = 100000000: a size is an integer"),
     ],

@@ -19,7 +19,7 @@ import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.errors import CheckpointError
-from skeleton_mamba.pretrained import CONFIG_NAME, WEIGHTS_NAME, PretrainedError
+from skeleton_mamba.pretrained.mixin import CONFIG_NAME, WEIGHTS_NAME, PretrainedError
 from skeleton_mamba.tasks.training.cli import main as sm
 
 MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16, dt_limit=(0.0, math.inf), A_init_range=(1.0, 8.0))
@@ -123,7 +123,7 @@ def test_the_card_says_task_sizes_and_citation(tmp_path):
 
 
 def test_card_citation_keys_are_defined_in_the_references():
-    from skeleton_mamba.pretrained import CITATIONS
+    from skeleton_mamba.pretrained.mixin import CITATIONS
 
     references = REPO / "docs" / "references.md"
     if not references.is_file():

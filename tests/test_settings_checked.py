@@ -34,7 +34,7 @@ from checkpoint_files import save_module_checkpoint
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.config import ConfigValueError
-from skeleton_mamba.pretrained_codec import PretrainedError
+from skeleton_mamba.pretrained.codec import PretrainedError
 from skeleton_mamba.tasks.motion.formats.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.formats.gltf_read import GltfError, read_glb
 from skeleton_mamba.tasks.training.cli import main as sm_main

@@ -1,4 +1,5 @@
-"""Slicing frames and joint sequences on a CPU (``skeleton_mamba.slicing``) must not change results."""
+"""Slicing frames and joint sequences on a CPU (``skeleton_mamba.runtime.slicing``) must not change
+results."""
 
 import dataclasses
 
@@ -6,7 +7,7 @@ import pytest
 import torch
 
 from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig, TemporalScan
-from skeleton_mamba.slicing import map_slices, slice_length
+from skeleton_mamba.runtime.slicing import map_slices, slice_length
 
 TINY_MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)
 

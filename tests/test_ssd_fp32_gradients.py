@@ -15,7 +15,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from skeleton_mamba.compiling import inductor_unavailable
+from skeleton_mamba.runtime.compiling import inductor_unavailable
 from skeleton_mamba.ssd import ssd_chunked, ssd_quadratic, ssd_recurrence
 
 F64 = torch.float64

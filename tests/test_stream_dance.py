@@ -233,7 +233,7 @@ def test_training_features_are_what_the_live_stream_computes(tmp_path):
 
 def test_sm_stream_compile_equals_the_eager_stream(checkpoint, tmp_path, capsys):
     """``--compile``: the frame step through torch.compile (a one-block tiny model: a short compile)."""
-    from skeleton_mamba.compiling import inductor_unavailable
+    from skeleton_mamba.runtime.compiling import inductor_unavailable
     from skeleton_mamba.tasks.stream.cli import main
 
     if (reason := inductor_unavailable()) is not None:
@@ -251,7 +251,7 @@ def test_sm_stream_compile_equals_the_eager_stream(checkpoint, tmp_path, capsys)
 
 
 def test_sm_stream_compile_falls_back_to_the_eager_step_with_a_warning(checkpoint, tmp_path, monkeypatch):
-    from skeleton_mamba.compiling import CompiledStep
+    from skeleton_mamba.runtime.compiling import CompiledStep
     from skeleton_mamba.tasks.stream.cli import main
 
     def no_compiler(self, *args, **kwargs):

@@ -3,7 +3,8 @@
 import pytest
 import torch
 
-from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig, streaming
+from skeleton_mamba import MixerConfig, SkeletonMamba, SkeletonMambaConfig
+from skeleton_mamba.runtime import streaming
 from skeleton_mamba.skeletons import SKELETONS
 
 TINY_MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)
@@ -175,7 +176,7 @@ def test_short_mix_equals_the_sequence_mix(options, length, compiled_form, monke
     """The frame path's few-operation mixer equals ``Mamba2Mixer.mix`` (chunked / quadratic SSD), also in
     the form it takes under torch.compile (the cumulative sums as a reduction), run eagerly here."""
     from skeleton_mamba import Mamba2Mixer
-    from skeleton_mamba.frame_ops import short_mix
+    from skeleton_mamba.runtime.frame_ops import short_mix
 
     torch.manual_seed(0)
     mixer = Mamba2Mixer(16, MixerConfig(d_state=4, headdim=4, ngroups=2, chunk_size=8, **options)).double()
@@ -189,7 +190,7 @@ def test_short_mix_equals_the_sequence_mix(options, length, compiled_form, monke
 
 
 def test_frame_linear_equals_linear_for_large_float32_weights():
-    from skeleton_mamba.frame_ops import ONEDNN_MIN_WEIGHT, linear
+    from skeleton_mamba.runtime.frame_ops import ONEDNN_MIN_WEIGHT, linear
 
     torch.manual_seed(0)
     layer = torch.nn.Linear(768, 1024)
@@ -225,7 +226,7 @@ def test_keep_freed_memory_stops_the_page_faults_of_a_repeated_allocation():
         pytest.skip("glibc's mallopt only")
     code = (
         "import resource, torch\n"
-        "from skeleton_mamba.streaming import keep_freed_memory\n"
+        "from skeleton_mamba.runtime.allocator import keep_freed_memory\n"
         "assert keep_freed_memory()\n"
         "def frame():\n"
         "    a, b, c = (torch.empty(n << 20).fill_(1) for n in (2, 3, 1))\n"

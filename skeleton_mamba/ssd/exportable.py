@@ -31,7 +31,8 @@ def masked_quadratic(xd: torch.Tensor, cs: torch.Tensor, B: torch.Tensor, C: tor
     Lmask_ij = exp(cs_i - cs_j) for i ≥ j, else 0: the difference of the float64 cumulative sums is
     masked to -inf above the diagonal before the exp (there it is positive and may overflow) and the mask
     rounded once to xd's dtype. C Bᵀ is formed once per group. The form of :func:`ssd_exportable` and of
-    the frame path (:func:`skeleton_mamba.frame_ops.short_mix`). Inference only (in-place temporaries).
+    the frame path (:func:`skeleton_mamba.runtime.frame_ops.short_mix`). Inference only (in-place
+    temporaries).
 
     Args:
         xd: (b, L, H, P) Δ ⊙ x in the compute dtype.

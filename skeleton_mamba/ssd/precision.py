@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import torch
 
-from skeleton_mamba.precision_names import PRECISIONS
+from skeleton_mamba.runtime.precision import PRECISIONS
 
 
 def autocast_on(t: torch.Tensor) -> bool:

@@ -38,9 +38,9 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
+from skeleton_mamba.io.atomic import atomic_open
+from skeleton_mamba.io.bounded_read import read_json
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.layout import SAMPLES, complete_samples, read_frames, read_meta
 from skeleton_mamba.tasks.egodance.builder.placement import yaw_matrix

@@ -32,7 +32,7 @@ from pathlib import Path
 import torch
 from lightning.pytorch import LightningModule, Trainer
 
-from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.egodance.builder.layout import read_meta
 from skeleton_mamba.tasks.egodance.demo_scores import format_scores, score_held_out, target_checks
 from skeleton_mamba.tasks.egodance.export import write_dance

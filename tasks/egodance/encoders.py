@@ -24,7 +24,7 @@ from torch import nn
 from transformers import ResNetConfig, ResNetModel
 
 from skeleton_mamba.errors import RandomWeightsWarning
-from skeleton_mamba.pretrained_checks import building_on_meta
+from skeleton_mamba.pretrained.checks import building_on_meta
 from skeleton_mamba.tasks.egodance.frames import resize_frames
 from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
 from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES

@@ -28,7 +28,7 @@ from transformers import ResNetConfig
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
 from skeleton_mamba.errors import RandomWeightsWarning
-from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
 from skeleton_mamba.tasks.egodance.encoders import FusionModule, MusicEncoder, VisionEncoder
 from skeleton_mamba.tasks.egodance.heading_frames import head_rotation, relative_headings
 from skeleton_mamba.tasks.egodance.representation import NUM_CHANNELS, NUM_JOINTS
@@ -114,8 +114,8 @@ class EMM(PretrainedMixin, nn.Module):
         image_size: square size the frames are resized to (the ResNet input).
         diffusion_steps: T of the noise schedule (of the preconditioning's scalings).
 
-    ``save_pretrained`` / ``from_pretrained``: :mod:`skeleton_mamba.pretrained` (the ResNet's weights are in
-    the folder, its architecture in ``config.resnet_layers``).
+    ``save_pretrained`` / ``from_pretrained``: :mod:`skeleton_mamba.pretrained.mixin` (the ResNet's weights
+    are in the folder, its architecture in ``config.resnet_layers``).
     """
 
     pretrained_task = (

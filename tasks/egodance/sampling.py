@@ -4,7 +4,8 @@ Sampling goes through the shared entry point :func:`~skeleton_mamba.tasks.traini
 (DDIM, EDGE: 50 steps, eta 1; or ancestral DDPM, the original code, 1000 steps) with classifier-free guidance
 (``guidance_weight``) and the head guidance G_head when head targets are given (:mod:`.guidance`);
 long tracks through :func:`~skeleton_mamba.tasks.training.diffusion.sample_long`. With ``compile=True`` the
-denoiser runs compiled with its weights frozen (:func:`skeleton_mamba.compiling.compile_for_inference`).
+denoiser runs compiled with its weights frozen
+(:func:`skeleton_mamba.runtime.compiling.compile_for_inference`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from skeleton_mamba.compiling import compile_for_inference
+from skeleton_mamba.runtime.compiling import compile_for_inference
 from skeleton_mamba.tasks.egodance.dance_args import DEFAULT_BATCH_WINDOWS  # torch-free, for sm dance --help
 from skeleton_mamba.tasks.egodance.guidance import HeadGuidance, HeadingGuidance
 from skeleton_mamba.tasks.egodance.heading_frames import HeadingFrames

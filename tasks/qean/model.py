@@ -36,7 +36,7 @@ from einops import rearrange
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
 from skeleton_mamba.tasks.motion.music.features import NUM_MUSIC_FEATURES
 from skeleton_mamba.tasks.qean.attention import QuaternionRotaryAttention, RotarySelfAttention
 from skeleton_mamba.tasks.training.backbone_config import derived_backbone

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from skeleton_mamba.atomic import atomic_open, atomic_path
+from skeleton_mamba.io.atomic import atomic_open, atomic_path
 
 __all__ = ["save_confusion_matrix"]
 

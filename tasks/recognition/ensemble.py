@@ -24,8 +24,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.recognition.ensemble_args import build_parser
 from skeleton_mamba.tasks.recognition.scores import RunScores, load_scores

@@ -15,8 +15,8 @@ every frame the people are sorted by their summed joint score and the best ``num
 (slots are per frame, not tracked). Unlike ST-GCN's fixed 300-frame buffer indexed by ``frame_index``, the
 clip keeps its true length, PYSKL style: frame ``i`` lands at ``frame_index[i] - min(frame_index)``.
 
-Files are parsed by the project's bounded reader (:mod:`skeleton_mamba.bounded_read`: a regular file, finite
-numbers, integers of at most :data:`MAX_INT_DIGITS` digits) with Kinetics' bounds: at most
+Files are parsed by the project's bounded reader (:mod:`skeleton_mamba.io.bounded_read`: a regular file,
+finite numbers, integers of at most :data:`MAX_INT_DIGITS` digits) with Kinetics' bounds: at most
 :data:`MAX_JSON_BYTES` bytes, nested at most :data:`MAX_JSON_DEPTH` levels; label indices below
 :data:`MAX_LABEL_INDEX`, and pose / score values that are JSON numbers (not strings).
 """
@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from skeleton_mamba.bounded_read import MAX_INT_DIGITS, read_json
 from skeleton_mamba.errors import DataFileError
+from skeleton_mamba.io.bounded_read import MAX_INT_DIGITS, read_json
 from skeleton_mamba.tasks.motion.io.value_checks import check_finite
 
 __all__ = [

@@ -20,7 +20,7 @@ from einops import rearrange
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
 
 __all__ = ["ActionRecognizer", "body_presence", "pool_bodies"]
 

@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.atomic import atomic_open, atomic_path
-from skeleton_mamba.compiling import compile_step_or_eager
 from skeleton_mamba.errors import InputError, one_line_message
+from skeleton_mamba.io.atomic import atomic_open, atomic_path
+from skeleton_mamba.runtime.compiling import compile_step_or_eager
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
@@ -50,7 +50,7 @@ __all__ = ["OnlineRecognizer", "build_parser", "main", "stream_recognition"]
 class OnlineRecognizer:
     """Per-frame class probabilities of a causal :class:`ActionRecognizer`, ``batch`` streams of M bodies.
 
-    ``compile``: step the backbone through ``torch.compile`` (:mod:`skeleton_mamba.compiling`),
+    ``compile``: step the backbone through ``torch.compile`` (:mod:`skeleton_mamba.runtime.compiling`),
     compiled here; if compiling fails, a warning and the eager step (``compile_seconds``: None).
     """
 

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import DataFileError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.io.value_checks import check_finite
 

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_open
 
 __all__ = ["SCORE_KINDS", "SCORES_FILE", "RunScores", "load_scores", "save_scores"]
 

@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError, one_line_message
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.ssd.precision import inference_precision
 from skeleton_mamba.tasks.motion.formats.export import dance_files, write_motion

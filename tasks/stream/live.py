@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from skeleton_mamba.compiling import compile_step_or_eager
+from skeleton_mamba.runtime.compiling import compile_step_or_eager
 from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer
 
@@ -32,7 +32,7 @@ class LiveDancer:
     Args:
         model: the network (put in eval mode here).
         sample_rate: rate of the pushed audio.
-        compile: step the backbone through ``torch.compile`` (:mod:`skeleton_mamba.compiling`),
+        compile: step the backbone through ``torch.compile`` (:mod:`skeleton_mamba.runtime.compiling`),
             compiled here (about a minute at the paper width); if compiling fails, a warning and the
             eager step. ``compile_seconds`` is the compile time (None: eager).
     """

@@ -27,8 +27,8 @@ from einops import rearrange, repeat
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.pretrained import PretrainedMixin
-from skeleton_mamba.streaming import StreamState
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
+from skeleton_mamba.runtime.streaming import StreamState
 from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
 from skeleton_mamba.tasks.motion.formats.fact_features import (
     features_to_joints,
@@ -87,9 +87,9 @@ def teacher_forcing_inputs(motion: torch.Tensor) -> torch.Tensor:
 
 @dataclass
 class DancerState(StreamState):
-    """A stream's state: the backbone's (:class:`~skeleton_mamba.streaming.StreamState`, updated in place),
-    ``smoothing``, the output low-pass's stages (stages, B, 24, 12) (None without one), and ``started``
-    (False until the first frame, which sets every stage to its value). Its size never changes."""
+    """A stream's state: the backbone's (:class:`~skeleton_mamba.runtime.streaming.StreamState`, updated in
+    place), ``smoothing``, the output low-pass's stages (stages, B, 24, 12) (None without one), and
+    ``started`` (False until the first frame, which sets every stage to its value). Its size never changes."""
 
     smoothing: torch.Tensor | None = None
     started: bool = False

@@ -35,8 +35,8 @@ from pathlib import Path
 
 import torch
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.motion.render.character import CHARACTER_SUFFIXES

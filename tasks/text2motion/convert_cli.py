@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError, one_line_message
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.formats.humanml3d_features import (
     denormalize,
     read_features,

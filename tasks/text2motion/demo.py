@@ -29,7 +29,7 @@ import re
 import torch
 from lightning.pytorch import LightningModule, Trainer
 
-from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.formats.gltf import from_joints
 from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, recover_from_ric

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import torch
 
-from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.text2motion.metrics import confidence_interval
 
 __all__ = ["METRICS", "COMPARABLE", "NOT_COMPARABLE", "summarize", "format_table", "write_report"]

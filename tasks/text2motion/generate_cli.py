@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import CheckpointError, InputError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import HUMANML3D22
 from skeleton_mamba.tasks.motion.commands.cli_options import checked_sampling, sampling_overrides
 from skeleton_mamba.tasks.motion.formats.gltf import from_joints, write_glb

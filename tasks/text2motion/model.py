@@ -31,7 +31,7 @@ import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
 from skeleton_mamba.tasks.motion.body.statistics import channel_statistics
 from skeleton_mamba.tasks.motion.formats.humanml3d_features import FEATURE_DIM, NUM_JOINTS
 from skeleton_mamba.tasks.training.backbone_config import derived_backbone

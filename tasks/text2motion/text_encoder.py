@@ -19,9 +19,9 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.pretrained_checks import building_on_meta
+from skeleton_mamba.io.bounded_read import read_json
+from skeleton_mamba.pretrained.checks import building_on_meta
 
 __all__ = ["TextEncoder", "default_model_path"]
 

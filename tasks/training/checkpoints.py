@@ -51,9 +51,9 @@ from typing import Any, TypeVar
 import torch
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import CheckpointError, RandomWeightsWarning
-from skeleton_mamba.pretrained_checks import MAX_PARAMETERS, check_finite_weights, check_sizes, dtype_fits
+from skeleton_mamba.io.atomic import atomic_open
+from skeleton_mamba.pretrained.checks import MAX_PARAMETERS, check_finite_weights, check_sizes, dtype_fits
 from skeleton_mamba.tasks.training.registry import task_of_class_path, task_packages
 
 __all__ = [
@@ -533,7 +533,7 @@ class CheckedCheckpointIO(TorchCheckpointIO):
 
     Reads go through :func:`load_checkpoint` (local file, ``weights_only``, structure and class paths).
     Writes go through a temporary file in the checkpoint's own folder, fsynced, then renamed over the
-    target (:func:`~skeleton_mamba.atomic.atomic_open`): a full disk or an interruption leaves
+    target (:func:`~skeleton_mamba.io.atomic.atomic_open`): a full disk or an interruption leaves
     the previous checkpoint of that name intact and no partial file under the final name (Lightning's own
     writer stages the file in the system temporary folder and moves it, which is a copy across file
     systems).

@@ -28,8 +28,8 @@ import sys
 from collections.abc import Callable, Sequence
 
 from skeleton_mamba import __version__
-from skeleton_mamba.allocator import keep_freed_memory
 from skeleton_mamba.errors import expected_failure, one_line_message
+from skeleton_mamba.runtime.allocator import keep_freed_memory
 from skeleton_mamba.tasks.training.library_noise import silence_library_noise
 from skeleton_mamba.tasks.training.registry import Command, registered_tasks
 from skeleton_mamba.tasks.training.threads import apply_thread_defaults

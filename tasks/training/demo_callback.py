@@ -13,7 +13,7 @@ from typing import Any
 
 from lightning.pytorch import Callback, Trainer
 
-from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.formats.export import write_motion
 from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
 from skeleton_mamba.tasks.motion.formats.motion_reader import load_skeleton_motion

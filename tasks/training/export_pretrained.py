@@ -1,6 +1,6 @@
 """``sm export-pretrained --ckpt CKPT --out DIR``: a Lightning checkpoint as a Hugging Face folder.
 
-The folder is the task network's ``from_pretrained`` folder (:mod:`skeleton_mamba.pretrained`):
+The folder is the task network's ``from_pretrained`` folder (:mod:`skeleton_mamba.pretrained.mixin`):
 ``config.json``, ``model.safetensors`` (the network the module infers with: the EMA copy when it keeps one,
 with its data statistics), ``README.md`` (the model card: task, skeleton, sizes, the module's
 hyper-parameters, the data module's, test metrics from the run's ``metrics.csv`` when a test ran,
@@ -26,9 +26,9 @@ from pathlib import Path
 from lightning.pytorch import LightningModule
 from safetensors.torch import save
 
-from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.errors import CheckpointError, InputError
-from skeleton_mamba.pretrained import (
+from skeleton_mamba.io.atomic import atomic_path
+from skeleton_mamba.pretrained.mixin import (
     CARD_NAME,
     CONFIG_NAME,
     WEIGHTS_NAME,

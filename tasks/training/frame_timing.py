@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import torch
 
-from skeleton_mamba.allocator import keep_freed_memory
+from skeleton_mamba.runtime.allocator import keep_freed_memory
 from skeleton_mamba.tasks.training.pretrained import check_model_source
 
 __all__ = ["announce_compile", "latency_summary", "prepare_live", "realtime_hint", "report_compile"]

@@ -31,10 +31,10 @@ from torch import nn
 from torch.export import Dim
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.errors import CheckpointError, InputError
-from skeleton_mamba.pretrained import PretrainedError, decode_value
-from skeleton_mamba.pretrained_checks import check_sizes
+from skeleton_mamba.io.atomic import atomic_path
+from skeleton_mamba.pretrained.checks import check_sizes
+from skeleton_mamba.pretrained.mixin import PretrainedError, decode_value
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
 from skeleton_mamba.tasks.training.onnx_export_args import build_parser

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from skeleton_mamba.size_bounds import SIZE_BOUNDS
+from skeleton_mamba.pretrained.size_bounds import SIZE_BOUNDS
 from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
 from skeleton_mamba.tasks.motion.io.option_types import int_option
 from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP

@@ -8,7 +8,7 @@ Graphs of the backbone:
   tensors, per block i ``conv_i`` (batch, J, conv_dim, d_conv) and ``ssm_i`` (batch, J, nheads,
   headdim, d_state), -> ``y`` (batch, J, D or C_out) and the next state ``next_conv_i`` / ``next_ssm_i``;
   batch dynamic. Zeros are the state of a new stream; feeding each step's next state to the following
-  step equals the causal sequence forward ([Mamba-2] SSD recurrence, ``skeleton_mamba.streaming``).
+  step equals the causal sequence forward ([Mamba-2] SSD recurrence, ``skeleton_mamba.runtime.streaming``).
 
 A task's networks build their graphs from these pieces in the task's own folder (its ``onnx_graphs.py``,
 named by its registration's :attr:`~skeleton_mamba.tasks.training.registry.TaskSpec.networks`);
@@ -24,7 +24,7 @@ from torch import nn
 
 from skeleton_mamba import SkeletonMamba
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.streaming import frame_forward
+from skeleton_mamba.runtime.streaming import frame_forward
 
 __all__ = [
     "ExportSpec",
@@ -77,7 +77,7 @@ class StepGraph(nn.Module):
 
     forward(x (B, J, C), conv_0, ssm_0, conv_1, ssm_1, ...) -> (y (B, J, D), next_conv_0, next_ssm_0, ...)
     with conv_i (B, J, conv_dim, d_conv) and ssm_i (B, J, nheads, headdim, d_state): the
-    :class:`~skeleton_mamba.streaming.StreamState` tensors of block i with the streams' rows (B·J)
+    :class:`~skeleton_mamba.runtime.streaming.StreamState` tensors of block i with the streams' rows (B·J)
     split into (B, J), so every input has the batch first.
     """
 

@@ -1,7 +1,7 @@
 """Commands' models from a Lightning checkpoint, a ``from_pretrained`` folder or a Hub id.
 
 A folder written by ``sm export-pretrained`` (:mod:`.export_pretrained`) is a network's ``from_pretrained``
-folder (:mod:`skeleton_mamba.pretrained`: ``config.json``, ``model.safetensors``, ``README.md``) whose
+folder (:mod:`skeleton_mamba.pretrained.mixin`: ``config.json``, ``model.safetensors``, ``README.md``) whose
 ``config.json`` also records the Lightning module it came from (``"module"``: class path, hyper-parameters,
 the data module's hyper-parameters, where the network sits in the module), and a fourth file,
 ``module.safetensors``, with the module's other tensors (a head estimator, the EMA's counter). From those
@@ -33,7 +33,8 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file
 
 from skeleton_mamba.errors import CheckpointError
-from skeleton_mamba.pretrained import (
+from skeleton_mamba.pretrained.checks import check_sizes, read_safetensors_header
+from skeleton_mamba.pretrained.mixin import (
     CONFIG_NAME,
     WEIGHTS_NAME,
     PretrainedError,
@@ -42,7 +43,6 @@ from skeleton_mamba.pretrained import (
     read_pretrained_config,
     resolve_pretrained,
 )
-from skeleton_mamba.pretrained_checks import check_sizes, read_safetensors_header
 from skeleton_mamba.tasks.training.checkpoints import (
     check_checkpoint_path,
     check_class_paths,

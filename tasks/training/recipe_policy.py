@@ -32,7 +32,7 @@ from typing import Any
 from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.size_bounds import SIZE_BOUNDS
+from skeleton_mamba.pretrained.size_bounds import SIZE_BOUNDS
 from skeleton_mamba.tasks.motion.commands.cli_options import SAMPLERS, SOLVER_NAMES
 from skeleton_mamba.tasks.motion.io.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
 from skeleton_mamba.tasks.motion.io.value_checks import FPS_RANGE

@@ -28,8 +28,8 @@ import jsonargparse
 import yaml
 from jsonargparse import ActionConfigFile
 
-from skeleton_mamba.bounded_read import read_text
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.bounded_read import read_text
 
 RECIPE_PACKAGE = "skeleton_mamba.recipes"
 RECIPE_SUFFIXES = (".yaml", ".yml")
@@ -173,7 +173,7 @@ def check_yaml_bounds(text: str, source: str = "YAML value") -> None:
 
 def read_recipe_text(path: str | os.PathLike[str], what: str = "recipe") -> str:
     """The text of a YAML file (a recipe, a backbone file) through the project's bounded reader: a regular
-    file of at most :data:`MAX_RECIPE_BYTES`, UTF-8 (:mod:`skeleton_mamba.bounded_read`)."""
+    file of at most :data:`MAX_RECIPE_BYTES`, UTF-8 (:mod:`skeleton_mamba.io.bounded_read`)."""
     return read_text(path, max_bytes=MAX_RECIPE_BYTES, what=what, error=InputError)
 
 

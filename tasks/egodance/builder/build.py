@@ -36,8 +36,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.errors import DataFileError, InputError, worker_ignores_ctrl_c
+from skeleton_mamba.io.bounded_read import read_json
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body

@@ -61,9 +61,9 @@ import imageio.v3 as iio
 import imageio_ffmpeg
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.errors import DataFileError, InputError
+from skeleton_mamba.io.atomic import atomic_open
+from skeleton_mamba.io.bounded_read import read_json
 from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, load_motion, save_motion
 from skeleton_mamba.tasks.motion.formats.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.io.value_checks import NPY_HEADER_ERRORS, load_npz, read_npy_header

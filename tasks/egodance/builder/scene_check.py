@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.bounded_read import parse_json, read_json
 from skeleton_mamba.errors import DataFileError
+from skeleton_mamba.io.bounded_read import parse_json, read_json
 from skeleton_mamba.tasks.egodance.builder.config import MAX_SCENE_FACES  # plain Python, for --help
 
 __all__ = ["MAX_SCENE_FACES", "SceneFileError", "check_face_count", "check_scene_file", "check_scene_mesh"]

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
 from skeleton_mamba.tasks.motion.io.option_types import real_option
 from skeleton_mamba.tasks.motion.music.features import (

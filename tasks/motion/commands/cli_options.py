@@ -14,8 +14,8 @@ import sys
 from collections.abc import Callable
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.precision_names import PRECISION_HELP, PRECISIONS
-from skeleton_mamba.size_bounds import SIZE_BOUNDS
+from skeleton_mamba.pretrained.size_bounds import SIZE_BOUNDS
+from skeleton_mamba.runtime.precision import PRECISION_HELP, PRECISIONS
 from skeleton_mamba.tasks.motion.io.option_types import real_option
 
 __all__ = [
@@ -233,7 +233,7 @@ def checked_sampling(args: argparse.Namespace, stored, num_steps: int, source: s
 
 
 def add_precision_argument(parser: argparse.ArgumentParser, measured: str) -> None:
-    """``--precision fp32|bf16`` (:mod:`skeleton_mamba.precision_names`), its help ending with what was
+    """``--precision fp32|bf16`` (:mod:`skeleton_mamba.runtime.precision`), its help ending with what was
     ``measured`` of bf16 against fp32 for this command."""
     parser.add_argument(
         "--precision", choices=PRECISIONS, default="fp32", help=f"{PRECISION_HELP} {measured}"

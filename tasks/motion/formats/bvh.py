@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import DataFileError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler

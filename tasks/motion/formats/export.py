@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
-from skeleton_mamba.atomic import atomic_path
+from skeleton_mamba.io.atomic import atomic_path
 from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.formats.bvh import save_bvh, smpl_to_bvh
 from skeleton_mamba.tasks.motion.formats.gltf import from_motion_data, write_glb

@@ -38,8 +38,8 @@ import numpy as np
 import pygltflib
 import torch
 
-from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_path
 from skeleton_mamba.skeletons import get_skeleton, parents_first_order
 from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, matrix_to_quaternion

@@ -29,8 +29,8 @@ from typing import NoReturn
 import numpy as np
 import torch
 
-from skeleton_mamba.atomic import atomic_open
 from skeleton_mamba.errors import DataFileError
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
 from skeleton_mamba.tasks.motion.io.value_checks import (

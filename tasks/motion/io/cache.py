@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.io.atomic import atomic_open
 
 __all__ = ["FeatureCache", "default_cache_root", "file_sha256"]
 

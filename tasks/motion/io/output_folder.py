@@ -24,7 +24,7 @@ A command told to write one named file and files beside it (``sm dance --out FIL
 ``FILE.bvh``, ``FILE.glb``, ...) checks those others with :func:`claim_output_files`: an existing one is
 refused unless ``--overwrite`` is given (the named file itself was asked for). Names given on the command
 line (``--name``) are plain file names (:func:`~.option_types.file_name_option`). The files themselves
-are written atomically (:mod:`skeleton_mamba.atomic`); a command's one output *file* goes into an existing
+are written atomically (:mod:`skeleton_mamba.io.atomic`); a command's one output *file* goes into an existing
 folder (:func:`output_file`).
 """
 
@@ -41,9 +41,9 @@ from contextlib import contextmanager
 from os import PathLike
 from pathlib import Path
 
-from skeleton_mamba.atomic import atomic_open, check_writable
-from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_open, check_writable
+from skeleton_mamba.io.bounded_read import read_json
 from skeleton_mamba.tasks.motion.io.cache import default_cache_root, file_sha256
 from skeleton_mamba.tasks.motion.io.option_types import is_plain_name
 

@@ -35,7 +35,7 @@ import soundfile
 from PIL import Image
 from tqdm import tqdm
 
-from skeleton_mamba.atomic import atomic_path, check_writable
+from skeleton_mamba.io.atomic import atomic_path, check_writable
 from skeleton_mamba.tasks.motion.formats.mp4 import write_mp4
 from skeleton_mamba.tasks.motion.io.value_checks import check_fps
 from skeleton_mamba.tasks.motion.music.audio_io import read_audio

@@ -38,9 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
-from skeleton_mamba.bounded_read import read_bytes, read_json
 from skeleton_mamba.errors import InputError, one_line_message
+from skeleton_mamba.io.atomic import atomic_open
+from skeleton_mamba.io.bounded_read import read_bytes, read_json
 from skeleton_mamba.tasks.motion.commands.view_args import build_parser
 from skeleton_mamba.tasks.motion.formats.gltf import SkeletonMotion, glb_bytes
 from skeleton_mamba.tasks.motion.formats.motion_reader import load_skeleton_motion

@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
-from skeleton_mamba.atomic import atomic_path
 from skeleton_mamba.errors import InputError
+from skeleton_mamba.io.atomic import atomic_path
 from skeleton_mamba.tasks.motion.retarget.rig import BONES, Rig
 
 __all__ = ["Retarget", "bone_direction_errors", "driven_tips", "retarget", "write_bvh_rig", "write_gltf_rig"]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeleton_mamba.atomic import atomic_open
+from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.tasks.motion.formats.aistpp import music_id
 from skeleton_mamba.tasks.motion.synthetic.dance import STYLES, synthesize_dance
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music

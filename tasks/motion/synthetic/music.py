@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
-from skeleton_mamba.atomic import atomic_path
+from skeleton_mamba.io.atomic import atomic_path
 
 __all__ = ["SyntheticTrack", "synthesize_music", "write_music", "write_tone", "beat_times"]
 

@@ -6,7 +6,7 @@ import torch
 from torch import nn
 
 from skeleton_mamba import SkeletonMamba, SkeletonMambaConfig
-from skeleton_mamba.pretrained import PretrainedMixin
+from skeleton_mamba.pretrained.mixin import PretrainedMixin
 
 
 class GestureClassifier(PretrainedMixin, nn.Module):

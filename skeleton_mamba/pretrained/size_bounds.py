@@ -1,6 +1,6 @@
 """The largest value each size of a network may take, by name: what a pretrained folder's ``config.json``, a
 checkpoint's hyper-parameters or a command's option (``sm export-onnx --in-channels``) may state before
-anything is built (:func:`skeleton_mamba.pretrained_checks.check_sizes`).
+anything is built (:func:`skeleton_mamba.pretrained.checks.check_sizes`).
 
 Plain Python (no torch): the commands' parsers range-check their options with these bounds before torch is
 imported.

@@ -49,7 +49,7 @@ def linear(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
     """``layer(x)`` for a few tokens x (..., in) at inference; oneDNN for large fp32 CPU weights.
 
     Under ``torch.compile`` always ``F.linear``: inductor cannot lower the eager oneDNN call, and with
-    frozen weights it packs them for oneDNN itself (:mod:`skeleton_mamba.compiling`).
+    frozen weights it packs them for oneDNN itself (:mod:`skeleton_mamba.runtime.compiling`).
     """
     w = layer.weight
     large_fp32 = w.numel() >= ONEDNN_MIN_WEIGHT and x.dtype == w.dtype == torch.float32 and not x.is_cuda

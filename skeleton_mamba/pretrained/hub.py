@@ -1,7 +1,7 @@
 """The Hugging Face Hub side of pretrained folders: a Hub id resolved to a local folder through the Hugging
 Face cache, and a folder uploaded as a Hub model repository.
 
-Only the three files of a folder (:data:`~skeleton_mamba.pretrained_codec.FOLDER_FILES`) are downloaded or
+Only the three files of a folder (:data:`~skeleton_mamba.pretrained.codec.FOLDER_FILES`) are downloaded or
 uploaded. The client's functions are looked up on the ``huggingface_hub`` module at each call, so a test can
 replace them (``huggingface_hub.HfApi`` by a recorder of the calls).
 """
@@ -16,7 +16,7 @@ from typing import Any
 import huggingface_hub
 from huggingface_hub.utils import HfHubHTTPError, HFValidationError, LocalEntryNotFoundError
 
-from skeleton_mamba.pretrained_codec import (
+from skeleton_mamba.pretrained.codec import (
     CONFIG_NAME,
     FOLDER_FILES,
     WEIGHTS_NAME,
@@ -51,7 +51,7 @@ def resolve_pretrained(
         >>> resolve_pretrained("no/such/folder")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        skeleton_mamba.pretrained_codec.PretrainedError: no/such/folder: no such folder, and not a Hub id...
+        skeleton_mamba.pretrained.codec.PretrainedError: no/such/folder: no such folder, and not a Hub id...
     """
     text = os.fspath(source)
     path = Path(text).expanduser()

@@ -1,13 +1,14 @@
 """Checks of a pretrained folder before anything is allocated: sizes, the safetensors header, the tensors.
 
 A folder from outside is checked in this order (``PretrainedMixin.from_pretrained`` of
-:mod:`skeleton_mamba.pretrained`, and the commands' folder loader, ``tasks/training/pretrained.py``):
+:mod:`skeleton_mamba.pretrained.mixin`, and the commands' folder loader, ``tasks/training/pretrained.py``):
 
-1. ``config.json`` is read by the bounded reader (:mod:`skeleton_mamba.bounded_read`: a regular file of at
+1. ``config.json`` is read by the bounded reader (:mod:`skeleton_mamba.io.bounded_read`: a regular file of at
    most :data:`MAX_CONFIG_BYTES`, nesting, finite numbers);
-2. every size it states is within :data:`~skeleton_mamba.size_bounds.SIZE_BOUNDS` (:func:`check_sizes`;
-   widths, depths, state sizes, heads, layer and class counts, about 30x [EgoMusic] supp. Table 2's sizes),
-   so the network can be built on PyTorch's ``meta`` device (shapes, no memory) in bounded time;
+2. every size it states is within :data:`~skeleton_mamba.pretrained.size_bounds.SIZE_BOUNDS`
+   (:func:`check_sizes`; widths, depths, state sizes, heads, layer and class counts, about 30x [EgoMusic]
+   supp. Table 2's sizes), so the network can be built on PyTorch's ``meta`` device (shapes, no memory) in
+   bounded time;
 3. the network built on ``meta`` (:func:`meta_state`) holds at most :data:`MAX_PARAMETERS` values;
 4. the safetensors header is parsed here (:func:`read_safetensors_header`: an 8-byte length of at most
    :data:`MAX_HEADER_BYTES`, then JSON of at most :data:`MAX_TENSORS` entries, each with a known dtype, a
@@ -31,8 +32,8 @@ from typing import Any
 
 import torch
 
-from skeleton_mamba.bounded_read import parse_json
-from skeleton_mamba.size_bounds import SIZE_BOUNDS, size_bound
+from skeleton_mamba.io.bounded_read import parse_json
+from skeleton_mamba.pretrained.size_bounds import SIZE_BOUNDS, size_bound
 
 __all__ = [
     "MAX_CONFIG_BYTES",

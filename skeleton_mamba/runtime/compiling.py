@@ -11,16 +11,16 @@ function keeps the parameter values of its first call.
 
 The frame step of a causal SkeletonMamba:
 
-At the paper width a frame (:func:`skeleton_mamba.streaming.step`) is a few hundred small operators
+At the paper width a frame (:func:`skeleton_mamba.runtime.streaming.step`) is a few hundred small operators
 (projections of 5 to 40 tokens, the frame-wise scans, the SSD state update): on a CPU its time goes to
 launching them, not to arithmetic. :class:`CompiledStep` compiles the whole frame,
-:func:`~skeleton_mamba.streaming.frame_forward` (input projection, every block's
-:func:`~skeleton_mamba.streaming.block_step`, output), into one inductor graph with the weights
+:func:`~skeleton_mamba.runtime.streaming.frame_forward` (input projection, every block's
+:func:`~skeleton_mamba.runtime.streaming.block_step`, output), into one inductor graph with the weights
 frozen: inductor treats them as constants, folds what depends on them alone, prepacks the
 projections for oneDNN and fuses the element-wise operators into C++ loops.
 
-- Same results as :func:`~skeleton_mamba.streaming.step` to the rounding of the compute dtype (fp32:
-  a few 1e-6 at the paper width), the same :class:`~skeleton_mamba.streaming.StreamState` (layout
+- Same results as :func:`~skeleton_mamba.runtime.streaming.step` to the rounding of the compute dtype (fp32:
+  a few 1e-6 at the paper width), the same :class:`~skeleton_mamba.runtime.streaming.StreamState` (layout
   unchanged, updated in place: the compiled graph writes the new convolution and SSD states back
   into the state's tensors).
 - Compiling happens on the first call. It needs a C++ compiler (inductor's CPU backend) and takes
@@ -34,7 +34,7 @@ projections for oneDNN and fuses the element-wise operators into C++ loops.
   call raises a RuntimeError, where dynamo's default would run eagerly from then on without saying so.
 - The weights are copied into the graph: a change of any parameter or buffer after compiling (a
   ``load_state_dict``, a training step) makes the call raise; build a new :class:`CompiledStep`.
-- Inference only, ``torch.inference_mode`` inside, as :func:`~skeleton_mamba.streaming.step`.
+- Inference only, ``torch.inference_mode`` inside, as :func:`~skeleton_mamba.runtime.streaming.step`.
 """
 
 from __future__ import annotations
@@ -47,8 +47,8 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
-from skeleton_mamba import streaming
-from skeleton_mamba.streaming import StreamState
+from skeleton_mamba.runtime import streaming
+from skeleton_mamba.runtime.streaming import StreamState
 
 __all__ = ["CompiledStep", "compile_for_inference", "compile_step_or_eager", "inductor_unavailable"]
 
@@ -100,7 +100,7 @@ def _weight_versions(model: nn.Module) -> tuple[int, ...]:
 
 
 class CompiledStep:
-    """:func:`skeleton_mamba.streaming.step` of ``model`` through :func:`compile_for_inference`.
+    """:func:`skeleton_mamba.runtime.streaming.step` of ``model`` through :func:`compile_for_inference`.
 
     ``compiled = CompiledStep(model)`` (or ``model.compile_step()``), then ``y, state = compiled(x,
     state)`` as ``model.step(x, state)``. See the module docstring for compile time, recompiles and

@@ -11,7 +11,7 @@ from typing import Any
 import torch
 
 from skeleton_mamba.config import SkeletonMambaConfig
-from skeleton_mamba.pretrained_codec import class_name, encode_value
+from skeleton_mamba.pretrained.codec import class_name, encode_value
 
 __all__ = ["CITATIONS", "model_card"]
 

@@ -21,9 +21,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from skeleton_mamba.bounded_read import read_json
 from skeleton_mamba.config import ConfigValueError
-from skeleton_mamba.pretrained_checks import MAX_CONFIG_BYTES
+from skeleton_mamba.io.bounded_read import read_json
+from skeleton_mamba.pretrained.checks import MAX_CONFIG_BYTES
 
 __all__ = [
     "CARD_NAME",
@@ -124,7 +124,7 @@ def decode_value(value: Any, hint: Any, where: str) -> Any:
         >>> decode_value("8", int, "init.depth")
         Traceback (most recent call last):
         ...
-        skeleton_mamba.pretrained_codec.PretrainedError: init.depth: expected int, got '8'
+        skeleton_mamba.pretrained.codec.PretrainedError: init.depth: expected int, got '8'
     """
     origin = typing.get_origin(hint)
     if origin in (typing.Union, types.UnionType):

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import torch
 
-from skeleton_mamba.frame_ops import FrameOps
+from skeleton_mamba.runtime.frame_ops import FrameOps
 
 
 @dataclass
@@ -122,7 +122,7 @@ def frame_forward(
     """The computation of :func:`step` (no checks, no counter): x (B, J, C_in) -> (B, J, D or C_out).
 
     ``conv`` and ``ssm`` (the :class:`StreamState` lists, one tensor per block) are updated in place.
-    This is the function :class:`~skeleton_mamba.compiling.CompiledStep` compiles.
+    This is the function :class:`~skeleton_mamba.runtime.compiling.CompiledStep` compiles.
     """
     h = model.input_proj(x)
     if model.joint_embedding is not None:

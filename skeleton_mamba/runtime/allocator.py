@@ -9,7 +9,7 @@ kernel. With the mmap threshold fixed at 32 MiB (the most glibc's own adaptation
 threshold at 1 GiB the faults and the kernel time are gone (the figures: ``benchmarks/README.md``, "Faster
 demo step"). The results are bit-identical: only where the memory comes from changes.
 
-A streamed frame (:func:`skeleton_mamba.streaming.step`) allocates and frees the same few hundred kB
+A streamed frame (:func:`skeleton_mamba.runtime.streaming.step`) allocates and frees the same few hundred kB
 buffers every frame; with the adaptive defaults a frame could start with thousands of minor page faults,
 none with these settings (``benchmarks/README.md``, "Streaming").
 

@@ -3,14 +3,14 @@
 A folder (local, or a Hub repository) holds three files:
 
 - ``config.json``: the format name and version, the network's class and its ``__init__`` arguments, as
-  :mod:`skeleton_mamba.pretrained_codec` encodes them (strict JSON; nothing in it names code to import).
+  :mod:`skeleton_mamba.pretrained.codec` encodes them (strict JSON; nothing in it names code to import).
 - ``model.safetensors``: the ``state_dict`` (parameters and persistent buffers, such as data statistics).
   It is read with ``safetensors``, which holds tensors and a JSON header only: nothing is unpickled.
-- ``README.md``: a model card (:mod:`skeleton_mamba.pretrained_card`).
+- ``README.md``: a model card (:mod:`skeleton_mamba.pretrained.card`).
 
 This module holds :class:`PretrainedMixin`, which writes and reads the three files; the Hub client (a Hub id
-to a local folder, uploads) is :mod:`skeleton_mamba.pretrained_hub`, and the checks made before anything is
-allocated are :mod:`skeleton_mamba.pretrained_checks`. The mixin records the arguments a network was built
+to a local folder, uploads) is :mod:`skeleton_mamba.pretrained.hub`, and the checks made before anything is
+allocated are :mod:`skeleton_mamba.pretrained.checks`. The mixin records the arguments a network was built
 with (in ``__new__``, before ``__init__`` runs), so a network only inherits from :class:`PretrainedMixin`.
 The public names of the codec, card and Hub modules are importable from here too.
 """
@@ -31,9 +31,9 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save
 
-from skeleton_mamba.atomic import atomic_path
-from skeleton_mamba.pretrained_card import CITATIONS, model_card
-from skeleton_mamba.pretrained_checks import (
+from skeleton_mamba.io.atomic import atomic_path
+from skeleton_mamba.pretrained.card import CITATIONS, model_card
+from skeleton_mamba.pretrained.checks import (
     MAX_PARAMETERS,
     check_finite_weights,
     check_header_fits,
@@ -42,7 +42,7 @@ from skeleton_mamba.pretrained_checks import (
     read_safetensors_header,
     total_values,
 )
-from skeleton_mamba.pretrained_codec import (
+from skeleton_mamba.pretrained.codec import (
     CARD_NAME,
     CONFIG_NAME,
     FORMAT,
@@ -55,7 +55,7 @@ from skeleton_mamba.pretrained_codec import (
     read_pretrained_config,
     type_hints,
 )
-from skeleton_mamba.pretrained_hub import push_folder_to_hub, resolve_pretrained
+from skeleton_mamba.pretrained.hub import push_folder_to_hub, resolve_pretrained
 
 __all__ = [
     "CARD_NAME",
@@ -76,7 +76,7 @@ __all__ = [
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file beside it (:mod:`skeleton_mamba.atomic`)."""
+    """Write ``data`` to ``path`` through a temporary file beside it (:mod:`skeleton_mamba.io.atomic`)."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
 
@@ -174,7 +174,8 @@ class PretrainedMixin:
     @classmethod
     def pretrained_kwargs(cls, config: Mapping[str, Any], source: str = CONFIG_NAME) -> dict[str, Any]:
         """The ``__init__`` arguments a ``config.json`` dict stores, decoded and checked: its class must be
-        ``cls`` and every size within :data:`~skeleton_mamba.size_bounds.SIZE_BOUNDS`. Nothing is built.
+        ``cls`` and every size within :data:`~skeleton_mamba.pretrained.size_bounds.SIZE_BOUNDS`. Nothing is
+        built.
 
         Raises:
             PretrainedError: naming ``source`` and the argument at fault.
@@ -210,7 +211,7 @@ class PretrainedMixin:
     @classmethod
     def check_pretrained_folder(cls, folder: str | os.PathLike[str], config: Mapping[str, Any]) -> dict:
         """Check ``folder`` (its ``config.json`` dict ``config``) before anything is allocated; returns the
-        ``__init__`` arguments. The order of :mod:`skeleton_mamba.pretrained_checks`: sizes, the network
+        ``__init__`` arguments. The order of :mod:`skeleton_mamba.pretrained.checks`: sizes, the network
         built on ``meta`` and its value count, the safetensors header against it.
 
         Raises:
@@ -279,7 +280,7 @@ class PretrainedMixin:
         device: str | torch.device = "cpu",
     ):
         """The network saved in ``source`` (a folder or a Hub id ``org/name``), in eval mode; checked before
-        anything is allocated (:mod:`skeleton_mamba.pretrained_checks`).
+        anything is allocated (:mod:`skeleton_mamba.pretrained.checks`).
 
         Raises:
             PretrainedError: not such a folder, another class, a size beyond its bound, config or weights

@@ -90,7 +90,7 @@ def read_bytes(
         >>> read_bytes(path, max_bytes=10, what="run record")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        skeleton_mamba.bounded_read.BoundedReadError: ...run.json: 34 bytes, more than a run record's 10
+        skeleton_mamba.io.bounded_read.BoundedReadError: ...run.json: 34 bytes, more than a run record's 10
     """
     name = os.fspath(path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -168,7 +168,7 @@ def check_json_depth(
         >>> check_json_depth("[[[1]]]", "deep.json", max_depth=2)
         Traceback (most recent call last):
         ...
-        skeleton_mamba.bounded_read.BoundedReadError: deep.json:1:3: nested more than 2 levels deep
+        skeleton_mamba.io.bounded_read.BoundedReadError: deep.json:1:3: nested more than 2 levels deep
     """
     depth = 0
     for match in _BRACKETS_OR_STRINGS.finditer(text):
@@ -203,7 +203,7 @@ def parse_json(
         >>> parse_json('[1.0, NaN]', "inline")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        skeleton_mamba.bounded_read.BoundedReadError: inline...NaN...
+        skeleton_mamba.io.bounded_read.BoundedReadError: inline...NaN...
     """
     if non_finite not in ("refuse", "null"):
         raise ValueError(f"non_finite must be 'refuse' or 'null', got {non_finite!r}")
