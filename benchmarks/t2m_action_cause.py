@@ -104,7 +104,7 @@ def model_side(steps: int, pooled_text: bool, seed: int = 0) -> dict:
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
-            losses.append(float(loss))
+            losses.append(loss.item())
             step += 1
             if step == steps:
                 break
