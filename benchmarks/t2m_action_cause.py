@@ -33,7 +33,6 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, write_report  # noqa: E402
 
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig  # noqa: E402
 from skeleton_mamba.tasks.motion.formats.humanml3d_features import recover_from_ric  # noqa: E402
 from skeleton_mamba.tasks.motion.synthetic.actions import ACTIONS  # noqa: E402
 from skeleton_mamba.tasks.text2motion.actions import CAPTIONS, PARAPHRASES, read_action  # noqa: E402
@@ -42,8 +41,8 @@ from skeleton_mamba.tasks.text2motion.model import TextCondition  # noqa: E402
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule  # noqa: E402
 from skeleton_mamba.tasks.text2motion.synthetic import LABEL  # noqa: E402
 from skeleton_mamba.tasks.text2motion.text_encoder import TextEncoder  # noqa: E402
+from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipe_dir  # noqa: E402
 
-RECIPES = Path(__file__).resolve().parent.parent / "recipes"
 NOISE_LEVELS = (100, 500, 700, 900, 999)
 
 
@@ -52,9 +51,7 @@ def text_side() -> dict:
     encoder = TextEncoder(None)
 
     def pooled(texts: list[str]) -> torch.Tensor:
-        tokens, mask = encoder(texts)
-        weights = mask.float()[..., None]
-        return torch.nn.functional.normalize((tokens * weights).sum(1) / weights.sum(1), dim=-1)
+        return torch.nn.functional.normalize(TextCondition(*encoder(texts)).pooled(), dim=-1)
 
     captions = [(a, LABEL + c) for a in ACTIONS for c in CAPTIONS[a]]
     asked = [(a, LABEL + p) for a in ACTIONS for p in PARAPHRASES[a]]
@@ -74,16 +71,11 @@ def text_side() -> dict:
 
 
 def demo_module(pooled_text: bool) -> TextToMotionModule:
-    recipe = yaml.safe_load((RECIPES / "humanml3d_demo.yaml").read_text())["model"]["init_args"]
-    backbone = yaml.safe_load((RECIPES / recipe["backbone"]).read_text())
-    backbone["mixer"] = MixerConfig(**backbone["mixer"])
-    keep = ("diffusion_steps", "cond_drop_prob", "guidance_weight", "sampler", "sampling_steps", "eta", "lr")
-    return TextToMotionModule(
-        backbone=SkeletonMambaConfig(**backbone),
-        temporal_prior=recipe["temporal_prior"],
-        pooled_text=pooled_text,
-        **{k: recipe[k] for k in keep},
-    )
+    """``humanml3d_demo.yaml``'s module, its backbone fragment read as the recipe names it."""
+    recipes = packaged_recipe_dir()
+    args = dict(yaml.safe_load((recipes / "humanml3d_demo.yaml").read_text())["model"]["init_args"])
+    args["backbone"] = yaml.safe_load((recipes / args["backbone"]).read_text())
+    return TextToMotionModule(**args, pooled_text=pooled_text)
 
 
 def model_side(steps: int, pooled_text: bool, seed: int = 0) -> dict:

@@ -17,7 +17,8 @@ from skeleton_mamba.ssd import kernel as kernel_mod
 from skeleton_mamba.ssd import ssd, ssd_chunked, ssd_quadratic, ssd_recurrence
 from skeleton_mamba.ssd.below_diagonal import below_diagonal
 from skeleton_mamba.ssd.dispatch import choose_impl
-from skeleton_mamba.ssd.segsum import decay_mask, segsum_stable
+from skeleton_mamba.ssd.minimal import segsum
+from skeleton_mamba.ssd.segsum import decay_mask
 
 F64 = torch.float64
 
@@ -79,7 +80,7 @@ def test_recurrence_equals_loop_built_matrix_form():
 def test_decay_mask_matches_stable_segsum_and_loops():
     a = -torch.rand(3, 9, dtype=F64) * 4
     mask = decay_mask(a.cumsum(-1))
-    torch.testing.assert_close(mask, segsum_stable(a).exp(), rtol=1e-12, atol=0)
+    torch.testing.assert_close(mask, segsum(a).exp(), rtol=1e-12, atol=0)
     for i in range(9):
         for j in range(9):
             expected = math.exp(float(a[1, j + 1 : i + 1].sum())) if i >= j else 0.0
@@ -87,8 +88,8 @@ def test_decay_mask_matches_stable_segsum_and_loops():
     # fp32: the cumsum-difference mask stays within 1e-5 relative of the fp64 stable mask for
     # chunk-length sums (|cs| up to 64 * 2 = 128).
     a32 = -torch.rand(4, 64) * 2
-    rel = (decay_mask(a32.cumsum(-1)).double() - segsum_stable(a32.double()).exp()).abs()
-    assert (rel / segsum_stable(a32.double()).exp().clamp_min(1e-30)).max() < 1e-5
+    rel = (decay_mask(a32.cumsum(-1)).double() - segsum(a32.double()).exp()).abs()
+    assert (rel / segsum(a32.double()).exp().clamp_min(1e-30)).max() < 1e-5
 
 
 def run_all(fn, inp, **kw):
@@ -473,14 +474,14 @@ def test_split_cumsum_gives_float64_mask():
     intra = importlib.import_module("skeleton_mamba.ssd.intra_chunk")
     a = -torch.rand(3, 120, dtype=F64) * 4  # |cs| up to ~480
     cs = a.cumsum(-1)
-    exact = segsum_stable(a).exp()
+    exact = segsum(a).exp()
     hi, r, c = intra.split_cumsum(cs, torch.float32)
     assert hi.dtype == r.dtype == c.dtype == torch.float32
     mask = decay_mask(hi).double() * r.double()[..., :, None] * c.double()[..., None, :]
     # entries are ≤ 1: the absolute error is the one that reaches y; the relative error grows as
     # u·|cs_i - cs_j| (exp of a correctly rounded difference), which is what bounds it here
     assert (mask - exact).abs().max() < 4e-7
-    log_gap = segsum_stable(a).clamp_min(-80.0).abs() + 2.0
+    log_gap = segsum(a).clamp_min(-80.0).abs() + 2.0
     ok = exact > 1e-30
     assert ((mask - exact).abs() / exact)[ok].le(2 * 2.0**-24 * log_gap[ok]).all()
     assert (decay_mask(hi).double() - exact).abs().max() > 5e-6  # rounding cs to fp32 alone is not enough

@@ -10,22 +10,6 @@ from __future__ import annotations
 import torch
 
 
-def segsum_stable(a: torch.Tensor) -> torch.Tensor:
-    """The stable O(T²) segment sum (as ``ssd_minimal.segsum``): every entry sums only its own terms.
-
-    Args:
-        a: (..., T) log decays.
-
-    Returns:
-        (..., T, T) with entry [i, j] = a_{j+1} + ... + a_i for i ≥ j, -inf above the diagonal.
-    """
-    T = a.shape[-1]
-    x = a[..., None].expand(*a.shape, T)  # x[..., i, j] = a_i
-    strict = torch.ones(T, T, dtype=torch.bool, device=a.device).tril(-1)
-    x = x.masked_fill(~strict, 0.0).cumsum(dim=-2)
-    return x.masked_fill(~strict.logical_or(torch.eye(T, dtype=torch.bool, device=a.device)), -torch.inf)
-
-
 def decay_mask(cs: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
     """exp(segsum) from the inclusive cumulative sum ``cs`` of the log decays of one chunk.
 

@@ -107,6 +107,12 @@ class TextCondition:
     tokens: torch.Tensor
     mask: torch.Tensor
 
+    def pooled(self) -> torch.Tensor:
+        """(B, D) the mean of the real tokens' embeddings (MiniLM's sentence embedding before its
+        normalisation); zeros for the null caption."""
+        weights = self.mask.to(self.tokens.device, self.tokens.dtype)[..., None]
+        return (self.tokens * weights).sum(1) / weights.sum(1).clamp(min=1.0)
+
     def null(self) -> TextCondition:
         """The null condition of this batch: all padding (no caption token), of the same shape.
 
@@ -214,10 +220,8 @@ class TextToMotionDenoiser(PretrainedMixin, nn.Module):
         b, frames, _ = x_t.shape
         emb = self.time_mlp(timestep_embedding(t, self.time_embedding_dim).to(x_t.dtype))  # (B, E)
         if self.pooled_text is not None and cond is not None:
-            weights = cond.mask.to(x_t.device, x_t.dtype)[..., None]  # (B, S, 1)
-            count = weights.sum(1)  # (B, 1): 0 for the null caption, which adds nothing (as no caption)
-            pooled = (cond.tokens.to(x_t.dtype) * weights).sum(1) / count.clamp(min=1.0)
-            emb = emb + self.pooled_text(pooled) * (count > 0).to(x_t.dtype)
+            has_caption = cond.mask.to(x_t.device).any(1, keepdim=True).to(x_t.dtype)  # (B, 1)
+            emb = emb + self.pooled_text(cond.pooled().to(x_t.dtype)) * has_caption  # null: as no caption
         channels = self.time_to_channels(emb)[:, None, None, :].expand(b, frames, NUM_JOINTS, -1)
         x_in = self.skip_x0.network_input(x_t, t)
         tokens = torch.cat([features_to_tokens(x_in), channels], dim=-1)  # (B, T, 22, 13 + C_t)
