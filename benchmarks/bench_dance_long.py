@@ -40,7 +40,7 @@ from common import machine_info  # noqa: E402
 from skeleton_mamba.tasks.egodance import dance_cli  # noqa: E402
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule  # noqa: E402
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music  # noqa: E402
-from skeleton_mamba.tasks.training.diffusion.sampling import FAST_SOLVER_STEPS  # noqa: E402
+from skeleton_mamba.tasks.training.diffusion.solvers import FAST_SOLVER_STEPS  # noqa: E402
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 SIZES = {"paper": "egodance.yaml", "demo": "egodance_demo.yaml"}

@@ -80,7 +80,7 @@ def test_sampling_options_check_override_and_describe():
 def test_cli_sampling_arguments():
     import argparse
 
-    from skeleton_mamba.tasks.motion.commands.cli_options import add_sampling_arguments, sampling_overrides
+    from skeleton_mamba.tasks.training.sampling_args import add_sampling_arguments, sampling_overrides
 
     parser = argparse.ArgumentParser()
     add_sampling_arguments(parser)

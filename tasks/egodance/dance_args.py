@@ -8,7 +8,6 @@ import argparse
 from skeleton_mamba.tasks.motion.commands.cli_options import (
     add_precision_argument,
     add_quiet_argument,
-    add_sampling_arguments,
     command_parser,
 )
 from skeleton_mamba.tasks.motion.io.option_types import (
@@ -21,6 +20,7 @@ from skeleton_mamba.tasks.motion.io.option_types import (
 )
 from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
+from skeleton_mamba.tasks.training.sampling_args import add_sampling_arguments
 
 __all__ = ["DANCE_BF16_ERROR", "DEFAULT_BATCH_WINDOWS", "build_parser", "overlap_problem"]
 

@@ -45,7 +45,6 @@ from skeleton_mamba.tasks.egodance.export import write_dance
 from skeleton_mamba.tasks.egodance.long_form import LongForm, head_targets
 from skeleton_mamba.tasks.egodance.module import EgoDanceModule
 from skeleton_mamba.tasks.egodance.representation import motion_joints
-from skeleton_mamba.tasks.motion.commands.cli_options import checked_sampling
 from skeleton_mamba.tasks.motion.formats.export import dance_files
 from skeleton_mamba.tasks.motion.io.output_folder import (
     claim_output_files,
@@ -60,6 +59,7 @@ from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle
 from skeleton_mamba.tasks.motion.retarget.rig_output import prepare_rig, rig_file_names
 from skeleton_mamba.tasks.training.diffusion.sampling import SamplingOptions
 from skeleton_mamba.tasks.training.pretrained import load_module_and_checkpoint_from
+from skeleton_mamba.tasks.training.sampling_args import checked_sampling
 
 __all__ = ["main", "build_parser"]
 

@@ -6,12 +6,12 @@ import argparse
 
 from skeleton_mamba.tasks.motion.commands.cli_options import (
     add_quiet_argument,
-    add_sampling_arguments,
     command_parser,
 )
 from skeleton_mamba.tasks.motion.io.option_types import int_option, seed_option
 from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
+from skeleton_mamba.tasks.training.sampling_args import add_sampling_arguments
 
 __all__ = ["build_parser"]
 

@@ -29,7 +29,6 @@ import torch
 from skeleton_mamba.errors import CheckpointError, InputError
 from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import HUMANML3D22
-from skeleton_mamba.tasks.motion.commands.cli_options import checked_sampling, sampling_overrides
 from skeleton_mamba.tasks.motion.formats.gltf import from_joints, write_glb
 from skeleton_mamba.tasks.motion.formats.humanml3d_features import FPS, recover_from_ric
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
@@ -39,6 +38,7 @@ from skeleton_mamba.tasks.motion.retarget.rig_output import prepare_rig, rig_fil
 from skeleton_mamba.tasks.text2motion.generate_args import build_parser
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.pretrained import check_model_source, load_module_from
+from skeleton_mamba.tasks.training.sampling_args import checked_sampling, sampling_overrides
 
 __all__ = ["MAX_FRAMES_PER_RUN", "parse_length", "slug", "save_generated", "main"]
 

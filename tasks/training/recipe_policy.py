@@ -18,7 +18,7 @@ naming the option and the recipes it may come from, instead of a numpy ``ValueEr
 a 728 TiB allocation. Every float is finite (a ``guidance_weight: .nan`` or an ``eta: .inf`` is refused at
 once, not after minutes of training by the demo that samples with it; only a mixer's ``dt_limit`` max may be
 ``inf``), every diffusion sampler named (``sampler``, ``eval_sampler``) is one of
-:data:`~skeleton_mamba.tasks.motion.commands.cli_options.SAMPLERS`, and every sampling step count fits the
+:data:`~skeleton_mamba.tasks.training.sampler_registry.SAMPLERS`, and every sampling step count fits the
 model's ``diffusion_steps``.
 """
 
@@ -33,10 +33,10 @@ from lightning.fabric.utilities.seed import max_seed_value, min_seed_value
 
 from skeleton_mamba.errors import InputError
 from skeleton_mamba.pretrained.size_bounds import SIZE_BOUNDS
-from skeleton_mamba.tasks.motion.commands.cli_options import SAMPLERS, SOLVER_NAMES
 from skeleton_mamba.tasks.motion.io.option_types import MAX_FRAMES, MAX_IMAGE_SIZE, MAX_WORKERS
 from skeleton_mamba.tasks.motion.io.value_checks import FPS_RANGE
 from skeleton_mamba.tasks.training.checkpoints import TRUSTED_CLASS_PREFIXES, trusted_class_prefixes
+from skeleton_mamba.tasks.training.sampler_registry import SAMPLERS, get_sampler
 
 __all__ = [
     "ALLOW_IMPORT_ENV",
@@ -336,7 +336,7 @@ def _check_sampling(config: Mapping[str, Any], origin: str) -> None:
         for where, mapping in _mappings(value, section):
             for key, item in mapping.items():
                 if key in SAMPLER_KEYS and item is not None and item not in SAMPLERS:
-                    names = ", ".join(SAMPLERS)
+                    names = ", ".join(SAMPLERS.names())
                     raise InputError(
                         f"--{where}.{key} = {item!r}: expected a sampler, one of {names}{origin}"
                     )
@@ -346,12 +346,11 @@ def _check_sampling(config: Mapping[str, Any], origin: str) -> None:
                 count = mapping.get(key)
                 if not isinstance(count, int) or isinstance(count, bool):
                     continue
-                sampler = mapping.get(sampler_key)
-                if sampler == "ddpm":
-                    continue  # runs all T steps
-                low = 2 if sampler in SOLVER_NAMES else 1
+                name = mapping.get(sampler_key) or "ddim"
+                low = get_sampler(name).first_step
+                if low is None:
+                    continue  # runs all T steps (DDPM)
                 if not low <= count <= total:
-                    name = sampler or "ddim"
                     raise InputError(
                         f"--{where}.{key} = {count}: {name} takes {low} to {total} steps on this model "
                         f"(--model.init_args.diffusion_steps = {total}){origin}"

@@ -1,5 +1,6 @@
 """What every ``sm`` command's parser shares: the help formatter, the input-file check, ``--quiet``, the
-sampling and precision options, each spelled alike.
+precision option, each spelled alike (the generative commands' sampling options:
+:mod:`skeleton_mamba.tasks.training.sampling_args`).
 
 argparse only: ``sm CMD --help`` builds the command's parser from a module that imports no torch (the
 ``*_args.py`` beside each command), and ``sm`` parses the command line with it before importing the command,
@@ -14,28 +15,17 @@ import sys
 from collections.abc import Callable
 
 from skeleton_mamba.errors import InputError
-from skeleton_mamba.pretrained.size_bounds import SIZE_BOUNDS
 from skeleton_mamba.runtime.precision import PRECISION_HELP, PRECISIONS
-from skeleton_mamba.tasks.motion.io.option_types import real_option
 
 __all__ = [
-    "SAMPLERS",
-    "SOLVER_NAMES",
     "CommandParser",
     "ExamplesHelpFormatter",
     "SmHelpFormatter",
     "add_precision_argument",
     "add_quiet_argument",
-    "add_sampling_arguments",
-    "checked_sampling",
     "command_parser",
     "progress_default",
-    "sampling_overrides",
 ]
-
-SAMPLERS = ("ddim", "ddpm", "dpmpp", "unipc")  # the diffusion samplers (tasks/training/diffusion/sampling.py)
-MAX_SAMPLING_STEPS = SIZE_BOUNDS["sampling_steps"]
-SOLVER_NAMES = ("dpmpp", "unipc")  # those of them that are multistep ODE solvers (diffusion/solvers.py)
 
 
 class SmHelpFormatter(argparse.HelpFormatter):
@@ -164,72 +154,6 @@ def add_quiet_argument(parser: argparse.ArgumentParser, what: str = "progress ba
         const=progress_default(),
         advice=f"{what} show by default on a terminal (--quiet hides them)",
     )
-
-
-def _steps(text: str) -> int:
-    try:
-        steps = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of sampling steps, got {text!r}") from None
-    if steps < 1:
-        raise argparse.ArgumentTypeError(f"expected at least 1 sampling step, got {steps}")
-    if steps > MAX_SAMPLING_STEPS:  # no model has more diffusion steps (the loaded model's: checked_sampling)
-        limit = f"{MAX_SAMPLING_STEPS:,}"
-        raise argparse.ArgumentTypeError(f"expected at most {limit} sampling steps, got {steps}")
-    return steps
-
-
-def add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--sampler ddim|ddpm|dpmpp|unipc``, ``--steps N`` (alone on a DDPM model it selects DDIM),
-    ``--eta`` and ``--guidance`` of the generative commands (``sm dance``, ``sm generate``), each defaulting
-    to the checkpoint's :class:`~skeleton_mamba.tasks.training.diffusion.sampling.SamplingOptions`."""
-    parser.add_argument("--sampler", choices=SAMPLERS, default=None, help="default: the checkpoint's")
-    parser.add_argument(
-        "--steps",
-        type=_steps,
-        default=None,
-        help="steps of ddim, dpmpp or unipc (alone on a ddpm checkpoint: ddim; default: the checkpoint's, "
-        "20 for a solver chosen with --sampler)",
-    )
-    parser.add_argument(
-        "--eta",
-        type=real_option(0.0, 10.0, "a DDIM eta"),
-        default=None,
-        help="DDIM noise eta (default: the checkpoint's)",
-    )
-    parser.add_argument(
-        "--guidance",
-        type=real_option(0.0, 100.0, "a guidance weight"),
-        default=None,
-        help="classifier-free guidance weight (default: the checkpoint's)",
-    )
-
-
-def sampling_overrides(args: argparse.Namespace) -> dict:
-    """The keyword arguments of ``SamplingOptions.override`` that ``args`` gives."""
-    return dict(sampler=args.sampler, sampling_steps=args.steps, eta=args.eta, guidance_weight=args.guidance)
-
-
-def checked_sampling(args: argparse.Namespace, stored, num_steps: int, source: str):
-    """The sampling a command runs: the checkpoint's ``stored`` ``SamplingOptions`` with the options of
-    ``args`` (:func:`sampling_overrides`), checked against the loaded model's ``num_steps`` diffusion steps
-    (``SamplingOptions.steps_problem``) right after the checkpoint loads, before any input is read.
-
-    Raises:
-        InputError: naming the option at fault (``--steps``, or ``--sampler`` with its default step count)
-            or, when no option set the step count, the checkpoint ``source`` and its ``sampling_steps``.
-    """
-    sampling = stored.override(**sampling_overrides(args))
-    problem = sampling.steps_problem(num_steps)
-    if problem is None:
-        return sampling
-    if args.steps is not None:
-        raise InputError(f"--steps {args.steps}: {problem}")
-    if args.sampler is not None and sampling.sampling_steps != stored.sampling_steps:
-        where = f"--sampler {args.sampler} (its default {sampling.sampling_steps} steps)"
-    else:
-        where = f"{source}: its sampling_steps {sampling.sampling_steps}"
-    raise InputError(f"{where}: {problem}; choose the count with --steps")
 
 
 def add_precision_argument(parser: argparse.ArgumentParser, measured: str) -> None:

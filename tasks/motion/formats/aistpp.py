@@ -27,6 +27,7 @@ import torch
 
 from skeleton_mamba.tasks.motion.body.resample import resample_smpl
 from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, MotionFileError
+from skeleton_mamba.tasks.motion.formats.registry import MOTION_FORMATS, FileMotion, ReadRequest
 from skeleton_mamba.tasks.motion.io.safe_pickle import safe_load_pickle
 from skeleton_mamba.tasks.motion.io.value_checks import check_real
 
@@ -189,3 +190,9 @@ def motion_windows(
         )
         for s in window_starts(len(poses_np), window, stride)
     ]
+
+
+@MOTION_FORMATS.register(".pkl")
+def read_aistpp_motion(path: Path, request: ReadRequest) -> FileMotion:
+    """an AIST++ motion ``.pkl`` (60 fps SMPL, read with the restricted unpickler)"""
+    return FileMotion(load_aistpp_motion(path))

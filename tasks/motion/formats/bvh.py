@@ -28,6 +28,8 @@ from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.body.kinematics import forward_kinematics
 from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler
 from skeleton_mamba.tasks.motion.body.smpl import SMPL_REST_OFFSETS
+from skeleton_mamba.tasks.motion.formats.gltf import SkeletonMotion
+from skeleton_mamba.tasks.motion.formats.registry import MOTION_FORMATS, FileMotion, ReadRequest
 from skeleton_mamba.tasks.motion.io.value_checks import FPS_RANGE
 
 __all__ = ["BvhError", "BvhMotion", "load_bvh", "save_bvh", "smpl_to_bvh", "bvh_to_smpl"]
@@ -424,3 +426,22 @@ def bvh_to_smpl(motion: BvhMotion, scale: float = 1.0) -> tuple[torch.Tensor, to
     rotations = motion.local_rotations()[:, index]
     root = torch.from_numpy(motion.local_translations()[:, index[0]]) * scale
     return rotations, root
+
+
+@MOTION_FORMATS.register(".bvh")
+def read_bvh_motion(path: Path, request: ReadRequest) -> FileMotion:
+    """any BVH file (hierarchy from the file; its unit detected from the figure's height)"""
+    bvh = load_bvh(path)
+    root = bvh.parents.index(-1)
+    has_position = [any(c.endswith("position") for c in chs) for chs in bvh.channels]
+    has_position[root] = True
+    motion = SkeletonMotion(
+        list(bvh.names),
+        list(bvh.parents),
+        bvh.fps,
+        np.asarray(bvh.offsets, np.float64),
+        bvh.local_translations(),
+        bvh.local_rotations().numpy(),
+        has_position,
+    )
+    return FileMotion(motion, figure_height=bvh.rest_height())

@@ -26,6 +26,7 @@ from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.skeletons import parents_first_order
 from skeleton_mamba.tasks.motion.body.rotations import quaternion_to_matrix
 from skeleton_mamba.tasks.motion.formats.gltf import SkeletonMotion
+from skeleton_mamba.tasks.motion.formats.registry import MOTION_FORMATS, FileMotion, ReadRequest
 from skeleton_mamba.tasks.motion.formats.units import METRES
 from skeleton_mamba.tasks.motion.io.value_checks import check_fps, non_finite_message
 
@@ -342,3 +343,9 @@ def _frame_rate(r: _Reader, times: np.ndarray) -> float:
         return check_fps(fps, f"{r.path}: frame rate")
     except ValueError as err:
         raise GltfError(str(err)) from None
+
+
+@MOTION_FORMATS.register(".glb")
+def read_glb_motion(path: Path, request: ReadRequest) -> FileMotion:
+    """a motion glTF as ``sm export`` writes it"""
+    return FileMotion(read_glb(path))

@@ -33,6 +33,7 @@ from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.io.atomic import atomic_open
 from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics_axis_angle
+from skeleton_mamba.tasks.motion.formats.registry import MOTION_FORMATS, FileMotion, ReadRequest
 from skeleton_mamba.tasks.motion.io.value_checks import (
     MAX_POSITION_M,
     check_fps,
@@ -223,3 +224,9 @@ def load_motion(path: str | PathLike[str]) -> MotionData:
         joints=arrays.get("joints"),
     )
     return motion.validate(str(path))
+
+
+@MOTION_FORMATS.register(".npz")
+def read_npz_motion(path: Path, request: ReadRequest) -> FileMotion:
+    """our motion ``.npz`` (SMPL parameters and / or joints)"""
+    return FileMotion(load_motion(path))

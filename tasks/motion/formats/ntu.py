@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from skeleton_mamba.errors import DataFileError
+from skeleton_mamba.skeletons import get_skeleton
+from skeleton_mamba.tasks.motion.formats.registry import MOTION_FORMATS, FileMotion, JointsClip, ReadRequest
 
 __all__ = [
     "BODY_FIELDS",
@@ -411,3 +413,18 @@ def read_skeleton_file(path: str | PathLike[str]) -> NTUSequence:
         xyz = np.stack(track["xyz"]).astype(np.float32)
         bodies.append(NTUBody(body_id, track["start"], track["frames"], xyz, _motion(xyz)))
     return NTUSequence(path_str, frames, bodies)
+
+
+@MOTION_FORMATS.register(".skeleton")
+def read_ntu_motion(path: Path, request: ReadRequest) -> FileMotion:
+    """a raw NTU RGB+D ``.skeleton`` file (every tracked body, up to two, 30 fps)"""
+    keypoints = read_skeleton_file(path).keypoints(max_bodies=2)  # (M, T, 25, 3)
+    if keypoints.shape[1] == 0:
+        raise ValueError(f"{path}: no frame lists a body")
+    skel = get_skeleton("ntu25")
+    bodies = keypoints.shape[0]
+    # Bodies side by side in one joint array; each keeps its own root (the camera follows the first).
+    parents = [p + b * skel.num_joints if p >= 0 else -1 for b in range(bodies) for p in skel.parents]
+    joints = np.concatenate(list(keypoints), axis=1).astype(np.float64)
+    names = [n for _ in range(bodies) for n in skel.joint_names]
+    return FileMotion(JointsClip(joints, parents, names, request.motion_fps or 30.0))

@@ -15,7 +15,7 @@ from skeleton_mamba.tasks.training.diffusion.samplers import (
     ddpm_sample,
     guided_x0,
 )
-from skeleton_mamba.tasks.training.diffusion.sampling import SAMPLERS, SamplingOptions, sample
+from skeleton_mamba.tasks.training.diffusion.sampling import SamplingOptions, sample
 from skeleton_mamba.tasks.training.diffusion.schedule import NoiseSchedule, cosine_betas
 from skeleton_mamba.tasks.training.diffusion.stitching import (
     WindowConsistency,
@@ -25,7 +25,6 @@ from skeleton_mamba.tasks.training.diffusion.stitching import (
 )
 
 __all__ = [
-    "SAMPLERS",
     "GaussianDiffusion",
     "GuidanceTerm",
     "NoiseSchedule",

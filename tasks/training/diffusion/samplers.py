@@ -15,8 +15,11 @@ import torch
 from tqdm.auto import tqdm
 
 from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion, _extract
+from skeleton_mamba.tasks.training.sampler_registry import Sampler
 
 __all__ = [
+    "DDIM",
+    "DDPM",
     "Denoiser",
     "NullConditioned",
     "GuidanceTerm",
@@ -247,3 +250,19 @@ def ddim_sample(
         if post_step is not None:
             x = post_step(x, x0, abar_prev.sqrt())
     return x
+
+
+def _ddpm(diffusion, denoiser, shape, cond=None, *, sampling_steps=None, eta=None, **options) -> torch.Tensor:
+    """:func:`ddpm_sample` with the registry's arguments (all T steps: no count, no eta)."""
+    return ddpm_sample(diffusion, denoiser, shape, cond, **options)
+
+
+def _ddim(diffusion, denoiser, shape, cond=None, *, sampling_steps=50, eta=1.0, **options) -> torch.Tensor:
+    """:func:`ddim_sample` with the registry's arguments."""
+    return ddim_sample(diffusion, denoiser, shape, cond, sampling_steps=sampling_steps, eta=eta, **options)
+
+
+DDPM = Sampler(run=_ddpm, first_step=None)
+"""``"ddpm"``: ancestral [DDPM] sampling through all T steps (entry point ``skeleton_mamba.samplers``)."""
+DDIM = Sampler(run=_ddim, first_step=1, uses_eta=True)
+"""``"ddim"``: [DDIM] over 1 to T steps with noise eta (entry point ``skeleton_mamba.samplers``)."""

@@ -1,12 +1,12 @@
 """The one sampling entry point of the generative tasks: :func:`sample`, and its options.
 
 Every task names its sampling options the same way (module arguments, recipes, :class:`SamplingOptions`):
-``sampler`` (``"ddim"``: DDIM over ``sampling_steps`` timesteps with noise ``eta``; ``"ddpm"``: ancestral
-sampling through all T steps, where ``sampling_steps`` and ``eta`` do not apply; ``"dpmpp"`` / ``"unipc"``:
-the multistep ODE solvers DPM-Solver++ and UniPC over ``sampling_steps`` timesteps, deterministic, where
-``eta`` does not apply, :mod:`~.solvers`) and ``guidance_weight``
-(the classifier-free guidance weight w). Task-specific terms (EgoMusic's head guidance) are
-:class:`~.samplers.GuidanceTerm` objects passed as ``guidance``.
+``sampler`` (a name of :data:`~skeleton_mamba.tasks.training.sampler_registry.SAMPLERS`: ``"ddim"``: DDIM over
+``sampling_steps`` timesteps with noise ``eta``; ``"ddpm"``: ancestral sampling through all T steps, where
+``sampling_steps`` and ``eta`` do not apply; ``"dpmpp"`` / ``"unipc"``: the multistep ODE solvers DPM-Solver++
+and UniPC over ``sampling_steps`` timesteps, deterministic, where ``eta`` does not apply, :mod:`~.solvers`)
+and ``guidance_weight`` (the classifier-free guidance weight w). Task-specific terms (EgoMusic's head
+guidance) are :class:`~.samplers.GuidanceTerm` objects passed as ``guidance``.
 """
 
 from __future__ import annotations
@@ -19,20 +19,11 @@ from typing import Any
 
 import torch
 
-from skeleton_mamba.tasks.motion.commands.cli_options import (
-    SAMPLERS,  # torch-free: the commands' --help lists them
-)
 from skeleton_mamba.tasks.training.diffusion.gaussian import GaussianDiffusion
-from skeleton_mamba.tasks.training.diffusion.samplers import Denoiser, ddim_sample, ddpm_sample
-from skeleton_mamba.tasks.training.diffusion.solvers import SOLVERS, solver_sample
+from skeleton_mamba.tasks.training.diffusion.samplers import Denoiser
+from skeleton_mamba.tasks.training.sampler_registry import get_sampler
 
-__all__ = ["FAST_SOLVER_STEPS", "SAMPLERS", "SamplingOptions", "sample"]
-
-FAST_SOLVER_STEPS = 20
-"""The step count a solver (``dpmpp``, ``unipc``) takes when it is chosen without one: on both demo models its
-motions are as close to deterministic DDIM over all steps as DDIM 50's, and score as DDIM 50 does (MPJPE,
-BeatAlign, amplitude, jitter), in less than half its time (the tables: ``benchmarks/README.md``, "Few-step
-samplers")."""
+__all__ = ["SamplingOptions", "sample"]
 
 
 @dataclass(frozen=True)
@@ -40,7 +31,7 @@ class SamplingOptions:
     """How a task samples (module docstring for the names); checked when made.
 
     Args:
-        sampler: ``"ddim"``, ``"ddpm"``, ``"dpmpp"`` or ``"unipc"``.
+        sampler: a registered sampler's name (``"ddim"``, ``"ddpm"``, ``"dpmpp"``, ``"unipc"``, ...).
         sampling_steps: timesteps of DDIM and the solvers (DDPM runs all T).
         eta: DDIM noise (0: deterministic; 1: EDGE).
         guidance_weight: classifier-free guidance weight w (1: plain conditional, 0: unconditional).
@@ -52,8 +43,7 @@ class SamplingOptions:
     guidance_weight: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.sampler not in SAMPLERS:
-            raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {self.sampler!r}")
+        get_sampler(self.sampler)  # an unknown name: a ValueError listing the registered ones
         if isinstance(self.sampling_steps, bool) or not isinstance(self.sampling_steps, int):
             raise ValueError(f"sampling_steps must be an integer, got {self.sampling_steps!r}")
         if self.sampling_steps < 1:
@@ -68,9 +58,8 @@ class SamplingOptions:
     def step_range(self, num_steps: int) -> tuple[int, int] | None:
         """The step counts this sampler takes on a diffusion of T = ``num_steps`` steps: DDIM 1 to T, the
         solvers 2 to T (their last evaluation is x0 at t = 0); None for DDPM, which runs all T."""
-        if self.sampler == "ddpm":
-            return None
-        return (2 if self.sampler in SOLVERS else 1), num_steps
+        first = get_sampler(self.sampler).first_step
+        return None if first is None else (first, num_steps)
 
     def steps_problem(self, num_steps: int) -> str | None:
         """Why ``sampling_steps`` does not fit a diffusion of ``num_steps`` steps (one phrase), or None."""
@@ -108,22 +97,26 @@ class SamplingOptions:
         """These options with the given ones replaced (``None`` keeps a setting).
 
         A step count given without a sampler keeps a sampler that takes one and otherwise selects DDIM
-        (``sm generate --steps 10`` on a DDPM model samples DDIM with 10 steps); a solver chosen without a
-        step count takes :data:`FAST_SOLVER_STEPS` (``sm dance --sampler dpmpp``).
+        (``sm generate --steps 10`` on a DDPM model samples DDIM with 10 steps); a sampler with a
+        :attr:`~.sampler_registry.Sampler.default_steps` chosen without a step count over one without runs
+        that count (``sm dance --sampler dpmpp``: :data:`~.solvers.FAST_SOLVER_STEPS`).
         """
-        if sampler is None and sampling_steps is not None and self.sampler == "ddpm":
+        current = get_sampler(self.sampler)
+        if sampler is None and sampling_steps is not None and not current.takes_steps:
             sampler = "ddim"
-        if sampler in SOLVERS and sampling_steps is None and self.sampler not in SOLVERS:
-            sampling_steps = FAST_SOLVER_STEPS
+        chosen = get_sampler(sampler) if sampler is not None else None
+        if chosen is not None and sampling_steps is None and current.default_steps is None:
+            sampling_steps = chosen.default_steps
         given = dict(sampler=sampler, sampling_steps=sampling_steps, eta=eta, guidance_weight=guidance_weight)
         return dataclasses.replace(self, **{k: v for k, v in given.items() if v is not None})
 
     def describe(self) -> dict:
         """The options as a plain dict, without those the sampler does not use (for reports)."""
         out = dataclasses.asdict(self)
-        if self.sampler == "ddpm":
+        chosen = get_sampler(self.sampler)
+        if not chosen.takes_steps:
             del out["sampling_steps"]
-        if self.sampler != "ddim":
+        if not chosen.uses_eta:
             del out["eta"]
         return out
 
@@ -156,8 +149,5 @@ def sample(
             ``progress``.
     """
     SamplingOptions(sampler, sampling_steps, eta).check_steps(diffusion.num_steps)  # checks them
-    if sampler == "ddpm":
-        return ddpm_sample(diffusion, denoiser, shape, cond, **kwargs)
-    if sampler in SOLVERS:
-        return solver_sample(diffusion, denoiser, shape, cond, sampler, sampling_steps, **kwargs)
-    return ddim_sample(diffusion, denoiser, shape, cond, sampling_steps=sampling_steps, eta=eta, **kwargs)
+    run = get_sampler(sampler).run
+    return run(diffusion, denoiser, shape, cond, sampling_steps=sampling_steps, eta=eta, **kwargs)
