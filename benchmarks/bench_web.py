@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.helpers
 
 from common import machine_info  # noqa: E402
 
@@ -66,7 +66,7 @@ class IsolatedHandler(http.server.SimpleHTTPRequestHandler):
 
 
 def browser_times(url: str, frames: int, profile: Path) -> dict:
-    from browser_page import Page
+    from tests.helpers.browser_page import Page
 
     page = Page(url, profile)
     try:

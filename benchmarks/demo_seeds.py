@@ -10,7 +10,7 @@ and merges each seed's row into :data:`RESULTS` (``benchmarks/demo_seeds.json``)
 
 ``python benchmarks/demo_seeds.py tables`` rewrites every table of the README and the tutorials that stands
 between ``<!-- demo_seeds: NAME -->`` and ``<!-- /demo_seeds -->`` from that file (``--check``: only say
-which differ, exit 1; ``tests/test_demo_tables.py`` runs it), so no figure of the demos is typed.
+which differ, exit 1; ``tests/benchmarks/test_demo_tables.py`` runs it), so no figure of the demos is typed.
 
 ``python benchmarks/demo_seeds.py check-run DEMO_JSON LOG --demo egodance --seed 0`` is CI's guard of the main
 job: it fails when the run differs from the published row of that seed: a score by more than the rounding of

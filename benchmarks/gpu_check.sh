@@ -3,7 +3,7 @@
 #   1. a virtual environment with the CUDA build of torch, the project, and mamba-ssm's Triton SSD path
 #      (installed without building its CUDA extensions: the Triton kernels need none of them);
 #   2. the CUDA tests: the Triton kernel equals the pure-PyTorch SSD (forward and backward) and the backbone
-#      on the kernel equals the pure-PyTorch backbone (tests/test_gpu.py, tests/test_ssd.py);
+#      on the kernel equals the pure-PyTorch backbone (tests/backbone/test_gpu.py, tests/backbone/test_ssd.py);
 #   3. EMM 1000-step DDPM sampling at the paper's size ([EgoMusic] supp. Table 2, one 150-frame sample, no
 #      classifier-free guidance) against the EDGE-style transformer twin of equal size, beside the figures
 #      [EgoMusic] reports (24.8 s for EMM, 30.1 s for EDGE).
@@ -56,7 +56,7 @@ print(f"torch {torch.__version__}, CUDA {torch.version.cuda}, {torch.cuda.get_de
 EOF
 
 step "CUDA tests (kernel path vs pure-PyTorch path)"
-python -m pytest -q -p no:xdist -rs tests/test_gpu.py tests/test_ssd.py -k "gpu or kernel or cuda"
+python -m pytest -q -p no:xdist -rs tests/backbone/test_gpu.py tests/backbone/test_ssd.py -k "gpu or kernel or cuda"
 
 step "EMM vs EDGE-style twin: 1000-step DDPM at the paper's size"
 python benchmarks/bench_egodance.py --size paper --no-train --ddpm-run --step-repeats 5 --json > "$RESULTS.tmp"

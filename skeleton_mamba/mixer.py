@@ -229,9 +229,9 @@ def _state_update_pointwise(
 
     The form of :meth:`Mamba2Mixer.step` in compiled code
     (:class:`~skeleton_mamba.runtime.compiling.CompiledStep`): inductor computes the new state directly into
-    ``ssm_state``'s storage (no matrix product whose result is copied back). ``tests/test_streaming.py`` runs
-    both forms and checks they equal the sequence mixer. ssm_state (B, H, P, N), decay (B, H), xd (B, H, P), B
-    and C (B, G, N) -> y (B, H, P).
+    ``ssm_state``'s storage (no matrix product whose result is copied back).
+    ``tests/backbone/test_streaming.py`` runs both forms and checks they equal the sequence mixer. ssm_state
+    (B, H, P, N), decay (B, H), xd (B, H, P), B and C (B, G, N) -> y (B, H, P).
     """
     b, h, p, n = ssm_state.shape
     g = B.shape[1]

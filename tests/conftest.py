@@ -10,23 +10,11 @@ from pathlib import Path
 import pytest
 import torch
 
+from tests.helpers.repo import SHARED_DATA
+
 # The suite runs under pytest-xdist with one worker per core: one intra-op thread per worker
 # avoids oversubscription, which slows small ops down by an order of magnitude.
 torch.set_num_threads(1)
-
-REPO_ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
-
-
-def load_script(relative: str):
-    """The module of a script of the repository that is not in the package (``benchmarks/NAME.py``)."""
-    import importlib.util
-
-    path = REPO_ROOT / relative
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -54,14 +42,6 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real sample data not found at {SHARED_DATA} (the project's shared/data folder)")
     return SHARED_DATA
-
-
-def shared_file(relative: str) -> Path:
-    """One file of ``../shared/data``, skipping the calling test with a clear reason when absent."""
-    path = SHARED_DATA / relative
-    if not path.exists():
-        pytest.skip(f"real sample {relative} not found under {SHARED_DATA}")
-    return path
 
 
 @pytest.fixture(scope="session")

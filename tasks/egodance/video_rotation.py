@@ -15,7 +15,7 @@ rotations, found from rest), then every ``keyframe``-th frame against the keyfra
 the frame-to-frame chain and refined, and the chain between keyframes corrected to end where the keyframe
 alignment does. Chaining frame to frame alone drifts (a bias of a few hundredths of a degree per pair adds up
 to tens of degrees a minute); keyframes a second apart hold it to about a degree a minute on the demo's
-videos (``tests/test_video_rotation.py`` tracks a rendered video with a known head path).
+videos (``tests/tasks/egodance/test_video_rotation.py`` tracks a rendered video with a known head path).
 
 :func:`head_headings` turns the camera rotations into the head's heading (radians about the vertical, relative
 to frame 0), what anchors each long-form window's heading (:mod:`.long_form`).

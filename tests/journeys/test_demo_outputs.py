@@ -13,9 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from checkpoint_files import save_module_checkpoint
-from gltf_reader import glb_joint_positions
-from retarget_rigs import MIXAMO, build_rig, read_animated, rest_positions
 
 from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
@@ -24,6 +21,9 @@ from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.text2motion.module import TextToMotionModule
 from skeleton_mamba.tasks.training.cli import main as sm_main
+from tests.helpers.checkpoint_files import save_module_checkpoint
+from tests.helpers.gltf_reader import glb_joint_positions
+from tests.helpers.retarget_rigs import MIXAMO, build_rig, read_animated, rest_positions
 
 MIXER = {"d_state": 8, "headdim": 8, "chunk_size": 16}
 TINY = {"dim": 16, "depth": 1, "heads": 2, "mlp_dim": 32, "mixer": MIXER}

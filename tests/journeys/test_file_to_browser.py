@@ -19,14 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_page import Page, browser_or_skip
-from conftest import SHARED_DATA
-from gltf_reader import glb_joint_positions
 
 from skeleton_mamba.tasks.motion.formats.bvh import save_bvh, smpl_to_bvh
 from skeleton_mamba.tasks.motion.formats.motion_reader import load_joints
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from skeleton_mamba.tasks.training.cli import main as sm_main
+from tests.helpers.browser_page import Page, browser_or_skip
+from tests.helpers.gltf_reader import glb_joint_positions
+from tests.helpers.repo import SHARED_DATA
 
 JOINT_SPAN_M = (1.25, 2.1)
 FEET_ABOVE_FLOOR_M = 0.15  # the lowest joint (an ankle or toe) at most this far above the floor

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from checkpoint_files import save_module_checkpoint
 
 from skeleton_mamba.tasks.recognition.model import ActionRecognizer
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.onnx_export import backbone_from_yaml
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipe_dir
+from tests.helpers.checkpoint_files import save_module_checkpoint
 
 ort = pytest.importorskip("onnxruntime", reason="onnxruntime runs the exported graphs")
 

@@ -10,13 +10,13 @@ import csv
 import numpy as np
 import pytest
 import torch
-from checkpoint_files import save_module_checkpoint
-from conftest import shared_file
 
 from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.module import ActionRecognitionModule
 from skeleton_mamba.tasks.recognition.transforms import pre_normalize_3d
 from skeleton_mamba.tasks.training.cli import main as sm_main
+from tests.helpers.checkpoint_files import save_module_checkpoint
+from tests.helpers.repo import shared_file
 
 CLASSES = ["drink water", "eat meal", "brush teeth"]
 

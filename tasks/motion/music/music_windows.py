@@ -11,7 +11,8 @@ reads the time-averaged tempogram, summed window by window (:func:`mean_tempogra
 
 The context covers the spectral frames, the constant-Q filters and the CENS smoothing, so the frames equal
 the whole-track analysis except where librosa's decibel floor (80 dB below the loudest frame it sees) falls
-differently: a window sees its own loudest frame, not the track's (``tests/test_music_windows.py``
+differently: a window sees its own loudest frame, not the track's
+    (``tests/motion/music/test_music_windows.py``
 measures the difference on a real recording).
 """
 
