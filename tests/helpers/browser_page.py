@@ -13,9 +13,13 @@ import subprocess
 import time
 import urllib.request
 from pathlib import Path
+from urllib.parse import urlparse
 
 import numpy as np
 import pytest
+
+from skeleton_mamba.errors import InputError
+from skeleton_mamba.tasks.stream.ort_web import read_ort_web
 
 BROWSER = next((b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
 
@@ -145,3 +149,18 @@ class Page:
         root = self.call("DOM.getDocument")["root"]["nodeId"]
         node = self.call("DOM.querySelector", nodeId=root, selector=selector)["nodeId"]
         self.call("DOM.setFileInputFiles", files=[str(path)], nodeId=node)
+
+
+READY = "!!(window.smDance && window.smDance.ready)"
+
+
+def ort_web_or_skip() -> None:
+    try:
+        read_ort_web()
+    except InputError as err:
+        pytest.skip(f"onnxruntime-web not available: {err}")
+
+
+def only_local(requests: list[str]) -> None:
+    schemes = {urlparse(url).scheme for url in requests}
+    assert schemes <= {"file", "data"}, requests

@@ -19,7 +19,7 @@ import pytest
 import torch
 
 from skeleton_mamba.tasks.training import cli
-from tests.repository.test_packaging import build_wheel
+from tests.helpers.wheel_build import build_wheel
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCES = ["pyproject.toml", "setup.py", "README.md", "LICENSE", "skeleton_mamba", "tasks", "recipes"]

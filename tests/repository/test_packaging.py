@@ -8,35 +8,14 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers.wheel_build import HEAVY, build_wheel
+
 REPO = Path(__file__).resolve().parents[2]
-HEAVY = [
-    "lightning",
-    "pytorch_lightning",
-    "torchmetrics",
-    "transformers",
-    "librosa",
-    "trimesh",
-    "kornia",
-    "jsonargparse",
-    "scipy",
-    "matplotlib",
-    "cv2",
-    "skeleton_mamba.tasks",
-]
 
 
 def _python(code: str, **kwargs) -> str:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, **kwargs)
     return out.stdout
-
-
-def build_wheel(source: Path, wheel_dir: Path) -> tuple[Path, str]:
-    """The wheel of the project in ``source`` (no dependencies, no build isolation) and pip's output."""
-    pip_wheel = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation"]
-    result = subprocess.run([*pip_wheel, "-w", str(wheel_dir), str(source)], capture_output=True, text=True)
-    assert result.returncode == 0, result.stdout + result.stderr
-    (wheel,) = wheel_dir.glob("skeleton_mamba-*.whl")
-    return wheel, result.stdout + result.stderr
 
 
 def test_import_skeleton_mamba_loads_only_torch_and_einops():

@@ -6,9 +6,7 @@ function); training runs go through the real ``sm`` executable in a subprocess.
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
 import sys
 from pathlib import Path
 
@@ -23,6 +21,7 @@ from skeleton_mamba.tasks.training.recipe_resolution import (
     recipe_description,
     resolve_recipe,
 )
+from tests.helpers.sm import run_sm
 
 RECIPES_DIR = Path(__file__).resolve().parents[2] / "recipes"
 EXPECTED_RECIPES = {
@@ -33,21 +32,6 @@ EXPECTED_RECIPES = {
     "kinetics.yaml",
     "recognition_synthetic.yaml",
 }
-
-
-def sm_executable() -> str:
-    """The installed ``sm`` console script next to this interpreter."""
-    path = Path(sys.executable).with_name("sm")
-    if not path.exists():
-        pytest.skip(f"console script not installed at {path}")
-    return str(path)
-
-
-def run_sm(args: list[str], cwd: Path, timeout: int = 300) -> subprocess.CompletedProcess:
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONWARNINGS": "ignore"}
-    return subprocess.run(
-        [sm_executable(), *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
-    )
 
 
 def print_config(args: list[str], capsys) -> dict:

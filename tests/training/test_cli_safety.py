@@ -26,8 +26,8 @@ from skeleton_mamba.tasks.training.checkpoints import check_class_paths, load_ch
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.run_folders import find_last_checkpoint, remove_if_empty
 from skeleton_mamba.tasks.training.run_guards import describe_batch
-from tests.motion.formats.test_ntu import body_motion, write_skeleton
-from tests.training.test_cli import run_sm, sm_executable
+from tests.helpers.motions import body_motion, write_skeleton
+from tests.helpers.sm import run_sm, sm_executable
 
 SYNTHETIC = "recognition_synthetic.yaml"
 

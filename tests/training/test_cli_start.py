@@ -22,7 +22,7 @@ from skeleton_mamba.tasks.motion.commands.cli_options import (
     progress_default,
 )
 from skeleton_mamba.tasks.training import cli
-from tests.repository.test_packaging import HEAVY as PACKAGE_HEAVY
+from tests.helpers.wheel_build import HEAVY as PACKAGE_HEAVY
 
 # torch, onnxruntime and the heavy libraries of test_packaging's list (jsonargparse is light; sm's command
 # table lives in the tasks' package, so importing it is no sign of a heavy import)

@@ -15,7 +15,7 @@ import pytest
 from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.training import recipe_resolution
 from skeleton_mamba.tasks.training.recipe_resolution import bounded_yaml_load, check_yaml_bounds
-from tests.training.test_cli import sm_executable
+from tests.helpers.sm import sm_executable
 
 MEMORY_LIMIT = 3 << 30  # bytes of address space for the `sm` subprocess (a bomb would need tens of GB)
 

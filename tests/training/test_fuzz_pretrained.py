@@ -30,8 +30,8 @@ from skeleton_mamba.pretrained.mixin import CONFIG_NAME, WEIGHTS_NAME, Pretraine
 from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint
 from skeleton_mamba.tasks.training.cli import main as sm
-from tests.training.test_cli import sm_executable
-from tests.training.test_pretrained import _networks
+from tests.helpers.sm import sm_executable
+from tests.training.networks import _networks
 
 MEMORY_LIMIT = 3 << 30  # address space of the `sm` subprocesses (the hostile sizes need tens of GB)
 MIXER = MixerConfig(d_state=8, headdim=8, chunk_size=16)

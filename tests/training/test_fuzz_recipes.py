@@ -35,7 +35,7 @@ from skeleton_mamba.tasks.training.recipe_policy import (
     split_allow_import,
 )
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipes
-from tests.training.test_cli import sm_executable
+from tests.helpers.sm import sm_executable
 
 SYNTHETIC = "recognition_synthetic.yaml"
 

@@ -8,10 +8,7 @@ from types import SimpleNamespace
 
 import lightning.pytorch as pl
 import pytest
-import torch
-from lightning.pytorch import LightningModule
 from lightning.pytorch.callbacks import Callback, TQDMProgressBar
-from torch.utils.data import DataLoader, TensorDataset
 
 from skeleton_mamba.tasks.training import progress_bar
 from skeleton_mamba.tasks.training.lightning_cli import SkeletonMambaCLI, import_task_modules
@@ -24,24 +21,7 @@ from skeleton_mamba.tasks.training.progress_bar import (
     train_description,
 )
 from tests.helpers.cli_builds import build_cli
-
-
-class TinyRegression(LightningModule):
-    """A linear model on 12 samples in batches of 4 (3 batches per epoch)."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.layer = torch.nn.Linear(2, 1)
-
-    def training_step(self, batch, batch_idx):
-        x, y = batch
-        return torch.nn.functional.mse_loss(self.layer(x), y)
-
-    def configure_optimizers(self):
-        return torch.optim.SGD(self.parameters(), lr=0.01)
-
-    def train_dataloader(self):
-        return DataLoader(TensorDataset(torch.randn(12, 2), torch.randn(12, 1)), batch_size=4)
+from tests.training.tiny_regression import TinyRegression
 
 
 class ShownDescriptions(Callback):

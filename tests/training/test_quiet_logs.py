@@ -24,7 +24,7 @@ from skeleton_mamba.tasks.training.model_summary import (
     with_parameter_summary,
 )
 from skeleton_mamba.tasks.training.progress_bar import PlainProgressLog, default_progress_bar
-from tests.training.test_progress_bar import TinyRegression as Regression
+from tests.training.tiny_regression import TinyRegression as Regression
 
 
 class Recorded(logging.Handler):

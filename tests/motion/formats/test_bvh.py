@@ -14,6 +14,7 @@ from skeleton_mamba.skeletons import SMPL24
 from skeleton_mamba.tasks.motion.body.rotations import axis_angle_to_matrix
 from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics
 from skeleton_mamba.tasks.motion.formats.bvh import BvhError, bvh_to_smpl, load_bvh, save_bvh, smpl_to_bvh
+from tests.helpers.motions import HAND_BVH
 
 
 @pytest.fixture(scope="module")
@@ -65,28 +66,6 @@ def test_cmu_save_load_round_trip(cmu, tmp_path):
     assert again.names == bvh.names and again.parents == bvh.parents and again.channels == bvh.channels
     np.testing.assert_allclose(again.values, short.values, atol=1e-6)
     np.testing.assert_allclose(again.joint_positions(), short.joint_positions(), atol=1e-5)
-
-
-HAND_BVH = """HIERARCHY
-ROOT root
-{{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition {order}
-  JOINT child
-  {{
-    OFFSET 1 0 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {{
-      OFFSET 0 2 0
-    }}
-  }}
-}}
-MOTION
-Frames: 1
-Frame Time: 0.04
-{values}
-"""
 
 
 @pytest.mark.parametrize(

@@ -27,8 +27,8 @@ from skeleton_mamba.tasks.motion.render import view
 from skeleton_mamba.tasks.motion.render.view import script_json, write_view
 from skeleton_mamba.tasks.training.cli import main as sm
 from tests.helpers.gltf_reader import accessor, assert_khronos_valid, glb_joint_positions
+from tests.helpers.motions import _smpl_motion
 from tests.helpers.repo import shared_file
-from tests.motion.formats.test_gltf import _smpl_motion
 
 HOSTILE_NAME = "</script><!--<script>alert(1)//\u2028__DATA__&amp;"
 

@@ -22,16 +22,10 @@ from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.text2motion.convert_cli import convert_file
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from tests.helpers.gltf_reader import accessor, assert_khronos_valid, glb_joint_positions
+from tests.helpers.motions import _smpl_motion
 from tests.helpers.repo import shared_file
 
 DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
-
-
-def _smpl_motion(frames: int = 25) -> MotionData:
-    rng = np.random.default_rng(3)
-    poses = rng.normal(0, 0.6, (frames, 72)).astype(np.float32)
-    trans = (rng.normal(0, 0.5, (frames, 3)) + [0, 0.9, 0]).astype(np.float32)
-    return MotionData(30.0, poses=poses, trans=trans * 2.0, scaling=2.0)
 
 
 def test_smpl_rotations_reproduce_joint_positions(tmp_path):

@@ -26,8 +26,8 @@ from skeleton_mamba.tasks.recognition.kinetics import KineticsFileError, read_ki
 from skeleton_mamba.tasks.recognition.pyskl import AnnotationFileError, save_annotations
 from skeleton_mamba.tasks.text2motion.humanml3d import load_clips
 from skeleton_mamba.tasks.training.cli import main as sm_main
+from tests.helpers.motions import HAND_BVH
 from tests.helpers.repo import shared_file
-from tests.motion.formats.test_bvh import HAND_BVH
 
 NTU_SAMPLE = "ntu/S001C001P001R001A001.skeleton"
 POISONS = ["nan", "-inf", "1e999", "1e39"]  # 1e39 is finite in float64 but Inf once stored as float32

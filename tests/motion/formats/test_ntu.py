@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -14,50 +12,9 @@ from skeleton_mamba.tasks.recognition.splits import (
     load_missing_samples,
     sample_splits,
 )
+from tests.helpers.motions import STANDING, as_written, body_motion, skeleton_text, write_skeleton
 
-# A standing person, 25 Kinect v2 joints (x, y, z) in metres: taller than wide, as real bodies are.
-STANDING = np.array(
-    [[0.0, 0.0, 3.0], [0.0, 0.3, 3.0], [0.0, 0.55, 3.0], [0.0, 0.7, 3.0], [-0.18, 0.5, 3.0],
-     [-0.2, 0.25, 3.0], [-0.2, 0.05, 3.0], [-0.2, 0.0, 3.0], [0.18, 0.5, 3.0], [0.2, 0.25, 3.0],
-     [0.2, 0.05, 3.0], [0.2, 0.0, 3.0], [-0.1, -0.05, 3.0], [-0.1, -0.45, 3.0], [-0.1, -0.85, 3.0],
-     [-0.1, -0.9, 2.9], [0.1, -0.05, 3.0], [0.1, -0.45, 3.0], [0.1, -0.85, 3.0], [0.1, -0.9, 2.9],
-     [0.0, 0.5, 3.0], [-0.2, -0.05, 3.0], [-0.22, 0.0, 3.0], [0.2, -0.05, 3.0], [0.22, 0.0, 3.0]]
-)  # fmt: skip
 BODY_ID = 72057594037931101  # needs 64 bits: a float cast would change it
-
-
-def body_motion(num_frames: int, amplitude: float, shift: float = 0.0, seed: int = 0) -> np.ndarray:
-    """(T, 25, 3) joints of a standing person whose hands wave with the given amplitude."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(num_frames)[:, None]
-    xyz = np.repeat(STANDING[None], num_frames, 0) + [shift, 0.0, 0.0]
-    xyz[:, [6, 7, 10, 11, 21, 22, 23, 24], 1] += amplitude * np.sin(t / 5.0)
-    return xyz + rng.normal(0, 1e-3, xyz.shape)
-
-
-def skeleton_text(frames: list[list[tuple[int, np.ndarray]]], newline: str = "\r\n") -> str:
-    """The official ``.skeleton`` text layout for ``frames`` = [[(bodyID, (25, 3) xyz), ...], ...]."""
-    out = [str(len(frames))]
-    for bodies in frames:
-        out.append(str(len(bodies)))
-        for body_id, xyz in bodies:
-            out.append(f"{body_id} 0 1 1 1 1 0 0.02764709 0.05745083 2")
-            out.append("25")
-            for j, (x, y, z) in enumerate(xyz):
-                depth = f"{250 + 60 * x / z:.4f} {212 - 60 * y / z:.4f}"
-                color = f"{960 + 250 * x / z:.3f} {540 - 250 * y / z:.3f}"
-                out.append(f"{x:.7g} {y:.7g} {z:.7g} {depth} {color} 0.5 0.5 -0.5 0.5 {1 + j % 2}")
-    return newline.join(out) + newline
-
-
-def write_skeleton(path: Path, frames: list[list[tuple[int, np.ndarray]]], newline: str = "\r\n") -> Path:
-    path.write_bytes(skeleton_text(frames, newline).encode("ascii"))
-    return path
-
-
-def as_written(xyz: np.ndarray) -> np.ndarray:
-    """The float32 values a reader gets back from the ``%.7g`` text."""
-    return np.array([[float(f"{v:.7g}") for v in row] for row in xyz], dtype=np.float32)
 
 
 # --- the real sample ---------------------------------------------------------------------------------

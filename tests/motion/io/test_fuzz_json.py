@@ -22,7 +22,7 @@ from skeleton_mamba.io.bounded_read import BoundedReadError, parse_json, read_by
 from skeleton_mamba.pretrained.mixin import PretrainedError, read_pretrained_config
 from skeleton_mamba.tasks.egodance.builder.layout import sample_problem
 from skeleton_mamba.tasks.training.recipe_resolution import read_yaml_file
-from tests.training.test_cli import sm_executable
+from tests.helpers.sm import sm_executable
 
 MEMORY_LIMIT = 2 << 30  # address space of the `sm` subprocesses: an endless read would pass it
 
@@ -152,7 +152,7 @@ def test_yaml_files_go_through_the_reader(tmp_path):
 def test_sm_refuses_a_fifo_or_an_endless_link_on_one_line(tmp_path, option):
     """``sm view --metrics FIFO`` and ``sm fit --recipe LINK-TO-/dev/zero``: one line, at once, no memory."""
     from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
-    from tests.motion.formats.test_gltf import _smpl_motion
+    from tests.helpers.motions import _smpl_motion
 
     if option == "--metrics":
         os.mkfifo(tmp_path / "metrics.json")

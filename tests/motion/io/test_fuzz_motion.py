@@ -42,7 +42,7 @@ from skeleton_mamba.tasks.motion.io.safe_pickle import MAX_PICKLE_OBJECT_BYTES, 
 from skeleton_mamba.tasks.motion.io.value_checks import MAX_NPZ_MEMBER_BYTES, load_npz
 from skeleton_mamba.tasks.recognition.kinetics import read_kinetics_clip, read_kinetics_labels
 from tests.helpers.peak_memory import PEAK_KIB_SOURCE
-from tests.training.test_cli import sm_executable
+from tests.helpers.sm import sm_executable
 
 MEMORY_LIMIT = 3 << 30  # bytes of address space for the `sm` subprocess (each bomb claims 6 GB or more)
 AIST_NAME = "gBR_sBM_cAll_d04_mBR0_ch01.pkl"

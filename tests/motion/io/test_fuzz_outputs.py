@@ -148,7 +148,7 @@ def test_every_folder_command_refuses_a_users_folder_before_any_work(
 def test_sm_export_does_not_replace_a_wav_beside_the_glb(tmp_path, capsys):
     from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
     from skeleton_mamba.tasks.motion.synthetic.music import synthesize_music, write_music
-    from tests.motion.formats.test_gltf import _smpl_motion
+    from tests.helpers.motions import _smpl_motion
 
     save_motion(tmp_path / "m.npz", _smpl_motion(4))
     song = write_music(tmp_path / "song.wav", synthesize_music(120.0, 1.0, sr=22050, seed=1))

@@ -24,7 +24,7 @@ from skeleton_mamba.tasks.motion.io.output_folder import (
     writing_outputs,
 )
 from skeleton_mamba.tasks.training.cli import main as sm
-from tests.tasks.egodance.test_egobuilder_resume import _motion
+from tests.helpers.motions import _motion
 
 EGO_OPTIONS = (
     "--scenes procedural --num-rooms 1 --fps 10 --window 1 --width 16 --height 16 --workers 1 --quiet"

@@ -25,52 +25,9 @@ from skeleton_mamba.tasks.motion.metrics import (
 )
 from skeleton_mamba.tasks.motion.metrics.geometric import GEOMETRIC_FEATURE_NAMES, HUMERUS_LENGTH
 from skeleton_mamba.tasks.motion.metrics.mmv import flow_magnitudes, load_video_frames
-
-# Rest offsets of the SMPL skeleton (Stanford-TML/EDGE vis.py), y-up.
-PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]
-OFFSETS = np.array([
-    [0, 0, 0], [0.0586, -0.0823, -0.0177], [-0.0603, -0.0905, -0.0135], [0.0044, 0.1244, -0.0384],
-    [0.0435, -0.3865, 0.0080], [-0.0433, -0.3837, -0.0048], [0.0045, 0.1380, 0.0268],
-    [-0.0148, -0.4269, -0.0374], [0.0191, -0.4200, -0.0346], [-0.0023, 0.0560, 0.0029],
-    [0.0411, -0.0603, 0.1220], [-0.0348, -0.0621, 0.1303], [-0.0134, 0.2116, -0.0335],
-    [0.0717, 0.1140, -0.0189], [-0.0830, 0.1125, -0.0237], [0.0101, 0.0889, 0.0504],
-    [0.1229, 0.0452, -0.0190], [-0.1132, 0.0469, -0.0085], [0.2553, -0.0156, -0.0229],
-    [-0.2601, -0.0144, -0.0313], [0.2657, 0.0127, -0.0074], [-0.2691, 0.0068, -0.0060],
-    [0.0867, -0.0106, -0.0156], [-0.0888, -0.0087, -0.0101],
-])  # fmt: skip
-
-
-def rest_pose() -> np.ndarray:
-    """(24, 3) joints of the rest pose with the pelvis at the origin."""
-    joints = np.zeros((24, 3))
-    for j in range(1, 24):
-        joints[j] = joints[PARENTS[j]] + OFFSETS[j]
-    return joints
-
+from tests.helpers.motions import published_kinetic, rest_pose
 
 # ----------------------------------------------------------------------------------------- kinetic
-
-
-def published_kinetic(positions: np.ndarray, bug: bool, fps: float = 60.0) -> np.ndarray:
-    """Loop transcription of aistplusplus_api kinetic.py/utils.py, y-up, window 2."""
-    dt, w, t_len = 1.0 / fps, 2, len(positions)
-    out = []
-    for j in range(positions.shape[1]):
-        ke_h = ke_v = ee = 0.0
-        for i in range(1, t_len):
-            ks = [k for k in range(-w, w + 1) if i + k - 1 >= 0 and i + k < t_len]
-            v = sum(positions[i + k, j] - positions[i + k - 1, j] for k in ks) / (len(ks) * dt)
-            ke_h += v[0] ** 2 + v[2] ** 2
-            ke_v += v[1] ** 2
-            ks = [k for k in range(-w, w + 1) if i + k - 1 >= 0 and i + k + 1 < t_len]
-            acc = np.zeros(3)
-            for k in ks:
-                p_prev, p, p_next = positions[i + k - 1, j], positions[i + k, j], positions[i + k + 1, j]
-                v1 = p - p_prev / dt if bug else (p - p_prev) / dt
-                acc += ((p_next - p) / dt - v1) / dt
-            ee += np.linalg.norm(acc / len(ks))
-        out += [ke_h / (t_len - 1), ke_v / (t_len - 1), ee / (t_len - 1)]
-    return np.array(out)
 
 
 def test_kinetic_static_joint_hand_values():

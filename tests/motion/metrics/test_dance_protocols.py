@@ -20,8 +20,8 @@ from skeleton_mamba.tasks.motion.metrics.beat_align import kinematic_beats
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import get_protocol
 from skeleton_mamba.tasks.motion.music.features import BEAT, compute_music_features
-from tests.motion.metrics.test_dance_metrics import published_kinetic, rest_pose
-from tests.motion.music.test_music import click_track
+from tests.helpers.motions import published_kinetic, rest_pose
+from tests.helpers.music import click_track
 
 
 def v_motion(speeds: np.ndarray) -> np.ndarray:

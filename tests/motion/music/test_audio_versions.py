@@ -12,8 +12,7 @@ import pytest
 from skeleton_mamba.tasks.motion.commands.analyze_music import main as analyze_main
 from skeleton_mamba.tasks.motion.music.features import audio_stack
 from skeleton_mamba.tasks.training.cli import main as sm_main
-from tests.motion.metrics.test_evaluate_dance import folders  # noqa: F401 (fixture)
-from tests.motion.music.test_music import click_track
+from tests.helpers.music import click_track
 
 KEYS = {"librosa", "numpy", "soundfile", "libsndfile", "resampler", "resampler_package"}
 

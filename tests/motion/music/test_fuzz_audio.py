@@ -33,7 +33,7 @@ from skeleton_mamba.tasks.motion.music import audio_io
 from skeleton_mamba.tasks.motion.music.audio_io import AudioFileError, AudioWarning, read_audio
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
 from skeleton_mamba.tasks.training.cli import main as sm_main
-from tests.training.test_cli import sm_executable
+from tests.helpers.sm import sm_executable
 
 MEMORY_LIMIT = 3 << 30  # bytes of address space for an `sm` subprocess
 RATE = 22050

@@ -32,10 +32,9 @@ from skeleton_mamba.tasks.motion.synthetic import synthesize_music
 from skeleton_mamba.tasks.motion.synthetic.dance import write_dance
 from skeleton_mamba.tasks.stream.features import SR, music_features
 from skeleton_mamba.tasks.training.cli import main as sm
-from tests.helpers.browser_page import Page, browser_or_skip
+from tests.helpers.browser_page import READY, Page, browser_or_skip, only_local, ort_web_or_skip
 from tests.helpers.checkpoint_files import tiny_stream_checkpoint
 from tests.helpers.retarget_rigs import HUMANOID, MIXAMO, build_rig, rest_positions
-from tests.tasks.stream.test_web_browser import READY, only_local, ort_web_or_skip
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from skeleton_mamba.tasks.egodance.builder.scene import load_scene
 from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from tests.helpers.repo import shared_file
-from tests.tasks.egodance.test_egobuilder import FEET, FLOOR, boxes_scene, rest_joints
+from tests.tasks.egodance.builder_scenes import FEET, FLOOR, boxes_scene, rest_joints
 
 
 def test_feet_beyond_the_floor_are_counted():

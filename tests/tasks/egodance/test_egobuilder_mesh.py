@@ -23,8 +23,8 @@ from skeleton_mamba.tasks.egodance.builder.placement import place_points, random
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room
 from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
-from tests.motion.body.test_smpl_model import TETRA, rest_joint_positions, write_tiny_smpl_npz
-from tests.tasks.egodance.test_egobuilder import FLOOR, boxes_scene
+from tests.helpers.smpl import TETRA, rest_joint_positions, write_tiny_smpl_npz
+from tests.tasks.egodance.builder_scenes import FLOOR, boxes_scene
 
 WALL = ([1.0, 0.0, -3.0], [1.6, 2.8, 3.0])  # a 60 cm thick wall, its face at x = 1
 LEFT_HAND = 22  # the joint farthest along +x in the rest pose

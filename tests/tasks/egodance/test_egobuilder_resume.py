@@ -9,12 +9,8 @@ from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
 from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
-from skeleton_mamba.tasks.motion.formats.motion_file import save_motion
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
-
-
-def _motion(folder, name="synthetic_bounce_120bpm_s1", seconds=2.0):
-    return save_motion(folder / f"{name}.npz", synthesize_dance(120, seconds, 10.0, "bounce", 1))
+from tests.helpers.motions import _motion
 
 
 def _config(out, **kw):

@@ -15,7 +15,7 @@ import pytest
 from skeleton_mamba.tasks.motion.io.safe_pickle import UnsafePickleError
 from skeleton_mamba.tasks.recognition.pyskl import AnnotationFileError, load_annotations, save_annotations
 from skeleton_mamba.tasks.training.cli import main as sm_main
-from tests.motion.formats.test_ntu import as_written, body_motion, write_skeleton
+from tests.helpers.motions import as_written, body_motion, write_skeleton
 
 # name -> (X-Sub side, X-View side) for NTU60; subjects 1, 2, 8 train, 3, 40 test; cameras 2, 3 train
 NTU60_SAMPLES = {

@@ -16,7 +16,6 @@ import torch
 import yaml
 from lightning.pytorch import Trainer
 
-from skeleton_mamba import MixerConfig, SkeletonMambaConfig
 from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.recognition.confusion import save_confusion_matrix
 from skeleton_mamba.tasks.recognition.data import RecognitionDataModule
@@ -26,17 +25,8 @@ from skeleton_mamba.tasks.recognition.pyskl import load_annotations, save_annota
 from skeleton_mamba.tasks.recognition.scores import load_scores
 from skeleton_mamba.tasks.recognition.synthetic import make_synthetic_annotations
 from skeleton_mamba.tasks.training.backbone_config import backbone_config
+from tests.tasks.recognition.cases import TINY
 
-TINY = SkeletonMambaConfig(
-    skeleton="ntu25",
-    in_channels=3,
-    dim=16,
-    depth=1,
-    heads=2,
-    mlp_dim=32,
-    group_paths=[[1, 2, 0, 3, 4]],
-    mixer=MixerConfig(d_state=16, headdim=8, chunk_size=16),
-)
 TINY_YAML = {k: v for k, v in dataclasses.asdict(TINY).items() if k not in ("skeleton", "in_channels")}
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from skeleton_mamba.tasks.recognition.scores import load_scores
-from tests.training.test_cli import sm_executable
+from tests.helpers.sm import sm_executable
 
 TESTS = Path(__file__).resolve().parents[2] / "helpers"  # ddp_probe
 

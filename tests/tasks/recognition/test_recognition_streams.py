@@ -24,8 +24,7 @@ from skeleton_mamba.tasks.recognition.transforms import (
     skeleton_features,
     uniform_sample_indices,
 )
-from tests.tasks.recognition.test_recognition import TINY
-from tests.tasks.recognition.test_recognition_transforms import moved_person, pyskl_test_indices
+from tests.tasks.recognition.cases import TINY, moved_person, pyskl_test_indices
 
 # PYSKL JointToBone.pairs per layout ('nturgb+d', 'openpose', 'coco'), 0-based (v1, v2): bone v1 = v1 - v2
 PYSKL_PAIRS = {

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from skeleton_mamba.tasks.motion.formats.ntu import read_skeleton_file
 from skeleton_mamba.tasks.recognition.transforms import (
@@ -15,7 +14,7 @@ from skeleton_mamba.tasks.recognition.transforms import (
     random_rotate_scale,
     uniform_sample_indices,
 )
-from tests.motion.formats.test_ntu import STANDING
+from tests.tasks.recognition.cases import moved_person, pyskl_test_indices
 
 # NTU bones, 1-based child -> parent (reference section 1.3)
 BONES = [(1, 2), (2, 21), (3, 21), (4, 3), (5, 21), (6, 5), (7, 6), (8, 7), (9, 21), (10, 9), (11, 10),
@@ -25,14 +24,6 @@ BONES = [(1, 2), (2, 21), (3, 21), (4, 3), (5, 21), (6, 5), (7, 6), (8, 7), (9, 
 
 def angle(u: np.ndarray, v: np.ndarray) -> float:
     return float(np.arccos(np.clip(np.dot(u, v) / np.linalg.norm(u) / np.linalg.norm(v), -1, 1)))
-
-
-def moved_person(frames: int, seed: int) -> np.ndarray:
-    """(frames, 25, 3): the standing template under a random rotation and translation, slightly moving."""
-    rng = np.random.default_rng(seed)
-    rot = Rotation.random(random_state=seed).as_matrix()
-    base = STANDING @ rot.T + rng.uniform(-2, 2, 3)
-    return base[None] + 0.01 * np.arange(frames)[:, None, None]
 
 
 def bone_lengths(kp: np.ndarray) -> np.ndarray:
@@ -85,31 +76,6 @@ def test_pre_normalize_2d_hand_values():
     out = pre_normalize_2d(kp, score, img_shape=(1080, 1920))
     np.testing.assert_allclose(out[0, 0], [[0, 0], [1, -1], [-1, 1], [0, 0]])  # the last one has score 0
     np.testing.assert_allclose(pre_normalize_2d(np.full((1, 1, 1, 2), 0.25), img_shape=(1, 1)), -0.5)
-
-
-def pyskl_test_indices(num_frames: int, clip_len: int, num_clips: int, seed: int = 255) -> np.ndarray:
-    """PYSKL ``UniformSampleFrames._get_test_clips`` (p_interval 1), transcribed with numpy's global RNG."""
-    # ruff: NPY002 is the point here: PYSKL reseeds and draws from the legacy global generator
-    np.random.seed(seed)  # noqa: NPY002
-    all_inds = []
-    for i in range(num_clips):
-        ratio = np.random.rand() * 0 + 1  # noqa: NPY002
-        n = int(ratio * num_frames)
-        off = np.random.randint(num_frames - n + 1)  # noqa: NPY002
-        if n < clip_len:
-            start_ind = i if n < num_clips else i * n // num_clips
-            inds = np.arange(start_ind, start_ind + clip_len)
-        elif clip_len <= n < clip_len * 2:
-            basic = np.arange(clip_len)
-            inds = np.random.choice(clip_len + 1, n - clip_len, replace=False)  # noqa: NPY002
-            offset = np.zeros(clip_len + 1, dtype=np.int64)
-            offset[inds] = 1
-            inds = basic + np.cumsum(offset)[:-1]
-        else:
-            bids = np.array([i * n // clip_len for i in range(clip_len + 1)])
-            inds = bids[:clip_len] + np.random.randint(np.diff(bids))  # noqa: NPY002
-        all_inds.append(inds + off)
-    return np.mod(np.concatenate(all_inds), num_frames)
 
 
 @pytest.mark.parametrize("total", [1, 7, 30, 100, 150, 199, 250, 600])

@@ -21,7 +21,6 @@ import shutil
 import subprocess
 import time
 from pathlib import Path
-from urllib.parse import urlparse
 
 import numpy as np
 import pytest
@@ -29,34 +28,24 @@ import soundfile as sf
 import soxr
 import torch
 
-from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
 from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic import synthesize_music
 from skeleton_mamba.tasks.stream.features import HOP, SR, music_features
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
-from skeleton_mamba.tasks.stream.ort_web import read_ort_web
 from skeleton_mamba.tasks.stream.web_export import export_web_graph
 from skeleton_mamba.tasks.stream.web_graph import run_web_graph
 from skeleton_mamba.tasks.training.cli import main as sm
-from tests.helpers.browser_page import Page, browser_or_skip
+from tests.helpers.browser_page import READY, Page, browser_or_skip, only_local, ort_web_or_skip
 from tests.helpers.checkpoint_files import tiny_stream_checkpoint
 from tests.helpers.repo import SHARED_DATA
 
 DOCS_PNG = Path(__file__).resolve().parents[3] / "docs" / "web_dancer.png"
 EXCERPT_S = 8.0  # of a sample track, danced in real time by the slow tests
 JOINT_TOLERANCE_M = 1e-3
-READY = "!!(window.smDance && window.smDance.ready)"
 WAITING = "pick a music file or press the microphone button"
 FORMAT_SECONDS = 3.0  # of each format's file
 RESPONSIVE_S = 1.0  # the longest the page may take to answer while it decodes or dances
-
-
-def ort_web_or_skip() -> None:
-    try:
-        read_ort_web()
-    except InputError as err:
-        pytest.skip(f"onnxruntime-web not available: {err}")
 
 
 def music_or_synthetic(seconds: float) -> np.ndarray:
@@ -84,11 +73,6 @@ def site(tmp_path_factory):
         )
     assert sm(["export-web", "--ckpt", str(ckpt), "--out", str(tmp / "site")]) == 0
     return tmp / "site" / "index.html", ckpt, dancer, wav, audio
-
-
-def only_local(requests: list[str]) -> None:
-    schemes = {urlparse(url).scheme for url in requests}
-    assert schemes <= {"file", "data"}, requests
 
 
 def test_page_opens_from_disk_and_steps_like_onnxruntime(site, tmp_path):
