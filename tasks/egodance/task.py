@@ -10,9 +10,9 @@ TASK = TaskSpec(
     modules=(f"{_PKG}.module", f"{_PKG}.data"),
     commands={
         "make-ego": Command(
-            f"{_PKG}.builder.cli:main",
+            f"{_PKG}.builder.make_ego_cli:main",
             "build EgoAIST++-style egocentric data",
-            f"{_PKG}.builder.cli_args:build_parser",
+            f"{_PKG}.builder.make_ego_args:build_parser",
         ),
         "dance": Command(
             f"{_PKG}.dance_cli:main",

@@ -10,7 +10,9 @@ TASK = TaskSpec(
     modules=(f"{_PKG}.module", f"{_PKG}.data"),
     commands={
         "prepare": Command(
-            f"{_PKG}.prepare:main", "build NTU / Kinetics annotation files", f"{_PKG}.prepare:build_parser"
+            f"{_PKG}.prepare:main",
+            "build NTU / Kinetics annotation files",
+            f"{_PKG}.prepare_args:build_parser",
         ),
         "ensemble": Command(
             f"{_PKG}.ensemble:main",

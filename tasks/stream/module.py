@@ -3,7 +3,7 @@
 Loss: mean squared error between the predicted and the true joint tokens of every frame, the
 previous-pose inputs being the true poses (teacher forcing) plus Gaussian noise of std
 ``input_noise`` (so the model tolerates its own slightly wrong poses when it runs on them).
-Validation reports the same teacher-forced loss. Inference is ``sm stream`` (:mod:`.cli`).
+Validation reports the same teacher-forced loss. Inference is ``sm stream`` (:mod:`.stream_cli`).
 """
 
 from __future__ import annotations

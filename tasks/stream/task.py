@@ -10,12 +10,14 @@ TASK = TaskSpec(
     modules=(f"{_PKG}.module", f"{_PKG}.data"),
     commands={
         "stream": Command(
-            f"{_PKG}.cli:main", "live music-to-dance / online recognition", f"{_PKG}.cli_args:build_parser"
+            f"{_PKG}.stream_cli:main",
+            "live music-to-dance / online recognition",
+            f"{_PKG}.stream_args:build_parser",
         ),
         "export-web": Command(
             f"{_PKG}.web_export:main",
             "the streaming dancer as a static page: dances in the browser (onnxruntime-web)",
-            f"{_PKG}.web_export_args:build_parser",
+            f"{_PKG}.export_web_args:build_parser",
         ),
     },
     networks={"StreamDancer": f"{_PKG}.onnx_graphs:dancer_specs"},

@@ -42,13 +42,13 @@ from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, wr
 from skeleton_mamba.tasks.motion.render.character import CHARACTER_SUFFIXES
 from skeleton_mamba.tasks.motion.render.view import script_json, three_modules
 from skeleton_mamba.tasks.motion.retarget.rig_output import RigOutput, prepare_rig
+from skeleton_mamba.tasks.stream.export_web_args import build_parser
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.stream.ort_web import LICENCE_FILE, VERSION, OrtWeb, read_ort_web
 from skeleton_mamba.tasks.stream.three_vrm import LICENCE_FILE as VRM_LICENCE_FILE
 from skeleton_mamba.tasks.stream.three_vrm import ThreeVrm, read_three_vrm
-from skeleton_mamba.tasks.stream.web_export_args import build_parser
 from skeleton_mamba.tasks.stream.web_graph import web_step_spec
 from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
 from skeleton_mamba.tasks.training.pretrained import load_module_from

@@ -44,12 +44,12 @@ MACHINERY_COMMANDS: dict[str, Command] = {
     "recipes": Command(
         f"{_PKG}.training.recipes_cli:main",
         "list the packaged recipes",
-        f"{_PKG}.training.recipes_cli:build_parser",
+        f"{_PKG}.training.recipes_args:build_parser",
     ),
     "analyze-music": Command(
         f"{_PKG}.motion.commands.analyze_music:main",
         "tempo, beats and features of a track",
-        f"{_PKG}.motion.commands.analyze_music:build_parser",
+        f"{_PKG}.motion.commands.analyze_music_args:build_parser",
     ),
     "evaluate-dance": Command(
         f"{_PKG}.motion.commands.evaluate_dance:main",
@@ -79,7 +79,7 @@ MACHINERY_COMMANDS: dict[str, Command] = {
     "export-onnx": Command(
         f"{_PKG}.training.onnx_export:main",
         "a backbone or task network as ONNX (sequence forward, streaming step)",
-        f"{_PKG}.training.onnx_export_args:build_parser",
+        f"{_PKG}.training.export_onnx_args:build_parser",
     ),
     "export-pretrained": Command(
         f"{_PKG}.training.export_pretrained:main",

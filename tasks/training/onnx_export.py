@@ -37,7 +37,7 @@ from skeleton_mamba.pretrained.checks import check_sizes
 from skeleton_mamba.pretrained.mixin import PretrainedError, decode_value
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 from skeleton_mamba.tasks.training.checkpoints import load_checkpoint, load_module_and_checkpoint
-from skeleton_mamba.tasks.training.onnx_export_args import build_parser
+from skeleton_mamba.tasks.training.export_onnx_args import build_parser
 from skeleton_mamba.tasks.training.onnx_graphs import (
     ExportSpec,
     SequenceGraph,

@@ -2,20 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 
-from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipes, recipe_description
+from skeleton_mamba.tasks.training.recipes_args import build_parser
 
-__all__ = ["build_parser", "main"]
-
-
-def build_parser() -> argparse.ArgumentParser:
-    return command_parser(
-        "sm recipes", "List the packaged recipes (sm fit --recipe NAME trains one; NAME.yaml or NAME)."
-    )
+__all__ = ["main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

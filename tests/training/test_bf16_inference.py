@@ -71,8 +71,8 @@ def test_sm_dance_refuses_compile_with_bf16(tmp_path, tiny_egodance_module):
 
 
 def test_sm_stream_bf16_dance_is_within_the_bound_of_fp32(tmp_path):
-    from skeleton_mamba.tasks.stream.cli import main
     from skeleton_mamba.tasks.stream.module import StreamDanceModule
+    from skeleton_mamba.tasks.stream.stream_cli import main
 
     torch.manual_seed(0)
     module = StreamDanceModule(backbone=TINY)

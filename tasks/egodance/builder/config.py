@@ -27,7 +27,7 @@ def default_workers() -> int:
 
 @dataclass
 class BuildConfig:
-    """Options of ``sm make-ego`` (see ``cli_args.py`` for their help)."""
+    """Options of ``sm make-ego`` (see ``make_ego_args.py`` for their help)."""
 
     out: str
     scenes: str = "procedural"

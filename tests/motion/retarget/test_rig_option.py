@@ -129,7 +129,7 @@ def test_sm_stream_writes_the_dance_on_the_rig_and_records_it(rigs, tmp_path, ca
 
 def test_model_commands_refuse_a_bad_rig_before_the_checkpoint(rigs, tmp_path, capsys, monkeypatch):
     import skeleton_mamba.tasks.egodance.dance_cli as dance_cli
-    import skeleton_mamba.tasks.stream.cli as stream_cli
+    import skeleton_mamba.tasks.stream.stream_cli as stream_cli
     import skeleton_mamba.tasks.text2motion.generate_cli as generate_cli
 
     def never(*args, **kwargs):

@@ -21,7 +21,7 @@ from skeleton_mamba.tasks.egodance.builder.build import (
     scene_keys,
 )
 from skeleton_mamba.tasks.egodance.builder.camera import head_camera, intrinsics
-from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
+from skeleton_mamba.tasks.egodance.builder.make_ego_cli import main as make_ego_main
 from skeleton_mamba.tasks.egodance.builder.penetration import FOOT_RADIUS, penetration_score, signed_distance
 from skeleton_mamba.tasks.egodance.builder.placement import place_points, random_placement
 from skeleton_mamba.tasks.egodance.builder.procedural_scene import procedural_room

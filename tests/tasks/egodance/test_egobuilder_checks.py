@@ -11,7 +11,7 @@ import pytest
 
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.camera import CameraTrajectory, intrinsics
-from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
+from skeleton_mamba.tasks.egodance.builder.make_ego_cli import main as make_ego_main
 from skeleton_mamba.tasks.egodance.builder.placement_checks import (
     MIN_VIEW_HITS,
     feet_off_floor,

@@ -13,7 +13,7 @@ import torch
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.body_mesh import get_body_model, pose_body
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, build_window, plan_windows
-from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
+from skeleton_mamba.tasks.egodance.builder.make_ego_cli import main as make_ego_main
 from skeleton_mamba.tasks.egodance.builder.penetration import (
     mesh_penetration_depths,
     mesh_penetration_score,

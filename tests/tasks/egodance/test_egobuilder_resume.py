@@ -8,7 +8,7 @@ import pytest
 from skeleton_mamba.errors import DataFileError
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import BuildConfig, run_build
-from skeleton_mamba.tasks.egodance.builder.cli import main as make_ego_main
+from skeleton_mamba.tasks.egodance.builder.make_ego_cli import main as make_ego_main
 from skeleton_mamba.tasks.motion.synthetic.dance import synthesize_dance
 from tests.helpers.motions import _motion
 

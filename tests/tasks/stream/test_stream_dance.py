@@ -234,7 +234,7 @@ def test_training_features_are_what_the_live_stream_computes(tmp_path):
 def test_sm_stream_compile_equals_the_eager_stream(checkpoint, tmp_path, capsys):
     """``--compile``: the frame step through torch.compile (a one-block tiny model: a short compile)."""
     from skeleton_mamba.runtime.compiling import inductor_unavailable
-    from skeleton_mamba.tasks.stream.cli import main
+    from skeleton_mamba.tasks.stream.stream_cli import main
 
     if (reason := inductor_unavailable()) is not None:
         pytest.skip(reason)
@@ -252,7 +252,7 @@ def test_sm_stream_compile_equals_the_eager_stream(checkpoint, tmp_path, capsys)
 
 def test_sm_stream_compile_falls_back_to_the_eager_step_with_a_warning(checkpoint, tmp_path, monkeypatch):
     from skeleton_mamba.runtime.compiling import CompiledStep
-    from skeleton_mamba.tasks.stream.cli import main
+    from skeleton_mamba.tasks.stream.stream_cli import main
 
     def no_compiler(self, *args, **kwargs):
         raise RuntimeError("InductorError: CppCompileError: C++ compile error")
@@ -267,7 +267,7 @@ def test_sm_stream_compile_falls_back_to_the_eager_step_with_a_warning(checkpoin
 
 
 def test_a_stream_slower_than_real_time_suggests_compiling():
-    from skeleton_mamba.tasks.stream.cli import realtime_hint
+    from skeleton_mamba.tasks.stream.stream_cli import realtime_hint
 
     slow = {"median_ms": 30.0, "p99_ms": 41.0, "max_ms": 60.0}
     fast = {"median_ms": 20.0, "p99_ms": 30.0, "max_ms": 40.0}

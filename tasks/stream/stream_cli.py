@@ -42,11 +42,11 @@ from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, wr
 from skeleton_mamba.tasks.motion.render.skeleton import RenderStyle
 from skeleton_mamba.tasks.motion.retarget.rig_output import RigOutput, prepare_rig, rig_file_names
 from skeleton_mamba.tasks.stream.audio_input import AudioSource
-from skeleton_mamba.tasks.stream.cli_args import build_parser
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.live import LiveDancer
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
+from skeleton_mamba.tasks.stream.stream_args import build_parser
 from skeleton_mamba.tasks.training.frame_timing import (
     announce_compile,
     latency_summary,

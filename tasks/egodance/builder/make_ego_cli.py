@@ -19,8 +19,8 @@ from pathlib import Path
 
 from skeleton_mamba.tasks.egodance.builder import layout
 from skeleton_mamba.tasks.egodance.builder.build import run_build
-from skeleton_mamba.tasks.egodance.builder.cli_args import build_parser
 from skeleton_mamba.tasks.egodance.builder.config import BuildConfig
+from skeleton_mamba.tasks.egodance.builder.make_ego_args import build_parser
 from skeleton_mamba.tasks.motion.io.output_folder import claim_output_folder, writing_outputs
 
 __all__ = ["main", "build_parser"]
