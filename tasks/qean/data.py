@@ -156,7 +156,8 @@ class AISTPPDanceDataModule(ContractDataModule):
             whole music instead.
         window_stride: frames between training windows.
         rollout_frames: frames before each training window that it also carries (0: none, [QEAN]'s windows),
-            for ``QEANModule.rollout_probability``; at most ``predict_frames``.
+            for ``QEANModule.rollout_probability``; at most ``seed_frames`` (above ``predict_frames`` the
+            module chains its predictions, so the whole seed can be the network's own).
         exclude_ignored: drop the AIST++ ignore list.
         batch_size: training batch (16).
         test_batch_size: sequences generated together at test and predict time.
@@ -209,10 +210,8 @@ class AISTPPDanceDataModule(ContractDataModule):
         if test_split is None:
             test_split = ["val", "test"]
         self.test_splits = [test_split] if isinstance(test_split, str) else list(test_split)
-        if not 0 <= rollout_frames <= predict_frames:
-            raise ValueError(
-                f"rollout_frames must be 0 to {predict_frames} (predict_frames), got {rollout_frames}"
-            )
+        if not 0 <= rollout_frames <= seed_frames:
+            raise ValueError(f"rollout_frames must be 0 to {seed_frames} (seed_frames), got {rollout_frames}")
         if test_max_sequences is not None and test_max_sequences < 1:
             raise ValueError(f"test_max_sequences must be >= 1 or None, got {test_max_sequences}")
         self.synthetic = synthetic

@@ -101,9 +101,11 @@ class QEANModule(BackboneModule):
             0, the default, is [QEAN]'s teacher forcing). Generation feeds the network its own frames, which
             teacher forcing never shows it: each step's small error pulls the dance towards the mean, and it
             freezes (exposure bias). With windows that carry R earlier frames (the data's
-            ``rollout_frames``), the network first predicts R frames from the R-earlier seed (no gradient),
+            ``rollout_frames``), the network first predicts R frames from the R-earlier seed (no gradient;
+            in steps of ``predict_frames``, each from the seed the previous steps left, when R is larger),
             they replace the seed's last R frames, and the loss asks for the true future from there, so the
-            network learns to return to the dance from its own frames.
+            network learns to return to the dance from its own frames (R = ``seed_frames``: from a seed
+            entirely its own, as generation gives it after its first window).
     """
 
     def __init__(
@@ -161,7 +163,9 @@ class QEANModule(BackboneModule):
         """A training window's seed and music: motion (B, R + S, 219) and music (B, R + M, 35) carrying R
         earlier frames -> seed (B, S, 219), music (B, M, 35). The seed is the last S true frames, or, for a
         ``rollout_probability`` share of the windows, its last R frames are the network's prediction (no
-        gradient) from the seed R frames earlier (frames ``[0, S)``, music ``[0, M)``)."""
+        gradient) from the seed R frames earlier (frames ``[0, S)``, music ``[0, M)``), chained in steps of
+        P = ``predict_frames`` as generation chains them: step k predicts frames ``[S + kP, S + (k+1)P)``
+        from frames ``[kP, S + kP)`` as the earlier steps left them, and music ``[kP, M + kP)``."""
         c = self.model.config
         extra = motion.shape[1] - c.seed_frames
         seed, future_music = motion[:, extra:], music[:, extra:]
@@ -170,10 +174,15 @@ class QEANModule(BackboneModule):
         rolled = torch.rand(motion.shape[0], device=motion.device) < self.hparams.rollout_probability
         if not rolled.any():
             return seed, future_music
+        chained, chained_music = motion[rolled].clone(), music[rolled]
         with torch.no_grad():
-            own = self.model(motion[rolled, : c.seed_frames], music[rolled, : c.music_frames])[:, :extra]
+            for start in range(0, extra, c.predict_frames):
+                window = chained[:, start : start + c.seed_frames]
+                own = self.model(window, chained_music[:, start : start + c.music_frames])
+                keep = min(c.predict_frames, extra - start)
+                chained[:, start + c.seed_frames : start + c.seed_frames + keep] = own[:, :keep]
         seed = seed.clone()
-        seed[rolled, c.seed_frames - extra :] = own
+        seed[rolled] = chained[:, extra:]
         return seed, future_music
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:

@@ -172,5 +172,31 @@ def test_rollout_windows_carry_the_earlier_frames_and_the_seed_ends_in_the_model
     torch.testing.assert_close(always.eval().rollout_seed(batch_motion, batch_music)[0], batch_motion[:, 3:])
     with pytest.raises(ValueError, match="rollout_probability"):
         QEANModule(network=network, rollout_probability=1.5)
-    with pytest.raises(ValueError, match="rollout_frames"):
-        AISTPPDanceDataModule(root="x", synthetic=True, predict_frames=4, rollout_frames=5)
+    with pytest.raises(ValueError, match="rollout_frames must be 0 to 12"):
+        AISTPPDanceDataModule(root="x", synthetic=True, seed_frames=12, predict_frames=4, rollout_frames=13)
+
+
+def test_a_rollout_longer_than_one_prediction_chains_them_into_a_seed_all_its_own():
+    """R = S = 12 with P = 4: three predictions, each from the seed the previous ones left (frames
+    [4k, 12 + 4k) and music [4k, 16 + 4k)), written out step by step; the seed is then all the network's."""
+    torch.manual_seed(1)
+    sizes = dict(hidden=16, heads=2, motion_layers=1, audio_layers=1, cross_layers=1, mlp_dim=32, dropout=0.0)
+    network = QEANConfig(**sizes, seed_frames=12, music_frames=16, predict_frames=4)
+    module = QEANModule(network=network, rollout_probability=1.0).train()
+    motion, music = torch.randn(2, 24, 219), torch.randn(2, 28, 35)  # R + S frames, R + M music frames
+    seed, future_music = module.rollout_seed(motion, music)
+    expected = motion.clone()
+    with torch.no_grad():
+        for k in range(3):
+            own = module.model(expected[:, 4 * k : 12 + 4 * k], music[:, 4 * k : 16 + 4 * k])
+            expected[:, 12 + 4 * k : 16 + 4 * k] = own
+    torch.testing.assert_close(seed, expected[:, 12:])
+    torch.testing.assert_close(future_music, music[:, 12:])
+    assert not torch.isclose(seed, motion[:, 12:]).any()  # no true frame is left in the seed
+    # a rollout of 6 frames: one full prediction and 2 frames of the next
+    six, _ = module.rollout_seed(motion[:, 6:], music[:, 6:])
+    partial = motion[:, 6:].clone()
+    with torch.no_grad():
+        partial[:, 12:16] = module.model(partial[:, :12], music[:, 6:22])
+        partial[:, 16:18] = module.model(partial[:, 4:16], music[:, 10:26])[:, :2]
+    torch.testing.assert_close(six, partial[:, 6:])
