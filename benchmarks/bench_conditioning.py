@@ -144,19 +144,22 @@ def _songs(results: dict) -> list[tuple[str, dict]]:
 
 
 def table(report: dict) -> str:
-    """The markdown tables of ``benchmarks/README.md`` from a report (``--table`` prints them)."""
+    """The markdown tables of ``benchmarks/README.md`` from a report (``--table`` prints them): every song of
+    the runs of the variant run on the most seeds (the recipe's), then every run's summary."""
     lines = [
         "| run | seed | song | margin to the song | margin in silence | truth's margin | "
         "best margin against late beats (lag) | smallest 5 s block from 10 s / largest | "
         "torso tilt (truth) | targets |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    runs = sorted(report["runs"].values(), key=lambda r: (r["demo_set"], r["seed"]))
-    for results in runs:
+    runs = sorted(report["runs"].values(), key=lambda r: (r["variant"], r["seed"]))
+    variants = [r["variant"] for r in runs]
+    demo = max(variants, key=variants.count)  # the recipe's, run on every seed: its songs one by one
+    for results in (r for r in runs if r["variant"] == demo):
         for song, entry in _songs(results):
             music, silence = entry["music"], entry["silence"]
             lines.append(
-                f"| {results['demo_set']} | {results['seed']} | {song} ({entry['kind']}) | "
+                f"| {results['variant']} | {results['seed']} | {song} ({entry['kind']}) | "
                 f"{music['margin']:+.3f} | {silence['margin']:+.3f} | {entry['truth']['margin']:+.3f} | "
                 f"{_lagged(music)} | {_ratio(music['freeze_ratio'])} | {music['tilt_deg']:.1f} deg "
                 f"({entry['truth']['tilt_deg']:.1f}) | {_verdict(entry['targets'])} |"
@@ -174,7 +177,7 @@ def table(report: dict) -> str:
         loss = results["teacher_forced_loss"]
         own, other, flat = loss["own music"], loss["another window's music"], loss["mean music"]
         lines.append(
-            f"| {results['demo_set']} | {results['seed']} | {mean:+.3f} | {below} of {len(songs)} | "
+            f"| {results['variant']} | {results['seed']} | {mean:+.3f} | {below} of {len(songs)} | "
             f"{results['filter_delay_frames']:.0f} frames | {own:.4f} | {other:.4f} (x{other / own:.2f}) | "
             f"{flat:.4f} (x{flat / own:.2f}) | {_verdict(results['targets'])} |"
         )
@@ -218,6 +221,23 @@ def default_songs() -> list[tuple[Path, str]]:
     ]
 
 
+def variant(config: dict) -> str:
+    """What a run was trained with: the demo set's music, the beat phase, the low-pass, the input noise, the
+    history shift and the window length when not 90 frames (the defaults where the config predates them)."""
+    data, model = config["data"]["init_args"], config["model"]["init_args"]
+    parts = [
+        data.get("synthetic_music", "drums"),
+        "beat phase" if data.get("beat_phase") else "no beat phase",
+        f"low-pass {model['smoothing_stages']}x{model['smoothing_decay']:g}",
+        f"noise {model['input_noise']:g}",
+    ]
+    if model.get("history_shift"):
+        parts.append(f"history shift {model['history_shift']}")
+    if data["window_frames"] != 90:
+        parts.append(f"windows of {data['window_frames']} frames")
+    return ", ".join(parts)
+
+
 def bench_run(run: Path, songs: list[tuple[Path, str]], seconds: float) -> dict:
     """Every score of one run (module docstring), printed as it goes."""
     module = load_module_from(StreamDanceModule, str(run / "checkpoints" / "last.ckpt")).eval()
@@ -226,13 +246,14 @@ def bench_run(run: Path, songs: list[tuple[Path, str]], seconds: float) -> dict:
     results = {
         "seed": config.get("seed_everything"),
         "demo_set": config["data"]["init_args"].get("synthetic_music", "drums"),
+        "variant": variant(config),
         "teacher_forced_loss": teacher_forced_losses(module, run, config),
         "filter_delay_frames": hparams.smoothing_stages
         * hparams.smoothing_decay
         / (1 - hparams.smoothing_decay),
     }
     print(
-        f"{run} (seed {results['seed']}, {results['demo_set']} set) teacher-forced validation loss: "
+        f"{run} (seed {results['seed']}, {results['variant']}) teacher-forced validation loss: "
         + ", ".join(f"{k} {v:.4f}" for k, v in results["teacher_forced_loss"].items()),
         flush=True,
     )

@@ -87,7 +87,7 @@ def _cli(tmp_path, *args: str) -> SkeletonMambaCLI:
 
 def test_music_width_flows_from_the_data_to_the_model_without_the_recipe(tmp_path):
     default = _cli(tmp_path / "a")
-    assert default.model.hparams.music_dim == data_contract(default.datamodule).music_dim == 34
+    assert default.model.hparams.music_dim == data_contract(default.datamodule).music_dim == 36  # beat phase
     narrow = _cli(tmp_path / "b", f"--data.class_path={__name__}.NarrowMusic")
     assert data_contract(narrow.datamodule).music_dim == 20
     assert narrow.model.hparams.music_dim == 20 and narrow.model.model.music_dim == 20

@@ -128,6 +128,13 @@ class StreamDanceDataModule(ContractDataModule):
         super().__init__()
         if synthetic_music not in SYNTHETIC_MUSIC:
             raise ValueError(f"synthetic_music must be one of {SYNTHETIC_MUSIC}, got {synthetic_music!r}")
+        if synthetic and synthetic_music == "recordings":  # before the model is built
+            available = len(recorded_music_set.training_tracks())
+            if not 1 <= synthetic_count <= available:
+                raise ValueError(
+                    f"synthetic_count must be 1 ... {available} (the training recordings of "
+                    f"{recorded_music_set.PACKAGE}) with synthetic_music: recordings, got {synthetic_count}"
+                )
         self.save_hyperparameters()
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
