@@ -1,6 +1,6 @@
 """An AIST++-layout demo set on REAL recordings, with SYNTHETIC dances choreographed to their beats.
 
-The music is the MIT-licensed ``immich-memories-music`` package (29 generated instrumental tracks of about
+The music is the MIT-licensed ``immich-memories-music`` package (28 generated instrumental tracks of about
 30 s, Opus, ``immich_memories_music/tracks/<mood>/<name>.opus``; ``pip install immich-memories-music``). For
 every track the dance is the toolkit's procedural dance (:func:`.dance.phase_dance`) on the recording's own
 beats and sections:
