@@ -31,7 +31,8 @@ from skeleton_mamba.tasks.motion.formats.aistpp import ignore_list, load_aistpp_
 from skeleton_mamba.tasks.motion.music.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic import aistpp_set, recorded_music_set
-from skeleton_mamba.tasks.stream.features import feature_width, music_features
+from skeleton_mamba.tasks.stream.beat_phase import NUM_BEAT_FEATURES
+from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
 from skeleton_mamba.tasks.training.base_data import ContractDataModule, DataContract, unlinked
 
@@ -138,7 +139,8 @@ class StreamDanceDataModule(ContractDataModule):
         self.save_hyperparameters()
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
-        self.music_dim = feature_width(beat_phase)  # the causal features' width, linked to the model
+        # the causal features' width (34, 36 with the beat phase), linked to the model
+        self.music_dim = NUM_FEATURES + (NUM_BEAT_FEATURES if beat_phase else 0)
         self.datasets: dict[str, Dataset] = {}
         self._music: dict[Path, torch.Tensor] = {}  # features per track (AIST++ reuses each track)
         if not synthetic:  # fail before the model is built

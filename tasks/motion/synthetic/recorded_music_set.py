@@ -41,6 +41,7 @@ from skeleton_mamba.tasks.motion.synthetic.dance import STYLES, dance_motion, ph
 
 __all__ = [
     "AMPLITUDE_RANGE",
+    "ANALYSIS_S",
     "LABEL",
     "PACKAGE",
     "SECTION_DB",
@@ -73,6 +74,7 @@ FPS = 30
 HOP = 512
 SR = FPS * HOP  # one hop is one 30 fps frame (the live dancer's feature rate)
 WAV_RATE = 22050  # the written excerpts
+ANALYSIS_S = 12.0  # the least music whose beats and sections are tracked for an excerpt
 SECTION_DB = 1.5
 AMPLITUDE_RANGE = (0.75, 1.15)
 BEATS_PER_BAR = 4
@@ -196,18 +198,22 @@ def choreograph(
     return Choreography(dance_motion(euler, trans, float(fps)), beats, sections, styles, amplitude)
 
 
-def _write_pair(root: Path, name: str, audio: np.ndarray, seed: int, first_style: int) -> Choreography:
+def _write_pair(
+    root: Path, name: str, audio: np.ndarray, samples: int, seed: int, first_style: int
+) -> Choreography:
+    """Choreograph all of ``audio``; write its first ``samples`` (the music) and their frames (the dance)."""
+    frames = samples // HOP
     piece = choreograph(audio, len(audio) // HOP, seed, first_style, fps=60.0)  # 60 fps, as AIST++ stores it
     motion = piece.motion
     data = {
-        "smpl_poses": motion.poses.reshape(-1, 72).astype(np.float32),
-        "smpl_trans": (motion.trans * SCALING).astype(np.float32),
+        "smpl_poses": motion.poses[: 2 * frames].reshape(-1, 72).astype(np.float32),
+        "smpl_trans": (motion.trans[: 2 * frames] * SCALING).astype(np.float32),
         "smpl_scaling": np.array([SCALING], dtype=np.float32),
     }
     with atomic_open(root / "motions" / f"{name}.pkl", "wb") as f:
         pickle.dump(data, f)
     with librosa_calls() as librosa:
-        wav = librosa.resample(audio, orig_sr=SR, target_sr=WAV_RATE)
+        wav = librosa.resample(audio[:samples], orig_sr=SR, target_sr=WAV_RATE)
     with atomic_path(root / "music" / f"{music_id(name)}.wav") as tmp:
         sf.write(tmp, wav, WAV_RATE, subtype="PCM_16")
     return piece
@@ -218,7 +224,8 @@ def write_recorded_music_aistpp(
 ) -> list[str]:
     """Write the first ``train_count`` training tracks (:func:`training_tracks`) and the :data:`TEST_TRACKS`
     (the ``val`` split) with their dances under ``root`` (module docstring); returns the names, val last.
-    ``duration_s``: the excerpt of each track (from its start).
+    ``duration_s``: the excerpt of each track (from its start); its beats and sections are found on at least
+    the first :data:`ANALYSIS_S` seconds (a few seconds hold too few beats to track).
 
     Raises:
         ValueError: ``train_count`` outside 1 ... the number of training tracks.
@@ -238,8 +245,8 @@ def write_recorded_music_aistpp(
     for k, track in enumerate(chosen):
         genre, index = GENRES[k % len(GENRES)], k // len(GENRES)
         name = f"g{genre}_sBM_cAll_d{k:02d}_m{genre}{index}_ch01"
-        audio = load_audio(tracks[track], SR, duration_s)
-        piece = _write_pair(root, name, audio, seed + k, k)
+        audio = load_audio(tracks[track], SR, max(duration_s, ANALYSIS_S))
+        piece = _write_pair(root, name, audio, min(len(audio), round(duration_s * SR)), seed + k, k)
         names.append(name)
         sources.append(f"{music_id(name)}\t{track}\t{'+'.join(piece.styles)}\t{len(piece.beats)} beats")
     train_names, val_names = names[:train_count], names[train_count:]
