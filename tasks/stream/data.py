@@ -11,7 +11,11 @@ causal music features (T, 34) of its track (:func:`~.features.music_features`), 
 the two; a training item is a window ``{motion (W, 24, 12), music (W, 34)}`` taken every
 ``window_stride`` frames. ``synthetic: true`` writes a SYNTHETIC demo set in this layout on first use
 (the toolkit's beat-synchronised procedural dances and drum tracks, one music id per dance, names
-``g<genre>_sBM_cAll_d<k>_m<genre><i>_ch01``) when ``<root>/motions`` does not exist.
+``g<genre>_sBM_cAll_d<k>_m<genre><i>_ch01``) when ``<root>/motions`` does not exist; with
+``synthetic_music: recordings`` its music is REAL recordings (the ``immich-memories-music`` package) and its
+dances are choreographed to each recording's tracked beats and sections
+(:mod:`~skeleton_mamba.tasks.motion.synthetic.recorded_music_set`: a fixed split whose held-out songs are
+never written into the set).
 """
 
 from __future__ import annotations
@@ -26,12 +30,15 @@ from skeleton_mamba.errors import DataFileError, DatasetNotFoundError
 from skeleton_mamba.tasks.motion.formats.aistpp import ignore_list, load_aistpp_motion, load_split, music_id
 from skeleton_mamba.tasks.motion.music.audio_io import probe_audio
 from skeleton_mamba.tasks.motion.music.features import load_audio
-from skeleton_mamba.tasks.motion.synthetic.aistpp_set import write_synthetic_aistpp
+from skeleton_mamba.tasks.motion.synthetic import aistpp_set, recorded_music_set
+from skeleton_mamba.tasks.stream.beat_phase import NUM_BEAT_FEATURES
 from skeleton_mamba.tasks.stream.features import NUM_FEATURES, music_features
 from skeleton_mamba.tasks.stream.model import motion_to_tokens
 from skeleton_mamba.tasks.training.base_data import ContractDataModule, DataContract, unlinked
 
-__all__ = ["StreamContract", "StreamDanceDataModule", "StreamStatistics"]
+__all__ = ["SYNTHETIC_MUSIC", "StreamContract", "StreamDanceDataModule", "StreamStatistics"]
+
+SYNTHETIC_MUSIC = ("drums", "recordings")  # the demo set's music: synthesised drum tracks, real recordings
 
 
 def audio_rate(path: Path) -> int:
@@ -94,8 +101,13 @@ class StreamDanceDataModule(ContractDataModule):
         batch_size: windows per batch.
         num_workers: DataLoader workers.
         synthetic: write a SYNTHETIC demo set under ``root`` when it holds no ``motions/``.
-        synthetic_count: dances in the demo set.
-        synthetic_duration_s: length of each demo dance.
+        synthetic_count: dances in the demo set (``recordings``: training recordings; the two test songs are
+            added as the ``val`` split).
+        synthetic_duration_s: length of each demo dance (``recordings``: the excerpt of each recording).
+        synthetic_music: the demo set's music, ``"drums"`` (synthesised drum tracks) or ``"recordings"``
+            (real recordings, :mod:`~skeleton_mamba.tasks.motion.synthetic.recorded_music_set`).
+        beat_phase: append the causal beat phase to the music features (36 per frame, :mod:`.beat_phase`;
+            the model's ``music_dim`` is linked to it; ``sm stream`` computes what the model was trained on).
     """
 
     def __init__(
@@ -111,12 +123,24 @@ class StreamDanceDataModule(ContractDataModule):
         synthetic: bool = False,
         synthetic_count: int = 8,
         synthetic_duration_s: float = 12.0,
+        synthetic_music: str = "drums",
+        beat_phase: bool = False,
     ) -> None:
         super().__init__()
+        if synthetic_music not in SYNTHETIC_MUSIC:
+            raise ValueError(f"synthetic_music must be one of {SYNTHETIC_MUSIC}, got {synthetic_music!r}")
+        if synthetic and synthetic_music == "recordings":  # before the model is built
+            available = len(recorded_music_set.training_tracks())
+            if not 1 <= synthetic_count <= available:
+                raise ValueError(
+                    f"synthetic_count must be 1 ... {available} (the training recordings of "
+                    f"{recorded_music_set.PACKAGE}) with synthetic_music: recordings, got {synthetic_count}"
+                )
         self.save_hyperparameters()
         self.root = Path(root).expanduser()
         self.music_dir = Path(music_dir).expanduser() if music_dir else self.root / "music"
-        self.music_dim = NUM_FEATURES  # the causal features' width, linked to the model
+        # the causal features' width (34, 36 with the beat phase), linked to the model
+        self.music_dim = NUM_FEATURES + (NUM_BEAT_FEATURES if beat_phase else 0)
         self.datasets: dict[str, Dataset] = {}
         self._music: dict[Path, torch.Tensor] = {}  # features per track (AIST++ reuses each track)
         if not synthetic:  # fail before the model is built
@@ -125,8 +149,20 @@ class StreamDanceDataModule(ContractDataModule):
     def prepare_data(self) -> None:
         h = self.hparams
         if h.synthetic and not (self.root / "motions").is_dir():
-            write_synthetic_aistpp(self.root, h.synthetic_count, h.synthetic_duration_s)
+            if h.synthetic_music == "recordings":
+                recorded_music_set.write_recorded_music_aistpp(
+                    self.root, h.synthetic_count, h.synthetic_duration_s
+                )
+            else:
+                aistpp_set.write_synthetic_aistpp(self.root, h.synthetic_count, h.synthetic_duration_s)
         self.check_layout()
+
+    @property
+    def label(self) -> str:
+        """What the demo set is (the demo prints it): synthetic dances, on drum tracks or recordings."""
+        if self.hparams.synthetic_music == "recordings":
+            return recorded_music_set.LABEL
+        return aistpp_set.LABEL
 
     def check_layout(self) -> None:
         """Raise :class:`DatasetNotFoundError` saying where the motions go when they are missing."""
@@ -163,7 +199,8 @@ class StreamDanceDataModule(ContractDataModule):
         if wav not in self._music:
             # At the file's own rate through the same streaming resampler as ``sm stream``.
             rate = audio_rate(wav)
-            self._music[wav] = torch.from_numpy(music_features(load_audio(wav, rate), rate))
+            features = music_features(load_audio(wav, rate), rate, beat_phase=self.hparams.beat_phase)
+            self._music[wav] = torch.from_numpy(features)
         music = self._music[wav]
         n = min(len(motion), len(music))
         return motion[:n], music[:n]

@@ -11,11 +11,13 @@ frame, fed its own previous pose (no teacher forcing, no look-ahead). It writes 
 - ``demo.json``: what was done, with ``"synthetic": true``, and ``scores``: motion amplitude and jitter of
   every scored dance as ratios to its ground truth's, beside the ground truth, the training mean pose and a
   random training sequence (:mod:`~skeleton_mamba.tasks.motion.metrics.held_out_dynamics`), with
-  ``checks`` against the targets. The same table is printed;
+  ``checks`` against the targets; ``conditioning``: the dances' beat margin over chance on their music beside
+  their ground truth's (:mod:`.conditioning`; target: at least half the truth's). The same is printed;
 - ``view.html``: the first dance beside its ground truth, with the music, in a browser
   (:mod:`~skeleton_mamba.tasks.motion.render.view`; its path is printed).
 
-Everything is labelled synthetic: the demo set is procedural dances and synthesised drum tracks.
+Everything is labelled synthetic: the demo set's dances are procedural (on synthesised drum tracks, or on real
+recordings' tracked beats with ``synthetic_music: recordings``).
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     held_out_dynamics,
     held_out_dynamics_checks,
 )
+from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
-from skeleton_mamba.tasks.stream.features import FPS
+from skeleton_mamba.tasks.stream.conditioning import conditioning_scores, format_conditioning
+from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import (
     POSE_CHANNELS,
     StreamDancer,
@@ -113,15 +117,16 @@ class StreamDanceDemo(DemoCallback):
         out = self.out_dir(trainer)
         was_training = pl_module.training
         pl_module.eval()
-        dances, truths, records = [], [], []
+        dances, truths, records, audios = [], [], [], []
         for i, name in enumerate(names[: max(scored, min(self.num_samples, len(names)))]):
             motion, music = (x[:frames] for x in held_out[name])
             tokens = dance_to_features(pl_module.model, music)
             dances.append(_joints(tokens))
             truths.append(_joints(motion))
+            wav = trainer.datamodule.music_dir / f"{music_id(name)}.wav"
+            audios.append(load_audio(wav, SR)[: len(music) * HOP])
             if i >= self.num_samples:
                 continue
-            wav = trainer.datamodule.music_dir / f"{music_id(name)}.wav"
             motions = (
                 ("dance", tokens_to_motion(tokens.float(), FPS), "live dance (synthetic demo)"),
                 ("reference", tokens_to_motion(motion.float(), FPS), "ground truth (synthetic)"),
@@ -132,23 +137,27 @@ class StreamDanceDemo(DemoCallback):
         train = [_joints(motion) for motion, _ in datasets["train"].sequences.values()]
         scores = held_out_dynamics(dances[:scored], truths[:scored], train, FPS)
         checks = held_out_dynamics_checks(scores)
+        conditioning = conditioning_scores(dances[:scored], truths[:scored], audios[:scored])
+        label = getattr(trainer.datamodule, "label", LABEL)
         summary = {
             "synthetic": True,
-            "label": LABEL,
+            "label": label,
             "held_out_split": "val",
             "global_step": trainer.global_step,
             "samples": records,
             "scores": {"held_out_sequences": scored, "training_sequences": len(train), **scores},
             "checks": checks,
+            "conditioning": conditioning,
         }
         view = write_summary(out, summary)
-        lines = [f"[stream demo] {LABEL}", f"[stream demo] live dance to held-out (val) music -> {out}"]
+        lines = [f"[stream demo] {label}", f"[stream demo] live dance to held-out (val) music -> {out}"]
         for record in records:
             lines += [f"  {k}: {v}" for k, v in record["dance"].items()]
         lines += [
             f"[stream demo] scores, mean over {scored} held-out sequences after {trainer.global_step} steps "
             f"(baselines from the {len(train)} training sequences):",
             format_dynamics(scores, checks),
+            format_conditioning(conditioning),
         ]
         if view is not None:
             lines.append(f"[stream demo] viewer: {view}")

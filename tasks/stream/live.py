@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from skeleton_mamba.runtime.compiling import compile_step_or_eager
-from skeleton_mamba.tasks.stream.features import CausalMusicFeatures
+from skeleton_mamba.tasks.stream.features import CausalMusicFeatures, beat_phase_for
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer
 
 __all__ = ["LiveDancer"]
@@ -49,7 +49,8 @@ class LiveDancer:
         self.backbone_step, self.compile_seconds = self.model.backbone.step, None
         if self.compile:
             self.backbone_step, self.compile_seconds = compile_step_or_eager(self.model.backbone)
-        self.features = CausalMusicFeatures(self.sample_rate)
+        self.beat_phase = beat_phase_for(self.model.music_dim)  # the features it was trained on
+        self.features = CausalMusicFeatures(self.sample_rate, self.beat_phase)
         self.state = self.model.init_state(1)
         weight = next(self.model.parameters())
         self.prev = torch.zeros(1, 24, POSE_CHANNELS, dtype=weight.dtype, device=weight.device)
@@ -57,7 +58,9 @@ class LiveDancer:
 
     def _warm_up(self) -> None:
         """One throwaway frame (librosa filters, torch kernels), so the first live frame is not slower."""
-        row = CausalMusicFeatures(self.sample_rate).push(np.zeros(self.sample_rate // 10, np.float32))[:1]
+        row = CausalMusicFeatures(self.sample_rate, self.beat_phase).push(
+            np.zeros(self.sample_rate // 10, np.float32)
+        )[:1]
         music = torch.from_numpy(row).to(self.prev)
         self.model.step(self.prev, music, self.model.init_state(1), self.backbone_step)
 
@@ -82,5 +85,5 @@ class LiveDancer:
         return torch.stack(self.poses) if self.poses else torch.zeros(0, 24, POSE_CHANNELS)
 
     def music_features(self) -> torch.Tensor:
-        """The features danced to, (T, 34)."""
-        return torch.from_numpy(np.stack(self.music)) if self.music else torch.zeros(0, 34)
+        """The features danced to, (T, 34) (36 with the beat phase)."""
+        return torch.from_numpy(np.stack(self.music)) if self.music else torch.zeros(0, self.features.width)

@@ -36,7 +36,7 @@ from torch import nn
 
 from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics
 from skeleton_mamba.tasks.motion.music.jit_lock import librosa_calls
-from skeleton_mamba.tasks.stream.features import HOP, N_FFT, N_MELS, SR, CausalMusicFeatures
+from skeleton_mamba.tasks.stream.features import HOP, N_FFT, N_MELS, NUM_FEATURES, SR, CausalMusicFeatures
 from skeleton_mamba.tasks.stream.model import POSE_CHANNELS, StreamDancer, tokens_to_features
 from skeleton_mamba.tasks.stream.onnx_graphs import DancerStepGraph
 from skeleton_mamba.tasks.training.onnx_graphs import ExportSpec, network_ready, state_names, zero_states
@@ -152,6 +152,11 @@ class WebStepGraph(nn.Module):
 
     def __init__(self, dancer: StreamDancer):
         super().__init__()
+        if dancer.music_dim != NUM_FEATURES:
+            raise ValueError(
+                f"the web graph computes the {NUM_FEATURES} music features only; this dancer reads "
+                f"{dancer.music_dim} (trained with the beat phase, data beat_phase: true): no web export"
+            )
         self.front_end = MusicFrontEnd()
         self.step = DancerStepGraph(dancer)
         self.smoothing = dancer.smoothing.enabled

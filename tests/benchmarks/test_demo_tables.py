@@ -61,12 +61,13 @@ def test_tables_are_rendered_from_the_rows_in_a_block():
             "stream": {"seeds": {"0": _stream_row(0.9, []), "1": _stream_row(0.61, ["NOT reached: x"])}}
         }
     }
+    results["demos"]["stream"]["seeds"]["0"]["conditioning"] = {"margin": 0.4, "truth_margin": 0.7}
     text = "before\n<!-- demo_seeds: stream -->\nold typed table\n<!-- /demo_seeds -->\nafter\n"
     out = demo_seeds.render_docs(text, results)
     assert "old typed table" not in out and out.startswith("before\n") and out.endswith("after\n")
     rows = [line for line in out.splitlines() if line.startswith("| ")]
-    assert rows[1] == "| 0 | 0.900 | 0.500 | 1.000 | all |"
-    assert rows[2] == "| 1 | 0.610 | 0.500 | 1.000 | 1 NOT reached |"
+    assert rows[1] == "| 0 | 0.900 | 0.500 | 1.000 | +0.400 (+0.700) | all |"
+    assert rows[2] == "| 1 | 0.610 | 0.500 | 1.000 |  | 1 NOT reached |"  # a row from before the margin
     assert rows[3].startswith("| random training clip | 1.000 | 1.300 | 10.000")
     with pytest.raises(KeyError, match="no run of the qean demo"):
         demo_seeds.render_docs("<!-- demo_seeds: qean -->\n<!-- /demo_seeds -->", results)

@@ -266,6 +266,8 @@ def test_music_width_is_linked_from_the_data_module(recipe, data_module, encoder
         args += ["--model.init_args.network.heads=2"]
     if recipe == "egodance_demo.yaml":
         args += ["--model.init_args.head_guidance.source", "none"]
+    if data_module == "stream.data":
+        args += ["--data.init_args.beat_phase", "false"]  # 34 features (7 here), without the 2 of the phase
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the demo's random ResNet
         cli = SkeletonMambaCLI(

@@ -87,7 +87,7 @@ def _cli(tmp_path, *args: str) -> SkeletonMambaCLI:
 
 def test_music_width_flows_from_the_data_to_the_model_without_the_recipe(tmp_path):
     default = _cli(tmp_path / "a")
-    assert default.model.hparams.music_dim == data_contract(default.datamodule).music_dim == 34
+    assert default.model.hparams.music_dim == data_contract(default.datamodule).music_dim == 36  # beat phase
     narrow = _cli(tmp_path / "b", f"--data.class_path={__name__}.NarrowMusic")
     assert data_contract(narrow.datamodule).music_dim == 20
     assert narrow.model.hparams.music_dim == 20 and narrow.model.model.music_dim == 20
@@ -234,7 +234,7 @@ def test_a_contract_built_with_a_misspelt_field_fails_in_one_line(tmp_path):
 
 
 class _ContractWidth(StreamDanceDataModule):
-    """An attribute saying 34 music features and a contract saying 20."""
+    """An attribute saying 36 music features (the recipe's, with the beat phase) and a contract saying 20."""
 
     @property
     def contract(self) -> StreamContract:
@@ -243,6 +243,6 @@ class _ContractWidth(StreamDanceDataModule):
 
 def test_the_links_come_from_the_contract_not_the_data_modules_attributes(tmp_path):
     cli = _cli(tmp_path, f"--data.class_path={__name__}._ContractWidth")
-    assert cli.datamodule.music_dim == 34
+    assert cli.datamodule.music_dim == 36
     assert cli.link_data_contract() == [("music_dim", "music_dim")]
     assert cli.model.hparams.music_dim == 20 and cli.model.model.music_dim == 20

@@ -28,7 +28,16 @@ import torch
 from skeleton_mamba.tasks.motion.body.rotations import euler_to_matrix, matrix_to_axis_angle
 from skeleton_mamba.tasks.motion.formats.motion_file import MotionData, save_motion
 
-__all__ = ["STYLES", "ROOT_HEIGHT", "SWING_SIDES", "synthesize_dance", "write_dance", "beat_phase"]
+__all__ = [
+    "STYLES",
+    "ROOT_HEIGHT",
+    "SWING_SIDES",
+    "beat_phase",
+    "dance_motion",
+    "phase_dance",
+    "synthesize_dance",
+    "write_dance",
+]
 
 SWING_SIDES = ("random", "music")
 ROOT_HEIGHT = 0.93  # pelvis height (m) of the offset-table skeleton standing with straight legs
@@ -102,13 +111,36 @@ def synthesize_dance(
         raise ValueError(f"unknown swing side {swing_side!r}; known: {', '.join(SWING_SIDES)}")
     if bpm <= 0 or duration_s <= 0 or fps <= 0:
         raise ValueError(f"bpm, duration and fps must be positive, got {bpm}, {duration_s}, {fps}")
+    t_frames = int(round(duration_s * fps))
+    euler, trans = phase_dance(beat_phase(t_frames, fps, bpm), style, seed, swing_side)
+    return dance_motion(euler, trans, fps)
+
+
+def phase_dance(
+    phi: np.ndarray,
+    style: str = "bounce",
+    seed: int = 0,
+    swing_side: str = "random",
+    amplitude: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The joint angles (T, 24, 3) (XYZ Euler, degrees) and root position (T, 3) (m) of a dance on the beat
+    phase ``phi`` (T,) (beats; integer on every beat). Any ``phi`` that is linear between beats keeps every
+    joint's stops on the beats (the module docstring): a tempo that follows a recording's tracked beats too.
+    ``amplitude`` (T,) scales every swing and bounce frame by frame (1: as listed); one whose slope is zero on
+    every beat keeps the stops there.
+
+    Raises:
+        ValueError: unknown style or swing side.
+    """
+    if style not in STYLES:
+        raise ValueError(f"unknown dance style {style!r}; known: {sorted(STYLES)}")
+    if swing_side not in SWING_SIDES:
+        raise ValueError(f"unknown swing side {swing_side!r}; known: {', '.join(SWING_SIDES)}")
     rng = np.random.default_rng(seed)
     spec = STYLES[style]
-    t_frames = int(round(duration_s * fps))
-    phi = beat_phase(t_frames, fps, bpm)
-    c1, c2 = np.cos(np.pi * phi), np.cos(2 * np.pi * phi)  # zero slope at every beat
-
-    euler = np.zeros((t_frames, 24, 3))
+    gain = np.ones(len(phi)) if amplitude is None else np.asarray(amplitude, dtype=np.float64)
+    c1, c2 = gain * np.cos(np.pi * phi), gain * np.cos(2 * np.pi * phi)  # zero slope at every beat
+    euler = np.zeros((len(phi), 24, 3))
     for joint, base in _ARMS_DOWN.items():
         euler[:, joint] += base
     for joint, (base, a, b) in spec["joints"].items():
@@ -117,14 +149,17 @@ def synthesize_dance(
         scale = rng.uniform(0.8, 1.2)
         euler[:, joint] += np.asarray(base) + scale * (side * np.outer(c1, a) + np.outer(c2, b))
     (sway, bounce, _), yaw_amp = spec["root"]
-    yaw = np.radians(yaw_amp) * rng.uniform(0.8, 1.2) * c1
-    euler[:, 0, 1] += np.degrees(yaw)
+    euler[:, 0, 1] += np.degrees(np.radians(yaw_amp) * rng.uniform(0.8, 1.2) * c1)
+    trans = np.zeros((len(phi), 3))
+    trans[:, 0] = sway * rng.uniform(0.8, 1.2) * c1
+    trans[:, 1] = ROOT_HEIGHT - bounce * rng.uniform(0.8, 1.2) * (gain - c2) / 2  # lowest on the off-beat
+    return euler, trans
+
+
+def dance_motion(euler: np.ndarray, trans: np.ndarray, fps: float) -> MotionData:
+    """Joint angles (T, 24, 3) (XYZ Euler, degrees) and root position (T, 3) -> SMPL :class:`MotionData`."""
     rotations = euler_to_matrix(torch.from_numpy(np.radians(euler)), "XYZ")
     poses = matrix_to_axis_angle(rotations).numpy()
-
-    trans = np.zeros((t_frames, 3))
-    trans[:, 0] = sway * rng.uniform(0.8, 1.2) * c1
-    trans[:, 1] = ROOT_HEIGHT - bounce * rng.uniform(0.8, 1.2) * (1 - c2) / 2  # lowest on the off-beat
     return MotionData(fps=fps, skeleton="smpl24", poses=poses.astype(np.float32), trans=trans, scaling=1.0)
 
 
