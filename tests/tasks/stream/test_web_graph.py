@@ -23,7 +23,7 @@ from skeleton_mamba.tasks.stream.ort_web import VERSION, read_ort_web
 from skeleton_mamba.tasks.stream.web_export import export_web_graph
 from skeleton_mamba.tasks.stream.web_graph import nearest_rotation_graph, polar_rotation, run_web_graph
 from skeleton_mamba.tasks.training.cli import main as sm
-from tests.helpers.checkpoint_files import tiny_stream_checkpoint
+from tests.helpers.checkpoint_files import save_module_checkpoint, tiny_stream_checkpoint
 from tests.helpers.repo import SHARED_DATA
 
 TRACKS = sorted((SHARED_DATA / "music").glob("*.opus")) if (SHARED_DATA / "music").is_dir() else []
@@ -115,3 +115,19 @@ def test_a_huge_or_forged_onnxruntime_web_tarball_is_refused_without_reading_it_
         f.truncate(ort_web.TARBALL_BYTES)
     with pytest.raises(InputError, match="forged.tgz: not the npm tarball .*SHA-512 differs"):
         read_ort_web(forged)
+
+
+def test_a_dancer_trained_with_the_beat_phase_is_refused_in_one_line_before_anything_is_written(
+    tmp_path, capsys
+):
+    """The page computes the 34 features only: ``sm export-web`` says so, naming the checkpoint, exit 2."""
+    from skeleton_mamba.tasks.stream.module import StreamDanceModule
+
+    tiny = {"dim": 16, "depth": 1, "heads": 2, "mlp_dim": 32, "mixer": {"d_state": 16, "headdim": 8}}
+    module = StreamDanceModule(backbone={**tiny, "causal": True}, music_dim=36)
+    ckpt = save_module_checkpoint(module, tmp_path / "phase.ckpt")
+    out = tmp_path / "site"
+    assert sm(["export-web", "--ckpt", str(ckpt), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(ckpt) in err and "beat_phase false" in err, err
+    assert not (out / "index.html").exists()
