@@ -2,6 +2,7 @@
 
     python benchmarks/qean_freeze_cause.py --run runs/qean_demo/version_0 [--songs FILE...] [--json]
     python benchmarks/qean_freeze_cause.py --table      # the README table of the saved JSON
+    python benchmarks/qean_freeze_cause.py --run RUN --json --out benchmarks/qean_freeze_chained.json
 
 For a trained ``qean_demo.yaml`` run (its log folder: ``checkpoints/last.ckpt``, ``config.yaml`` and the
 synthetic set under ``<run>/../data``) and each song (the held-out synthetic tracks, looped to ``--seconds``,
@@ -452,11 +453,13 @@ def main() -> None:
     parser.add_argument("--run", type=Path, help="a qean_demo log folder (runs/qean_demo/version_N)")
     parser.add_argument("--songs", nargs="*", type=Path, default=None, help="default: ../shared/data/music")
     parser.add_argument("--seconds", type=float, default=33.0, help="dance to at most this much of each song")
-    parser.add_argument("--json", action="store_true", help="write qean_freeze_cause.json beside")
+    parser.add_argument("--json", action="store_true", help="write qean_freeze_cause.json beside (or --out)")
     parser.add_argument("--table", action="store_true", help="print the README table of the saved JSON")
+    parser.add_argument("--out", type=Path, default=None, help="the JSON --json writes and --table reads")
     args = parser.parse_args()
+    saved = args.out or Path(__file__).with_suffix(".json")
     if args.table:
-        report = json.loads(Path(__file__).with_suffix(".json").read_text())
+        report = json.loads(saved.read_text())
         print(table(report) + "\n\n" + finding(report))
         return
     if args.run is None:
@@ -475,8 +478,11 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d"),
     }
     report.update(measure(args.run, songs, args.seconds))
-    if args.json:
+    if args.json and args.out is None:
         write_report(__file__, report)
+    elif args.json:
+        args.out.write_text(json.dumps(report, indent=1) + "\n")
+        print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":
