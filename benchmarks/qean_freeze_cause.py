@@ -290,6 +290,10 @@ def measure(run: Path, songs: list[Path], seconds: float) -> dict:
         "smoothing": [c.smoothing_stages, c.smoothing_decay],
         "truth": {"amplitude": block_amplitude(truth, size), "speed": block_speed(truth, size)},
     }  # fmt: skip
+    demo = run / "demo" / "demo.json"  # what the run's demo printed on the held-out dances, when it ran
+    if demo.is_file():
+        printed = json.loads(demo.read_text())
+        report["demo"] = {"dance": printed["scores"]["dance"], "checks": printed["checks"]}
     # training distribution, on every held-out dance
     losses = []
     for name in held_out:
@@ -420,7 +424,19 @@ def finding(report: dict) -> str:
 
 def table(report: dict) -> str:
     """The markdown table of ``benchmarks/README.md`` from a report (``--table`` prints it)."""
-    lines = [
+    lines = []
+    if "demo" in report:  # the demo's own dynamics on the held-out dances (against the ground truth's)
+        d, checks = report["demo"]["dance"], report["demo"]["checks"]
+        failed = [k for k, ok in checks.items() if not ok]
+        lines += [
+            f"Training rollouts of {report['rollout_frames']} frames; the demo printed amplitude ratio "
+            f"{d['amplitude_ratio']:.2f}, jitter ratio {d['jitter_ratio']:.2f}, energy above 6 Hz "
+            f"{d['high_frequency_ratio']:.1f}x the truth's ("
+            + ("every target reached" if not failed else "NOT reached: " + "; ".join(failed))
+            + ").",
+            "",
+        ]
+    lines += [
         "| song | amplitude per 5 s (m) | speed per 5 s (m/s) | freeze ratio | margin | seed at 15 s: "
         "amplitude | 20 frames kept per call: amplitude | distance to plain in the last 5 s block (m): "
         "another seed / still seed / swapped / shifted / zero music |",
