@@ -377,11 +377,17 @@ def test_video_reader_memory_does_not_grow_with_the_length(tmp_path):
     frames would add 700 * 230 KB = 161 MB as uint8 (644 MB as float). The first pass also pays the
     decoder's, the resize's and the allocator's one-time costs, which do not grow with the length."""
     paths = [_gradient_video(tmp_path / f"v{frames}.mp4", frames) for frames in (300, 1000)]
-    proc = subprocess.run([sys.executable, "-c", _PEAK_RSS, *map(str, paths)], capture_output=True, text=True,
-                          timeout=300, check=True)  # fmt: skip
-    (short, after_short), (long, after_long) = ast.literal_eval(proc.stdout.strip())
-    assert (short, long) == (300, 1000)
-    assert after_long - after_short < 16 * 1024, (after_short, after_long)  # a tenth of the frames as uint8
+    growths = []
+    for _ in range(2):  # the smaller of two fresh interpreters: held frames show in both; a one-off growth
+        # (32 MB, once, in CI's suite; not reproduced alone nor beside two busy processes) in one only
+        proc = subprocess.run([sys.executable, "-c", _PEAK_RSS, *map(str, paths)], capture_output=True,
+                              text=True, timeout=300, check=True)  # fmt: skip
+        (short, after_short), (long, after_long) = ast.literal_eval(proc.stdout.strip())
+        assert (short, long) == (300, 1000)
+        growths.append(after_long - after_short)
+        if growths[-1] < 16 * 1024:
+            break
+    assert min(growths) < 16 * 1024, growths  # a tenth of the frames as uint8
 
 
 def test_decoded_video_frames_match_what_was_written(tmp_path):
