@@ -5,8 +5,8 @@ The modules are found by walking the installed packages (the backbone and ``skel
 list is kept by hand. They are imported by their installed names: ``tasks/`` is installed as
 ``skeleton_mamba.tasks`` by a package-dir mapping, and ``pytest --doctest-modules tasks/`` would import each
 file again as ``tasks.<...>``, a second copy of every module (its registries and classes distinct from the
-installed ones). The items sit under ``tests/repository/examples/<module>`` (``pytest
-tests/repository/examples`` runs them alone); the examples that write a file write it under
+installed ones). The items sit under ``tests/repository/examples/<module>`` (``pytest tests/repository
+-k "examples and not test_"`` runs them alone); the examples that write a file write it under
 :func:`tempfile.mkdtemp`, pointed here at the test's temporary folder.
 """
 
