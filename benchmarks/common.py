@@ -133,10 +133,10 @@ def operator_profile(fn: Callable[[], object], rows: int = 25) -> tuple[str, flo
     return table, gemm / max(total, 1e-9)
 
 
-def write_report(script: str, report: dict) -> Path:
-    """Write ``report`` as the JSON beside ``script`` (``bench_x.py`` -> ``bench_x.json``); print and
-    return its path."""
-    out = Path(script).with_suffix(".json")
+def write_report(script: str, report: dict, out: Path | None = None) -> Path:
+    """Write ``report`` as the JSON beside ``script`` (``bench_x.py`` -> ``bench_x.json``), or at ``out``;
+    print and return its path."""
+    out = Path(script).with_suffix(".json") if out is None else Path(out)
     out.write_text(json.dumps(report, indent=1) + "\n")
     print(f"wrote {out}")
     return out

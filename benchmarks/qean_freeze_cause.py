@@ -494,11 +494,8 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d"),
     }
     report.update(measure(args.run, songs, args.seconds))
-    if args.json and args.out is None:
-        write_report(__file__, report)
-    elif args.json:
-        args.out.write_text(json.dumps(report, indent=1) + "\n")
-        print(f"wrote {args.out}")
+    if args.json:
+        write_report(__file__, report, args.out)
 
 
 if __name__ == "__main__":

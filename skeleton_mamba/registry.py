@@ -48,6 +48,10 @@ class UnknownNameError(KeyError, ValueError):
         return str(self.args[0]) if self.args else ""
 
 
+class _EntryPoint(str):
+    """An entry point's ``"module:attribute"``, registered but not imported yet."""
+
+
 class Registry(Generic[T]):
     """A table of named objects of one kind (a sampler, a motion format).
 
@@ -62,9 +66,7 @@ class Registry(Generic[T]):
         self.kind = kind
         self.locations = tuple(locations)
         self.group = group
-        self._objects: dict[str, T] = {}
-        self._entry_points: dict[str, str] = {}  # name -> "module:attribute", not yet loaded
-        self._order: list[str] = []  # every name, in the order it was first seen
+        self._entries: dict[str, T | _EntryPoint] = {}  # in registration order; entry points until loaded
         self._filled = False
         self._lock = threading.RLock()
 
@@ -82,13 +84,15 @@ class Registry(Generic[T]):
 
         def add(obj: T) -> T:
             with self._lock:
-                taken = self._objects.get(name)
-                if taken is not None and taken is not obj and not force:
+                taken = self._entries.get(name)
+                if (
+                    taken is not None
+                    and taken is not obj
+                    and not force
+                    and not isinstance(taken, _EntryPoint)
+                ):
                     raise ValueError(f"{self.kind} {name!r} is registered already ({taken!r})")
-                self._objects[name] = obj
-                self._entry_points.pop(name, None)
-                if name not in self._order:
-                    self._order.append(name)
+                self._entries[name] = obj
             return obj
 
         return add
@@ -97,11 +101,8 @@ class Registry(Generic[T]):
         """Remove ``name`` (a ``KeyError`` when it is not registered): a test's or a notebook's own entry."""
         self._fill()
         with self._lock:
-            if name not in self._order:
+            if self._entries.pop(name, None) is None:
                 raise KeyError(f"no {self.kind} {name!r} is registered")
-            self._order.remove(name)
-            self._objects.pop(name, None)
-            self._entry_points.pop(name, None)
 
     def _fill(self) -> None:
         """Read the entry points' names and import the locations, once."""
@@ -111,9 +112,7 @@ class Registry(Generic[T]):
             self._filled = True
             if self.group is not None:
                 for point in sorted(entry_points(group=self.group), key=lambda p: p.name):
-                    if point.name not in self._objects and point.name not in self._entry_points:
-                        self._entry_points[point.name] = point.value
-                        self._order.append(point.name)
+                    self._entries.setdefault(point.name, _EntryPoint(point.value))
             for module in self.locations:
                 importlib.import_module(module)
 
@@ -121,7 +120,7 @@ class Registry(Generic[T]):
         """Every registered name, in the order each was first registered (the entry points' in name order)."""
         self._fill()
         with self._lock:
-            return tuple(self._order)
+            return tuple(self._entries)
 
     def __contains__(self, name: object) -> bool:
         return isinstance(name, str) and name in self.names()
@@ -134,16 +133,15 @@ class Registry(Generic[T]):
         """
         self._fill()
         with self._lock:
-            if name in self._objects:
-                return self._objects[name]
-            target = self._entry_points.get(name)
-            if target is None:
-                known = ", ".join(self.names()) or "none is registered"
+            entry = self._entries.get(name)
+            if entry is None:
+                known = ", ".join(self._entries) or "none is registered"
                 raise UnknownNameError(f"{self.kind} must be one of {known}, got {name!r}")
-            module, _, attribute = target.partition(":")
+            if not isinstance(entry, _EntryPoint):
+                return entry
+            module, _, attribute = entry.partition(":")
             obj = getattr(importlib.import_module(module), attribute) if attribute else None
             if obj is None:
-                raise ValueError(f"{self.kind} {name!r}: entry point {target!r} names no object")
-            self._objects[name] = obj
-            del self._entry_points[name]
+                raise ValueError(f"{self.kind} {name!r}: entry point {entry!r} names no object")
+            self._entries[name] = obj
             return obj

@@ -43,13 +43,13 @@ from skeleton_mamba.tasks.motion.render.character import CHARACTER_SUFFIXES
 from skeleton_mamba.tasks.motion.render.view import script_json, three_modules
 from skeleton_mamba.tasks.motion.retarget.rig_output import RigOutput, prepare_rig
 from skeleton_mamba.tasks.stream.export_web_args import build_parser
-from skeleton_mamba.tasks.stream.features import FPS, HOP, NUM_FEATURES, SR
+from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import StreamDancer
 from skeleton_mamba.tasks.stream.module import StreamDanceModule
 from skeleton_mamba.tasks.stream.ort_web import LICENCE_FILE, VERSION, OrtWeb, read_ort_web
 from skeleton_mamba.tasks.stream.three_vrm import LICENCE_FILE as VRM_LICENCE_FILE
 from skeleton_mamba.tasks.stream.three_vrm import ThreeVrm, read_three_vrm
-from skeleton_mamba.tasks.stream.web_graph import web_step_spec
+from skeleton_mamba.tasks.stream.web_graph import check_web_dancer, web_step_spec
 from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
 from skeleton_mamba.tasks.training.pretrained import load_module_from
 
@@ -143,12 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     rig = prepare_rig(args, [out / name for name in produced], list(SMPL24.joint_names))  # before the model
     vrm = read_three_vrm(args.three_vrm) if vrm_rig else None  # a .vrm: drawn by three-vrm
     dancer = load_module_from(StreamDanceModule, args.ckpt).model.eval()
-    if dancer.music_dim != NUM_FEATURES:  # before the onnxruntime-web tarball and the export
-        raise InputError(
-            f"--ckpt {args.ckpt}: this dancer reads {dancer.music_dim} music features (trained with the "
-            f"beat phase); the page computes the {NUM_FEATURES} without it: train with "
-            "--data.init_args.beat_phase false for the browser"
-        )
+    check_web_dancer(dancer, f"--ckpt {args.ckpt}")  # before the onnxruntime-web tarball and the export
     ort = read_ort_web(args.ort_web)  # checked before the export (a minute at the paper width)
     print("sm export-web: exporting the dancer's step with its music front end ...", flush=True)
     with writing_outputs(out, "sm export-web", produced, replaces=True):

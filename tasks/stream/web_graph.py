@@ -34,6 +34,7 @@ import onnxruntime
 import torch
 from torch import nn
 
+from skeleton_mamba.errors import InputError
 from skeleton_mamba.tasks.motion.body.smpl import smpl_forward_kinematics
 from skeleton_mamba.tasks.motion.music.jit_lock import librosa_calls
 from skeleton_mamba.tasks.stream.features import HOP, N_FFT, N_MELS, NUM_FEATURES, SR, CausalMusicFeatures
@@ -48,6 +49,7 @@ __all__ = [
     "MusicFrontEnd",
     "WebStepGraph",
     "SQUARINGS",
+    "check_web_dancer",
     "nearest_rotation_graph",
     "polar_rotation",
     "run_web_graph",
@@ -147,16 +149,24 @@ def nearest_rotation_graph(m: torch.Tensor, squarings: int = SQUARINGS) -> torch
     return torch.where(_det(m, _cofactor(m)) < 0, flipped, q)
 
 
+def check_web_dancer(dancer: StreamDancer, source: str) -> None:
+    """Refuse a dancer the web graph cannot feed: one trained with the beat phase reads more than the
+    :data:`~.features.NUM_FEATURES` music features the graph computes (an :class:`InputError` naming
+    ``source``, e.g. ``--ckpt PATH``)."""
+    if dancer.music_dim != NUM_FEATURES:
+        raise InputError(
+            f"{source}: this dancer reads {dancer.music_dim} music features (trained with the beat phase); "
+            f"the page computes the {NUM_FEATURES} without it: train with --data.init_args.beat_phase false "
+            "for the browser"
+        )
+
+
 class WebStepGraph(nn.Module):
     """:class:`MusicFrontEnd`, then the dancer's step, then the joints: one graph (module docstring)."""
 
     def __init__(self, dancer: StreamDancer):
         super().__init__()
-        if dancer.music_dim != NUM_FEATURES:
-            raise ValueError(
-                f"the web graph computes the {NUM_FEATURES} music features only; this dancer reads "
-                f"{dancer.music_dim} (trained with the beat phase, data beat_phase: true): no web export"
-            )
+        check_web_dancer(dancer, "the dancer")
         self.front_end = MusicFrontEnd()
         self.step = DancerStepGraph(dancer)
         self.smoothing = dancer.smoothing.enabled

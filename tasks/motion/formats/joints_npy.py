@@ -35,11 +35,6 @@ SKELETON_BY_JOINT_COUNT = {22: "humanml3d22", 24: "smpl24", 25: "ntu25", 18: "op
 _DEFAULT_FPS = {"humanml3d22": HUMANML3D_FPS}
 
 
-def _clip(joints: np.ndarray, skeleton: str, fps: float) -> JointsClip:
-    skel = get_skeleton(skeleton)
-    return JointsClip(joints, list(skel.parents), list(skel.joint_names), fps)
-
-
 @MOTION_FORMATS.register(".npy")
 def read_npy_joints(path: Path, request: ReadRequest) -> FileMotion:
     """joint positions (T, J, 3) or HumanML3D features (T, 263) in a ``.npy``"""
@@ -48,7 +43,7 @@ def read_npy_joints(path: Path, request: ReadRequest) -> FileMotion:
         features = torch.from_numpy(check_features(joints, path).astype(np.float64))
         joints = recover_from_ric(features).numpy()
         joints = check_finite(joints, f"{path} (joints recovered)", "joints", ("frame", "joint"))
-        return FileMotion(_clip(joints, "humanml3d22", request.motion_fps or HUMANML3D_FPS))
+        return FileMotion(JointsClip.of_skeleton(joints, "humanml3d22", request.motion_fps or HUMANML3D_FPS))
     if joints.ndim != 3 or joints.shape[2] != 3:
         raise ValueError(
             f"{path}: expected joint positions (T, J, 3) or HumanML3D features (T, {FEATURE_DIM}), "
@@ -65,4 +60,4 @@ def read_npy_joints(path: Path, request: ReadRequest) -> FileMotion:
     fps = request.motion_fps or _DEFAULT_FPS.get(skel.name, 30.0)
     joints = check_finite(joints.astype(np.float64), str(path), "joints", ("frame", "joint"))
     check_magnitude(joints, MAX_POSITION_M, str(path), "joints", ("frame", "joint"), unit=" m")
-    return FileMotion(_clip(joints, name, fps))
+    return FileMotion(JointsClip.of_skeleton(joints, name, fps))

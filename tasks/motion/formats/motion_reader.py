@@ -19,7 +19,6 @@ from dataclasses import replace
 from os import PathLike
 from pathlib import Path
 
-from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.formats.gltf import (
     SkeletonMotion,
     check_skeleton_motion,
@@ -128,11 +127,6 @@ def load_joints(
         return JointsClip(motion.joint_positions(), motion.parents, motion.names, motion.fps, motion.scale)
     clip = found.motion
     if isinstance(clip, MotionData):
-        clip = JointsClip(clip.joint_positions(), *_tree(clip.skeleton), motion_fps or clip.fps)
+        clip = JointsClip.of_skeleton(clip.joint_positions(), clip.skeleton, clip.fps)
     unit = choose_scale(units, scale, found.figure_height)
     return replace(clip, joints=clip.joints * unit.metres_per_unit, fps=motion_fps or clip.fps, scale=unit)
-
-
-def _tree(skeleton: str) -> tuple[list[int], list[str]]:
-    skel = get_skeleton(skeleton)
-    return list(skel.parents), list(skel.joint_names)

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Union
 import numpy as np
 
 from skeleton_mamba.registry import Registry
+from skeleton_mamba.skeletons import get_skeleton
 from skeleton_mamba.tasks.motion.formats.units import METRES, UnitScale
 
 if TYPE_CHECKING:
@@ -54,6 +55,13 @@ class JointsClip:
     names: list[str]
     fps: float
     scale: UnitScale = METRES
+
+    @classmethod
+    def of_skeleton(cls, joints: np.ndarray, skeleton: str, fps: float) -> JointsClip:
+        """Joints (T, J, 3) of the named skeleton (:func:`~skeleton_mamba.skeletons.get_skeleton`): its
+        parents and joint names."""
+        skel = get_skeleton(skeleton)
+        return cls(joints, list(skel.parents), list(skel.joint_names), fps)
 
 
 @dataclass(frozen=True)
@@ -96,18 +104,10 @@ class _FormatRegistry(Registry[MotionFormat]):
         add = super().register(name, force=force)
 
         def wrap(read: Callable[[Path, ReadRequest], FileMotion]) -> Callable:
-            summary = (read.__doc__ or name).strip().splitlines()[0]
-            taken = self._objects.get(name)
-            again = taken is not None and _same_function(taken.read, read)  # its module imported again
-            register = super(_FormatRegistry, self).register(name, force=True) if again else add
-            register(MotionFormat(read, summary))
+            add(MotionFormat(read, (read.__doc__ or name).strip().splitlines()[0]))
             return read
 
         return wrap
-
-
-def _same_function(a: Callable, b: Callable) -> bool:
-    return (a.__module__, a.__qualname__) == (b.__module__, b.__qualname__)
 
 
 MOTION_FORMATS: Registry[MotionFormat] = _FormatRegistry("motion file type", locations=FORMAT_MODULES)
