@@ -8,12 +8,15 @@ from skeleton_mamba.tasks.motion.commands.cli_options import command_parser
 from skeleton_mamba.tasks.motion.io.output_folder import OVERWRITE_HELP
 from skeleton_mamba.tasks.motion.retarget.rig_output import add_rig_arguments
 
-__all__ = ["build_parser"]
+__all__ = ["QUANTIZE_CHOICES", "build_parser"]
+
+QUANTIZE_CHOICES = ("none", "int8", "int4")  # sm export-web --quantize (tasks/stream/web_quantize.py)
 
 EXAMPLES = """examples:
   sm export-web --ckpt runs/stream_dance_demo/version_0/checkpoints/last.ckpt --out site/
   sm export-web --ckpt my-dancer/ --out site/ --ort-web onnxruntime-web-1.31.1.tgz   # no npm, no network
   sm export-web --ckpt my-dancer/ --out site/ --rig avatar.vrm    # your character dances in the page
+  sm export-web --ckpt my-dancer/ --out site/ --quantize int8     # int8 weights: a smaller, faster page
   python -m http.server -d site/     # or open site/index.html from disk"""
 
 
@@ -44,6 +47,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="with a VRM --rig: the npm tarball pixiv-three-vrm-3.5.5.tgz (default: the cache; npm pack "
         "fetches it)",
+    )
+    p.add_argument(
+        "--quantize",
+        choices=QUANTIZE_CHOICES,
+        default="none",
+        help="the graph's Linear weights, quantized by onnxruntime's tools after the float32 export: int8 "
+        "(per channel), int4 (blocks of 32); the page names its precision (default: none, float32)",
     )
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p

@@ -50,10 +50,11 @@ from skeleton_mamba.tasks.stream.ort_web import LICENCE_FILE, VERSION, OrtWeb, r
 from skeleton_mamba.tasks.stream.three_vrm import LICENCE_FILE as VRM_LICENCE_FILE
 from skeleton_mamba.tasks.stream.three_vrm import ThreeVrm, read_three_vrm
 from skeleton_mamba.tasks.stream.web_graph import check_web_dancer, web_step_spec
+from skeleton_mamba.tasks.stream.web_quantize import PRECISIONS, quantization_tools, quantize_web_graph
 from skeleton_mamba.tasks.training.onnx_export import export_onnx, max_difference_from_eager
 from skeleton_mamba.tasks.training.pretrained import load_module_from
 
-__all__ = ["PAGE", "THREE_LICENCE", "avatar_plan", "export_web_graph", "main", "write_web_page"]
+__all__ = ["PAGE", "THREE_LICENCE", "avatar_plan", "export_web_graph", "main", "write_page", "write_web_page"]
 
 PAGE = "index.html"
 THREE_LICENCE = "LICENSE-three.txt"
@@ -90,20 +91,36 @@ def avatar_plan(rig: RigOutput) -> dict:
 
 def write_web_page(
     dancer: StreamDancer, out: str | Path, ort: OrtWeb, title: str, rig: RigOutput | None = None,
-    vrm: ThreeVrm | None = None,
+    vrm: ThreeVrm | None = None, quantize: str = "none",
 ) -> tuple[Path, float]:  # fmt: skip
     """Export ``dancer`` and write the page into the (claimed) folder ``out``; the page's path and the
-    graph's onnxruntime-vs-eager difference. ``rig``: the character the page's dancer drives (its file
-    embedded, and the plan of :func:`~skeleton_mamba.tasks.motion.retarget.live.live_plan`); ``vrm``:
-    three-vrm, for a VRM character (its licence written beside the page)."""
-    out = Path(out)
+    float32 graph's onnxruntime-vs-eager difference. ``quantize``: the graph's weights
+    (:func:`~skeleton_mamba.tasks.stream.web_quantize.quantize_web_graph`: ``none``, ``int8``, ``int4``);
+    the rest as :func:`write_page`."""
     with tempfile.TemporaryDirectory() as tmp:
         graph = Path(tmp) / "dancer.onnx"
         shapes, diff = export_web_graph(dancer, graph)
-        model = graph.read_bytes()
+        if quantize != "none":
+            graph = quantize_web_graph(graph, Path(tmp) / f"dancer.{quantize}.onnx", quantize)
+        return write_page(graph, shapes, out, ort, title, rig, vrm, quantize), diff
+
+
+def write_page(
+    graph: Path, shapes: dict[str, list[int]], out: str | Path, ort: OrtWeb, title: str,
+    rig: RigOutput | None = None, vrm: ThreeVrm | None = None, quantize: str = "none",
+) -> Path:  # fmt: skip
+    """Write the page of the web graph at ``graph`` (its input shapes but the audio: ``shapes``, as
+    :func:`export_web_graph` returns them) into the (claimed) folder ``out``; the page's path. ``rig``: the
+    character the page's dancer drives (its file embedded, and the plan of
+    :func:`~skeleton_mamba.tasks.motion.retarget.live.live_plan`); ``vrm``: three-vrm, for a VRM character
+    (its licence written beside the page); ``quantize``: how ``graph``'s weights were quantized, named by
+    the page (``quantize`` and ``precision`` in its data; the precision on screen beside onnxruntime-web's
+    version)."""
+    out = Path(out)
+    model = Path(graph).read_bytes()
     viewer, web = files("skeleton_mamba.tasks.motion.render.viewer"), files("skeleton_mamba.tasks.stream.web")
     data = {"title": title, "sr": SR, "hop": HOP, "fps": FPS, "parents": list(SMPL24.parents),
-            "inputs": shapes, "ort_version": VERSION,
+            "inputs": shapes, "ort_version": VERSION, "quantize": quantize, "precision": PRECISIONS[quantize],
             "avatar": None if rig is None else {**avatar_plan(rig), "vrm": vrm is not None}}  # fmt: skip
     fields = {
         "__TITLE__": html.escape(title),
@@ -128,7 +145,7 @@ def write_web_page(
     if vrm is not None:
         with atomic_open(out / VRM_LICENCE_FILE, "w", encoding="utf-8") as f:
             f.write(vrm.licence)
-    return out / PAGE, diff
+    return out / PAGE
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -144,11 +161,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     vrm = read_three_vrm(args.three_vrm) if vrm_rig else None  # a .vrm: drawn by three-vrm
     dancer = load_module_from(StreamDanceModule, args.ckpt).model.eval()
     check_web_dancer(dancer, f"--ckpt {args.ckpt}")  # before the onnxruntime-web tarball and the export
+    if args.quantize != "none":
+        quantization_tools(args.ckpt)  # before the export, as the tarball
     ort = read_ort_web(args.ort_web)  # checked before the export (a minute at the paper width)
     print("sm export-web: exporting the dancer's step with its music front end ...", flush=True)
     with writing_outputs(out, "sm export-web", produced, replaces=True):
         title = f"Skeleton Mamba dancer: {Path(args.ckpt).name}"
-        page, diff = write_web_page(dancer, out, ort, title, rig, vrm)
-    print(f"sm export-web: wrote {page} ({page.stat().st_size / 1e6:.1f} MB; onnxruntime vs eager max |diff| "
-          f"{diff:.1e}); open it from disk or serve {out} (python -m http.server -d {out})")  # fmt: skip
+        page, diff = write_web_page(dancer, out, ort, title, rig, vrm, args.quantize)
+    print(f"sm export-web: wrote {page} ({page.stat().st_size / 1e6:.1f} MB, {PRECISIONS[args.quantize]}; "
+          f"fp32 graph: onnxruntime vs eager max |diff| {diff:.1e}); open it from disk or serve {out} "
+          f"(python -m http.server -d {out})")  # fmt: skip
     return 0

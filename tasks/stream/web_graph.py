@@ -222,18 +222,30 @@ def web_step_spec(dancer: StreamDancer) -> ExportSpec:
     )  # fmt: skip
 
 
-def run_web_graph(path: str, dancer: StreamDancer, audio: np.ndarray) -> dict[str, np.ndarray]:
+def run_web_graph(
+    path: str, dancer: StreamDancer, audio: np.ndarray, beside: str | None = None
+) -> dict[str, np.ndarray]:
     """Step the web graph at ``path`` with onnxruntime over mono ``audio`` at SR, as the page does:
     one call per complete hop, each output state fed back. Returns (T, ...) ``pose``, ``joints``,
-    ``features``."""
+    ``features``; with ``beside`` (another web graph of ``dancer``, e.g. quantized), also that graph's
+    ``beside_joints`` (T, 24, 3), each frame stepped from ``path``'s state of that frame (one step apart)."""
     session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    other = (
+        None
+        if beside is None
+        else onnxruntime.InferenceSession(str(beside), providers=["CPUExecutionProvider"])
+    )
     feeds = {k: v.numpy() for k, v in web_zero_inputs(dancer).items()}
     names = [o.name for o in session.get_outputs()]
     out: dict[str, list[np.ndarray]] = {"pose": [], "joints": [], "features": []}
+    if other is not None:
+        out["beside_joints"] = []
     audio = np.asarray(audio, dtype=np.float32).reshape(-1)
     for t in range(len(audio) // HOP):
         feeds["audio"] = audio[None, t * HOP : (t + 1) * HOP]
         result = dict(zip(names, session.run(None, feeds)))
+        if other is not None:
+            result["beside_joints"] = other.run(["joints"], feeds)[0]
         for key in out:
             out[key].append(result[key][0])
         feeds["prev"], feeds["started"] = result["pose"], np.ones((), np.float32)

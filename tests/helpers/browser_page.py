@@ -37,6 +37,11 @@ class PageCrashed(AssertionError):
     """The page's renderer died (crashed, or Chromium terminated it): nothing it would answer comes."""
 
 
+class NoDocument(AssertionError):
+    """No document to evaluate in yet: the page is between documents (a cross-origin isolated page loads in
+    a new renderer process; a page of tens of megabytes takes seconds to arrive)."""
+
+
 class Page:
     """A page of a headless Chromium; ``flags``: more command-line switches. ``errors`` collects console
     errors and exceptions, ``requests`` the URL of every request the page made. A call raises
@@ -101,6 +106,8 @@ class Page:
             elif message.get("method") == "Inspector.targetCrashed":
                 raise PageCrashed(f"the page's renderer died during {method} ({self.errors})")
             if message.get("id") == self.next_id:
+                if "Cannot find default execution context" in message.get("error", {}).get("message", ""):
+                    raise NoDocument(message)
                 assert "error" not in message, message
                 return message["result"]
 
@@ -133,7 +140,12 @@ class Page:
     def wait_for(self, expression: str, timeout: float = 60.0, what: str | None = None) -> None:
         """Poll until the JavaScript ``expression`` is truthy (fails after ``timeout`` seconds)."""
         deadline = time.time() + timeout
-        while not self.js(expression):
+        while True:
+            try:
+                if self.js(expression):
+                    return
+            except NoDocument:  # not yet loaded: as not yet true
+                pass
             assert time.time() < deadline, f"{what or expression}: not in {timeout:g} s ({self.errors})"
             time.sleep(0.1)
 

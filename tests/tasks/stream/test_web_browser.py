@@ -1,15 +1,17 @@
 """``sm export-web``'s page in a real headless Chromium, driven over CDP (:mod:`browser_page`).
 
-Fast: the page opens from disk, makes no request but its own file (and the data URLs inside it), logs
-no error, says before any music what it waits for (no NaN on it, the dancer standing in its first pose,
-not a lone ball), and onnxruntime-web's wasm steps give the poses that onnxruntime in Python gives for the
-same audio; a picked file of every format the file picker offers (WAV 16/24-bit/float, 8 to 96 kHz, mono
-and stereo, FLAC, MP3, Ogg Opus and Vorbis: a few seconds each, written by soundfile, else ffmpeg, else
-skipped) dances within seconds, the page saying 'decoding' first and answering throughout; a file the
-browser cannot decode is said so, and the page goes on. Slow (``-m slow``): a music file picked in the
-page dances as it plays, and its poses, read back, equal ``sm stream``'s on the same WAV within 1 mm; the
-microphone (Chromium's fake device playing the WAV) dances too. ``SM_WRITE_WEB_PNG=CKPT`` exports CKPT
-(e.g. the stream demo's) for the file test and writes the screenshot mid-dance to ``docs/web_dancer.png``.
+Fast: the page opens from disk, makes no request but its own file (and the data URLs inside it), logs no
+error, says before any music what it waits for (no NaN on it, the dancer standing in its first pose, not a
+lone ball), and onnxruntime-web's wasm steps give the poses that onnxruntime in Python gives for the same
+audio (a page of int8 weights, ``--quantize int8``, names its precision and gives the poses of its int8
+graph in onnxruntime); a picked file of every format the file picker offers (WAV 16/24-bit/float, 8 to 96
+kHz, mono and stereo, FLAC, MP3, Ogg Opus and Vorbis: a few seconds each, written by soundfile, else
+ffmpeg, else skipped) dances within seconds, the page saying 'decoding' first and answering throughout; a
+file the browser cannot decode is said so, and the page goes on. Slow (``-m slow``): a music file picked
+in the page dances as it plays, and its poses, read back, equal ``sm stream``'s on the same WAV within 1
+mm; the microphone (Chromium's fake device playing the WAV) dances too. ``SM_WRITE_WEB_PNG=CKPT`` exports
+CKPT (e.g. the stream demo's) for the file test and writes the screenshot mid-dance to
+``docs/web_dancer.png``.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from skeleton_mamba.tasks.stream.features import HOP, SR, music_features
 from skeleton_mamba.tasks.stream.model import tokens_to_motion
 from skeleton_mamba.tasks.stream.web_export import export_web_graph
 from skeleton_mamba.tasks.stream.web_graph import run_web_graph
+from skeleton_mamba.tasks.stream.web_quantize import PRECISIONS, quantize_web_graph
 from skeleton_mamba.tasks.training.cli import main as sm
 from tests.helpers.browser_page import READY, Page, browser_or_skip, only_local, ort_web_or_skip
 from tests.helpers.checkpoint_files import tiny_stream_checkpoint
@@ -105,6 +108,37 @@ def test_page_opens_from_disk_and_steps_like_onnxruntime(site, tmp_path):
     graph = tmp_path / "dancer.onnx"
     export_web_graph(dancer, graph)
     expected = run_web_graph(graph, dancer, audio[: frames * HOP])["pose"]
+    np.testing.assert_allclose(np.asarray(poses).reshape(expected.shape), expected, atol=1e-4)
+
+
+def test_a_quantized_page_names_its_precision_and_steps_like_onnxruntime(site, tmp_path):
+    """``sm export-web --quantize int8``: the page says it runs int8 weights, and its wasm steps (integer
+    products) give the poses of the same int8 graph in onnxruntime's Python CPU provider."""
+    _, ckpt, dancer, _, audio = site
+    if dancer is None:
+        pytest.skip("SM_WRITE_WEB_PNG is set: the page holds that checkpoint")
+    out = tmp_path / "site"
+    assert sm(["export-web", "--ckpt", str(ckpt), "--out", str(out), "--quantize", "int8"]) == 0
+    p = Page((out / "index.html").as_uri(), tmp_path)
+    try:
+        p.wait_for(READY, 120, "the page's start")
+        p.wait_for("document.getElementById('info').textContent.includes('status:')", 10, "the status line")
+        info = p.js("document.getElementById('info').textContent")
+        assert PRECISIONS["int8"] in info and p.js("window.smDance.precision") == PRECISIONS["int8"], info
+        frames = 30
+        samples = audio[: frames * HOP].tolist()
+        poses = p.js(
+            f"(async () => {{ const x = {samples}; for (let t = 0; t < {frames}; t++) "
+            f"await window.smDance.step(x.slice(t * {HOP}, (t + 1) * {HOP})); "
+            "return window.smDance.poses; })()"
+        )
+        assert not p.errors, p.errors
+    finally:
+        p.close()
+    graph = tmp_path / "dancer.onnx"
+    export_web_graph(dancer, graph)
+    quantized = quantize_web_graph(graph, tmp_path / "dancer.int8.onnx", "int8")
+    expected = run_web_graph(quantized, dancer, audio[: frames * HOP])["pose"]
     np.testing.assert_allclose(np.asarray(poses).reshape(expected.shape), expected, atol=1e-4)
 
 
