@@ -89,16 +89,8 @@ def _egodance(summary: dict) -> dict:
     return row
 
 
-def _qean(summary: dict) -> dict:
-    protocol = summary["protocol"]
-    return {
-        "dance": _dance(summary["scores"], DYNAMICS),
-        "protocol": {k: protocol[k] for k in ("FID_k", "Dist_k", "BeatAlign") if k in protocol},
-        "baselines": {"random_clip": summary["scores"]["random_clip"]},
-    }
-
-
-def _stream(summary: dict) -> dict:
+def _dancer(summary: dict) -> dict:
+    """The live dancer's and QEAN's common row: dynamics, the random clip, the beat margin when printed."""
     row = {
         "dance": _dance(summary["scores"], DYNAMICS),
         "baselines": {"random_clip": summary["scores"]["random_clip"]},
@@ -106,6 +98,14 @@ def _stream(summary: dict) -> dict:
     if "conditioning" in summary:  # the beat margin over chance on the held-out music, beside the truth's
         row["conditioning"] = {k: summary["conditioning"][k] for k in ("margin", "truth_margin")}
     return row
+
+
+def _qean(summary: dict) -> dict:
+    protocol = summary["protocol"]
+    return {
+        **_dancer(summary),
+        "protocol": {k: protocol[k] for k in ("FID_k", "Dist_k", "BeatAlign") if k in protocol},
+    }
 
 
 def _text2motion(summary: dict) -> dict:
@@ -124,7 +124,7 @@ def _text2motion(summary: dict) -> dict:
 ROWS: dict[str, Callable[[dict], dict]] = {
     "egodance": _egodance,
     "qean": _qean,
-    "stream": _stream,
+    "stream": _dancer,
     "text2motion": _text2motion,
 }
 
@@ -300,18 +300,24 @@ def _dynamics_rows(results: dict, demo: str, extra: Callable[[dict], list[str]])
     ]
 
 
+def _margin(r: dict) -> list[str]:
+    """The beat margin over chance column: the dance's, the truth's in brackets."""
+    c = r.get("conditioning")
+    return [f"{c['margin']:+.3f} ({c['truth_margin']:+.3f})" if c else ""]
+
+
 def qean_seeds(results: dict) -> str:
     header = ["seed", "amplitude ratio", "jitter ratio", "energy above 6 Hz", "FID_k", "Dist_k", "BeatAlign",
-              "targets"]  # fmt: skip
+              "beat margin over chance (truth)", "targets"]  # fmt: skip
 
     def protocol(r: dict) -> list[str]:
         p = r["protocol"]
-        return [_f(p["FID_k"], 1), _f(p["Dist_k"], 2), _f(p["BeatAlign"])]
+        return [_f(p["FID_k"], 1), _f(p["Dist_k"], 2), _f(p["BeatAlign"]), *_margin(r)]
 
     rows = _dynamics_rows(results, "qean", protocol)
     clip = _first(results, "qean")["baselines"]["random_clip"]
-    rows.append(["random training clip", *(_f(clip[k]) for k in DYNAMICS), "", "", "", ""])
-    rows.append(["target", ">= 0.7", "<= 1.5", "0.5 to 2", "", "", "", ""])
+    rows.append(["random training clip", *(_f(clip[k]) for k in DYNAMICS), "", "", "", "", ""])
+    rows.append(["target", ">= 0.7", "<= 1.5", "0.5 to 2", "", "", "", ">= half the truth's", ""])
     return _table(header, rows)
 
 
@@ -319,11 +325,7 @@ def stream_seeds(results: dict) -> str:
     header = ["seed", "amplitude ratio", "jitter ratio", "energy above 6 Hz",
               "beat margin over chance (truth)", "targets"]  # fmt: skip
 
-    def margin(r: dict) -> list[str]:
-        c = r.get("conditioning")
-        return [f"{c['margin']:+.3f} ({c['truth_margin']:+.3f})" if c else ""]
-
-    rows = _dynamics_rows(results, "stream", margin)
+    rows = _dynamics_rows(results, "stream", _margin)
     clip = _first(results, "stream")["baselines"]["random_clip"]
     rows.append(["random training clip", *(_f(clip[k]) for k in DYNAMICS), "", ""])
     rows.append(["target", ">= 0.7", "<= 1.5", "0.5 to 2", ">= half the truth's", ""])

@@ -13,6 +13,9 @@ It prints and writes into ``<log dir>/demo/``:
 - the held-out dynamics of the generated frames (after the seed) beside their ground truth, the training
   mean pose and a random training sequence (:mod:`~skeleton_mamba.tasks.motion.metrics.held_out_dynamics`),
   with ``checks`` against the targets;
+- ``conditioning``: the generated frames' beat margin over chance on the music's beats (the beat column of
+  its FACT features: librosa's tracker) beside the ground truth's over the same frames
+  (:mod:`~skeleton_mamba.tasks.motion.metrics.beat_conditioning`; target: at least half the truth's);
 - ``synthetic_<sequence>_dance.{npz,bvh,glb,mp4,wav}``: the first ``num_samples`` dances (seed, then the
   generation) and ``synthetic_<sequence>_reference.*``: their ground truth over the same frames;
 - ``demo.json``: what was done, with ``"synthetic": true``, the protocol figures, the dynamics and checks;
@@ -23,14 +26,17 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
 from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_joints
+from skeleton_mamba.tasks.motion.metrics.beat_conditioning import conditioning_scores, format_conditioning
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,
     held_out_dynamics_checks,
 )
+from skeleton_mamba.tasks.motion.music.features import BEAT
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
 from skeleton_mamba.tasks.qean.module import features_to_motion
 from skeleton_mamba.tasks.training.demo_callback import DemoCallback, write_summary
@@ -85,13 +91,14 @@ class QEANDemo(DemoCallback):
         truths = [data.sequence(name)[0][:length] for name in names]  # (<= 120 + G, 219)
         train_motions = data.datasets["train"].sequences.values()
         train = [features_to_joints(motion.double()) for motion, _ in train_motions]
-        scores = held_out_dynamics(
-            [j[seed_frames:] for j in joints],
-            [features_to_joints(t[seed_frames:].double()) for t in truths],
-            train,
-            FPS,
-        )
+        dances = [j[seed_frames:] for j in joints]  # the generated frames, after the seed
+        truth_joints = [features_to_joints(t[seed_frames:].double()) for t in truths]
+        scores = held_out_dynamics(dances, truth_joints, train, FPS)
         checks = held_out_dynamics_checks(scores)
+        beats = [  # the music's beats from the first generated frame on
+            np.flatnonzero(data.sequence(name)[1][seed_frames:length, BEAT].numpy() > 0.5) for name in names
+        ]
+        conditioning = conditioning_scores(dances, truth_joints, beats, FPS)
         out = self.out_dir(trainer)
         records = []
         for name, dance, truth in list(zip(names, generated, truths, strict=True))[: self.num_samples]:
@@ -120,6 +127,7 @@ class QEANDemo(DemoCallback):
             },
             "scores": {"held_out_sequences": len(names), "training_sequences": len(train), **scores},
             "checks": checks,
+            "conditioning": conditioning,
         }
         view = write_summary(out, summary)
         lines = [
@@ -134,6 +142,7 @@ class QEANDemo(DemoCallback):
             f"held-out sequences after {trainer.global_step} steps (baselines from the {len(train)} "
             "training sequences):",
             format_dynamics(scores, checks),
+            format_conditioning(conditioning),
         ]
         if view is not None:
             lines.append(f"[qean demo] viewer: {view}")

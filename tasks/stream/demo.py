@@ -11,8 +11,10 @@ frame, fed its own previous pose (no teacher forcing, no look-ahead). It writes 
 - ``demo.json``: what was done, with ``"synthetic": true``, and ``scores``: motion amplitude and jitter of
   every scored dance as ratios to its ground truth's, beside the ground truth, the training mean pose and a
   random training sequence (:mod:`~skeleton_mamba.tasks.motion.metrics.held_out_dynamics`), with
-  ``checks`` against the targets; ``conditioning``: the dances' beat margin over chance on their music beside
-  their ground truth's (:mod:`.conditioning`; target: at least half the truth's). The same is printed;
+  ``checks`` against the targets; ``conditioning``: the dances' beat margin over chance on their music's
+  tracked beats beside their ground truth's
+  (:mod:`~skeleton_mamba.tasks.motion.metrics.beat_conditioning`; target: at least half the truth's). The
+  same is printed;
 - ``view.html``: the first dance beside its ground truth, with the music, in a browser
   (:mod:`~skeleton_mamba.tasks.motion.render.view`; its path is printed).
 
@@ -29,6 +31,7 @@ from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.formats.aistpp import music_id
 from skeleton_mamba.tasks.motion.formats.fact_features import features_to_joints
+from skeleton_mamba.tasks.motion.metrics.beat_conditioning import conditioning_scores, format_conditioning
 from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     format_dynamics,
     held_out_dynamics,
@@ -36,7 +39,7 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
 )
 from skeleton_mamba.tasks.motion.music.features import load_audio
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
-from skeleton_mamba.tasks.stream.conditioning import conditioning_scores, format_conditioning
+from skeleton_mamba.tasks.motion.synthetic.recorded_music_set import tracked_beats
 from skeleton_mamba.tasks.stream.features import FPS, HOP, SR
 from skeleton_mamba.tasks.stream.model import (
     POSE_CHANNELS,
@@ -137,7 +140,8 @@ class StreamDanceDemo(DemoCallback):
         train = [_joints(motion) for motion, _ in datasets["train"].sequences.values()]
         scores = held_out_dynamics(dances[:scored], truths[:scored], train, FPS)
         checks = held_out_dynamics_checks(scores)
-        conditioning = conditioning_scores(dances[:scored], truths[:scored], audios[:scored])
+        beats = [tracked_beats(audio) for audio in audios[:scored]]  # librosa's, at 30 fps
+        conditioning = conditioning_scores(dances[:scored], truths[:scored], beats, FPS)
         label = getattr(trainer.datamodule, "label", LABEL)
         summary = {
             "synthetic": True,

@@ -52,3 +52,35 @@ def test_fewer_than_two_beats_have_no_chance():
     assert score == pytest.approx(sequence_beat_align(_swing(120, 2.0), [23], "fact", 60.0)) and math.isnan(
         chance
     )
+
+
+def test_conditioning_scores_are_each_dances_margin_beside_its_truths_on_the_same_beats():
+    from skeleton_mamba.tasks.motion.metrics.beat_conditioning import (
+        TARGET_FRACTION,
+        conditioning_scores,
+        format_conditioning,
+    )
+
+    truth = _swing(240, 2.0)  # stops every 15 frames, on beats 8, 23, ...
+    late = np.roll(truth, 7, axis=0)  # half a beat late: below chance
+    short = truth[:200]  # the dance ends before the truth: both are scored on their first 200 frames
+    beats = np.arange(8, 240, 15)
+    scores = conditioning_scores([truth, late, short], [truth, truth, truth], [beats] * 3, 60.0)
+
+    def margin(motion: np.ndarray, frames: np.ndarray) -> float:
+        score, chance = beat_align_over_chance(motion, frames, "bailando", 60.0)
+        return score - chance
+
+    expected = [margin(truth, beats), margin(late, beats), margin(short, beats[beats < 200])]
+    assert scores["per_sequence"] == pytest.approx(expected)
+    assert scores["truth_per_sequence"] == pytest.approx(
+        [margin(truth, beats), margin(truth, beats), margin(truth[:200], beats[beats < 200])]
+    )
+    assert expected[1] < 0 < expected[0]
+    assert scores["margin"] == pytest.approx(np.mean(expected))
+    assert scores["reached"] is bool(scores["margin"] >= TARGET_FRACTION * scores["truth_margin"])
+    assert conditioning_scores([truth], [truth], [beats], 60.0)["reached"] is True
+    assert conditioning_scores([late], [truth], [beats], 60.0)["reached"] is False
+    text = format_conditioning(conditioning_scores([late], [truth], [beats], 60.0))
+    assert f"dance {margin(late, beats):+.3f}, ground truth {margin(truth, beats):+.3f}" in text
+    assert "NOT reached: beat margin over chance >= 0.5 x the ground truth's" in text

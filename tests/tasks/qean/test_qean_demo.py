@@ -17,13 +17,15 @@ import yaml
 
 from skeleton_mamba.tasks.motion.formats.fact_features import features_to_joints
 from skeleton_mamba.tasks.motion.formats.motion_file import load_motion
+from skeleton_mamba.tasks.motion.metrics.beat_conditioning import margin_over_chance
+from skeleton_mamba.tasks.motion.music.features import BEAT
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule
 from skeleton_mamba.tasks.qean.model import QEANConfig
 from skeleton_mamba.tasks.qean.module import QEANModule
 from skeleton_mamba.tasks.training.cli import main as sm_main
 from skeleton_mamba.tasks.training.recipe_resolution import packaged_recipes
 
-LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 30}
+LENGTHS = {"seed_frames": 12, "music_frames": 24, "predict_frames": 4, "generate_frames": 72}
 TINY = [
     "--trainer.max_steps=3", "--trainer.enable_progress_bar=false", "--data.init_args.synthetic_count=4",
     "--data.init_args.synthetic_held_out=2", "--data.init_args.synthetic_duration_s=1.5",
@@ -38,7 +40,7 @@ def _recipe() -> dict:
     return yaml.safe_load(Path(packaged_recipes()["qean_demo.yaml"]).read_text(encoding="utf-8"))
 
 
-@pytest.mark.slow  # about 30 s of CPU (a 3-dance set, 3 steps, 30 generated frames, rendering off)
+@pytest.mark.slow  # about 30 s of CPU (a 4-dance set, 3 steps, 72 generated frames, rendering off)
 def test_qean_demo_runs_end_to_end_and_writes_its_files(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     callbacks = [
@@ -56,7 +58,7 @@ def test_qean_demo_runs_end_to_end_and_writes_its_files(tmp_path, monkeypatch, c
     folder = Path("runs/qean_demo/version_0/demo")
     demo = json.loads((folder / "demo.json").read_text())
     assert demo["synthetic"] is True and "SYNTHETIC" in demo["label"] and demo["global_step"] == 3
-    assert demo["frames"] == {"seed": 12, "music": 24, "predict": 4, "generate": 30}
+    assert demo["frames"] == {"seed": 12, "music": 24, "predict": 4, "generate": 72}
     protocol = demo["protocol"]
     assert protocol["comparable_with_paper"] is False and protocol["sequences"] == 2
     assert {"FID_k", "FID_g", "Dist_k", "Dist_g", "BeatAlign"} <= set(protocol)
@@ -75,7 +77,7 @@ def test_qean_demo_runs_end_to_end_and_writes_its_files(tmp_path, monkeypatch, c
     (sample,) = demo["samples"]
     assert sample["sequence"] == held_out[0]
     dance, reference = (load_motion(sample[k]["npz"]) for k in ("dance", "reference"))
-    assert dance.num_frames == reference.num_frames == 12 + 30
+    assert dance.num_frames == reference.num_frames == 12 + 72
     # the dance starts from the held-out sequence's own seed: its first 12 frames are the truth's
     np.testing.assert_allclose(dance.joints[:12], reference.joints[:12], atol=1e-5)
     assert not np.allclose(dance.joints[12:], reference.joints[12:], atol=1e-3)
@@ -83,13 +85,24 @@ def test_qean_demo_runs_end_to_end_and_writes_its_files(tmp_path, monkeypatch, c
     assert all(Path(p).stat().st_size > 0 for p in sample["dance"].values())
     # the reference is the truth: the held-out sequence's joints from the data module's own reader
     data = AISTPPDanceDataModule(root=str(root), synthetic=True, **LENGTHS)
-    truth = features_to_joints(data.sequence(held_out[0])[0][:42].double()).numpy()
+    truth = features_to_joints(data.sequence(held_out[0])[0][:84].double()).numpy()
     np.testing.assert_allclose(reference.joints, truth, atol=1e-4)
     out = capsys.readouterr().out
     assert "NOT COMPARABLE with [QEAN] Table 1: synthetic data in the AIST++ layout" in out
     assert f"{'BeatAlign':<10} {protocol['BeatAlign']:>10.3f}" in out
     for check, ok in demo["checks"].items():
         assert f"{'reached' if ok else 'NOT reached'}: {check}" in out
+    # the conditioning: the generated frames' beat margin over chance beside the truth's, on the music's beats
+    conditioning = demo["conditioning"]
+    truths = [features_to_joints(data.sequence(n)[0][12:84].double()).numpy() for n in held_out]
+    beats = [np.flatnonzero(data.sequence(n)[1][12:84, BEAT].numpy() > 0.5) for n in held_out]
+    expected = [margin_over_chance(t, b, 60.0) for t, b in zip(truths, beats)]
+    assert conditioning["truth_per_sequence"] == pytest.approx(expected, abs=1e-6, nan_ok=True)
+    assert any(math.isfinite(m) for m in expected)  # a sequence with fewer than 2 beats has no chance: NaN
+    assert conditioning["margin"] == pytest.approx(np.nanmean(conditioning["per_sequence"]))
+    assert f"dance {conditioning['margin']:+.3f}, ground truth {conditioning['truth_margin']:+.3f}" in out
+    verdict = "reached" if conditioning["reached"] else "NOT reached"
+    assert f"{verdict}: beat margin over chance >= 0.5 x the ground truth's" in out
     page = (folder / "view.html").read_text()
     assert f"viewer: {folder / 'view.html'}" in out and "dance" in page and "reference" in page
 
