@@ -5,6 +5,7 @@
     python benchmarks/bench_stream.py --json --compile     # + the step compiled with torch.compile
     python benchmarks/bench_stream.py --json --onnx        # + the dancer's step in onnxruntime (CPU)
     python benchmarks/bench_stream.py --json --bf16        # + the step under bf16 autocast beside fp32
+    python benchmarks/bench_stream.py --json --int8        # + the step with int8 Linear layers beside fp32
 
 For each backbone width (``paper``: recipes/backbones/skeleton_mamba.yaml; ``tiny``:
 skeleton_mamba_tiny.yaml) the causal dance network (:class:`StreamDancer`, SMPL-24, random weights)
@@ -30,6 +31,8 @@ runs in a fresh subprocess with ``--threads`` torch threads under ``torch.infere
 - ``bf16`` (``--bf16``): the eager step in fp32 and under bf16 autocast (``sm stream --precision bf16``)
   on alternate frames, each with its own state: median / p99 / fps of both, the ratio and bf16's
   largest difference from fp32;
+- ``int8`` (``--int8``): the same with the step's Linear layers dynamically quantized to int8 (``sm stream
+  --quantize int8``) in place of bf16;
 - ``gemm``: this machine's fp32 and bf16 ``torch.matmul`` rates (GFLOP/s, best of n = 512, 1024, 2048);
 - ``features``: the causal music features of one frame (:mod:`tasks.stream.features`, 44.1 kHz in);
 - ``memory``: resident set size (VmRSS) after streaming ``--memory-minutes`` minutes of frames as
@@ -229,45 +232,64 @@ def onnx_and_eager(model, frames: int, threads: int) -> dict:
     }
 
 
-def bf16_and_fp32(model, frames: int) -> dict:
-    """The eager step in fp32 and under bf16 autocast (``sm stream --precision bf16``) on alternate frames
-    of the same run, each with its own state, both fed the fp32 step's previous pose: median / p99 / fps
-    of both, the ratio fp32 over bf16, and bf16's largest difference from fp32 (absolute, and relative to
-    the largest fp32 output)."""
-    import numpy as np
-    import torch
+def variant_and_fp32(model, frames: int, name: str, step) -> dict:
+    """The eager step in fp32 and ``step`` (``model.step``'s signature: another precision or quantization of
+    it) on alternate frames of the same run, each with its own state, both fed the fp32 step's previous
+    pose: median / p99 / fps of both, the ratio fp32 over ``name``, and ``name``'s largest difference from
+    fp32 (absolute, and relative to the largest fp32 output)."""
+    import numpy as np  # lazy: after --help
+    import torch  # lazy: after --help
 
-    from skeleton_mamba.ssd.precision import inference_precision
-    from skeleton_mamba.tasks.training.frame_timing import latency_summary
+    from skeleton_mamba.tasks.training.frame_timing import latency_summary  # lazy: after --help
 
     music, prev = torch.randn(1, 34), torch.zeros(1, 24, 12)
-    state, bf16_state = model.init_state(1), model.init_state(1)
-    fp32_ms, bf16_ms, difference, largest = [], [], 0.0, 0.0
+    state, other_state = model.init_state(1), model.init_state(1)
+    fp32_ms, other_ms, difference, largest = [], [], 0.0, 0.0
     for i in range(frames + 10):
         start = time.perf_counter()
-        with inference_precision("bf16"):
-            low, bf16_state = model.step(prev, music, bf16_state)
-        bf16_elapsed = 1e3 * (time.perf_counter() - start)
+        other, other_state = step(prev, music, other_state)
+        other_elapsed = 1e3 * (time.perf_counter() - start)
         start = time.perf_counter()
         prev, state = model.step(prev, music, state)
         fp32_elapsed = 1e3 * (time.perf_counter() - start)
-        difference = max(difference, float((low.float() - prev).abs().max()))
+        difference = max(difference, float((other.float() - prev).abs().max()))
         largest = max(largest, float(prev.abs().max()))
         if i >= 10:  # warm-up
             fp32_ms.append(fp32_elapsed)
-            bf16_ms.append(bf16_elapsed)
-    fp32_ms, bf16_ms = np.asarray(fp32_ms), np.asarray(bf16_ms)
-    fp32, bf16 = latency_summary(fp32_ms), latency_summary(bf16_ms)
+            other_ms.append(other_elapsed)
+    fp32_ms, other_ms = np.asarray(fp32_ms), np.asarray(other_ms)
+    fp32, other = latency_summary(fp32_ms), latency_summary(other_ms)
     return {
         **{f"fp32_{k}": round(v, 3) for k, v in fp32.items()},
         "fp32_fps": round(1e3 / float(np.mean(fp32_ms)), 1),
-        **{f"bf16_{k}": round(v, 3) for k, v in bf16.items()},
-        "bf16_fps": round(1e3 / float(np.mean(bf16_ms)), 1),
-        "fp32_over_bf16_median": round(fp32["median_ms"] / bf16["median_ms"], 2),
+        **{f"{name}_{k}": round(v, 3) for k, v in other.items()},
+        f"{name}_fps": round(1e3 / float(np.mean(other_ms)), 1),
+        f"fp32_over_{name}_median": round(fp32["median_ms"] / other["median_ms"], 2),
         "max_abs_difference": float(f"{difference:.3g}"),
         "max_relative_difference": float(f"{difference / max(largest, 1e-12):.3g}"),
         "frames": frames,
     }
+
+
+def bf16_and_fp32(model, frames: int) -> dict:
+    """:func:`variant_and_fp32` of the step under bf16 autocast (``sm stream --precision bf16``)."""
+    from skeleton_mamba.ssd.precision import inference_precision  # lazy: after --help
+
+    def bf16_step(prev, music, state):
+        with inference_precision("bf16"):
+            return model.step(prev, music, state)
+
+    return variant_and_fp32(model, frames, "bf16", bf16_step)
+
+
+def int8_and_fp32(model, frames: int) -> dict:
+    """:func:`variant_and_fp32` of the step with every Linear dynamically quantized to int8 (``sm stream
+    --quantize int8``)."""
+    import copy  # lazy: after --help
+
+    from skeleton_mamba.tasks.stream.stream_cli import quantize_linear_int8  # lazy: after --help
+
+    return variant_and_fp32(model, frames, "int8", quantize_linear_int8(copy.deepcopy(model)).step)
 
 
 def measure(
@@ -280,6 +302,7 @@ def measure(
     compile_mode: str | None = None,
     onnx: bool = False,
     bf16: bool = False,
+    int8: bool = False,
 ) -> dict:
     """All figures of one width (run in a subprocess); ``compile_mode``: None, or "default" (or a
     ``torch.compile`` mode) to add the compiled step."""
@@ -345,6 +368,10 @@ def measure(
         print(f"[{width}] fp32 and bf16 steps on alternate frames", file=sys.stderr, flush=True)
         with torch.inference_mode():
             result["bf16"] = bf16_and_fp32(model, frames)
+    if int8 and not memory_only:
+        print(f"[{width}] fp32 and int8 steps on alternate frames", file=sys.stderr, flush=True)
+        with torch.inference_mode():
+            result["int8"] = int8_and_fp32(model, frames)
     with torch.inference_mode():
         if not memory_only and backbone_step is not None:
             result["compiled"].update(compiled_and_eager(model, backbone_step, frames))
@@ -479,6 +506,11 @@ def main() -> int:
         action="store_true",
         help="also time the eager step under bf16 autocast (--precision bf16) beside the fp32 one",
     )
+    p.add_argument(
+        "--int8",
+        action="store_true",
+        help="also time the eager step with its Linear layers quantized to int8 (sm stream --quantize int8)",
+    )
     p.add_argument("--width-only", help=argparse.SUPPRESS)
     args = p.parse_args()
     minutes = [float(m) for m in args.memory_minutes.split(",")]
@@ -504,6 +536,7 @@ def main() -> int:
             args.compile,
             args.onnx,
             args.bf16,
+            args.int8,
         )
         print(json.dumps(figures))
         return 0
@@ -523,7 +556,7 @@ def main() -> int:
         cmd += ["--memory-only"] * args.memory_only + ["--profile", str(args.profile)]
         cmd += ["--adaptive-malloc"] * args.adaptive_malloc
         cmd += ["--compile", args.compile] if args.compile else []
-        cmd += ["--onnx"] * args.onnx + ["--bf16"] * args.bf16
+        cmd += ["--onnx"] * args.onnx + ["--bf16"] * args.bf16 + ["--int8"] * args.int8
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         if args.omp_wait_policy != "inherit":
             env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()

@@ -46,12 +46,15 @@ _ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_l
 
 
 def linear(layer: nn.Linear, x: torch.Tensor) -> torch.Tensor:
-    """``layer(x)`` for a few tokens x (..., in) at inference; oneDNN for large fp32 CPU weights.
+    """``layer(x)`` for a few tokens x (..., in) at inference; oneDNN for large fp32 CPU weights, the layer's
+    own call for a dynamically quantized int8 Linear (``sm stream --quantize int8``).
 
     Under ``torch.compile`` always ``F.linear``: inductor cannot lower the eager oneDNN call, and with
     frozen weights it packs them for oneDNN itself (:mod:`skeleton_mamba.runtime.compiling`).
     """
     w = layer.weight
+    if not isinstance(w, torch.Tensor):  # torch.ao's dynamically quantized Linear: its weight is a method
+        return layer(x)
     large_fp32 = w.numel() >= ONEDNN_MIN_WEIGHT and x.dtype == w.dtype == torch.float32 and not x.is_cuda
     if _ONEDNN and large_fp32 and not torch.compiler.is_compiling():
         return torch.ops.mkldnn._linear_pointwise(x, w, layer.bias, "none", [], "")

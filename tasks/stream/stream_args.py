@@ -92,4 +92,11 @@ def build_parser() -> argparse.ArgumentParser:
         "warning and the eager step",
     )
     add_precision_argument(p, STREAM_BF16_ERROR)
+    p.add_argument(
+        "--quantize",
+        choices=("none", "int8"),
+        default="none",
+        help="dance: the dancer's Linear layers as PyTorch's dynamically quantized int8 Linear (int8 weights "
+        "per output channel, each input quantized as it comes), eager and fp32 only (default: none)",
+    )
     return p

@@ -28,10 +28,13 @@ import argparse
 import json
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 import soundfile as sf
+import torch
+from torch import nn
 
 from skeleton_mamba.errors import InputError, one_line_message
 from skeleton_mamba.io.atomic import atomic_open
@@ -63,12 +66,27 @@ def _load_dancer(ckpt: str):
     return load_module_from(StreamDanceModule, ckpt).model.eval()
 
 
+def quantize_linear_int8(model: nn.Module) -> nn.Module:
+    """``model`` with every ``nn.Linear`` replaced by PyTorch's dynamically quantized int8 Linear
+    (``torch.ao.quantization.quantize_dynamic``, int8 weights per output channel; each (..., in) input
+    quantized per call, the (..., out) output float32). The frame path calls such a layer itself
+    (:func:`~skeleton_mamba.runtime.frame_ops.linear`)."""
+    with warnings.catch_warnings():  # torch.ao's quantized modules are deprecated in favour of torchao
+        warnings.simplefilter("ignore")
+        spec = {nn.Linear: torch.ao.quantization.per_channel_dynamic_qconfig}
+        return torch.ao.quantization.quantize_dynamic(model, spec, dtype=torch.qint8)
+
+
 def stream_dance(args: argparse.Namespace) -> int:
 
     if not args.music:
         raise InputError("--music FILE (or -) is required for --task dance")
     if args.compile and args.precision != "fp32":
         raise InputError(f"--compile steps in fp32 only: drop --compile or --precision {args.precision}")
+    if args.quantize != "none" and (args.compile or args.precision != "fp32"):
+        raise InputError(
+            f"--quantize {args.quantize} steps eager and in fp32: drop --compile and --precision"
+        )
     name = args.name or ("stdin" if args.music == "-" else Path(args.music).stem)
     on_rig = rig_file_names([name], args.rig)
     produced = [*dance_files(name, not args.no_render), f"{name}_stream.json", *on_rig]
@@ -77,6 +95,8 @@ def stream_dance(args: argparse.Namespace) -> int:
     rig = prepare_rig(args, [out / n for n in on_rig], SMPL24.joint_names)
     source = AudioSource(args.music, args.chunk_ms / 1e3, args.realtime, args.raw_rate)
     model = _load_dancer(args.ckpt)
+    if args.quantize == "int8":
+        model = quantize_linear_int8(model)
     with inference_precision(args.precision):  # the warm-up frame too
         dancer = LiveDancer(model, source.sample_rate, compile=announce_compile(args.compile))
     report_compile(dancer.compile_seconds, args.compile)
@@ -146,6 +166,7 @@ def _dance_into(
         "compiled": dancer.compile_seconds is not None,
         "compile_seconds": dancer.compile_seconds,
         "precision": args.precision,
+        "quantize": args.quantize,
         "interrupted": interrupted,
         "files": {k: str(v) for k, v in vars(files).items() if v is not None},
     }
