@@ -1,14 +1,15 @@
 """The web dancer's graph with quantized weights (``sm export-web --quantize``), by onnxruntime's own tools.
 
 Only the weights of the dancer's ``nn.Linear`` layers are quantized: the ``MatMul`` nodes that the exporter
-places in a ``linear`` scope of the step and whose second input is a constant matrix (97 % of the paper
+places in a ``linear`` scope of the step and whose second input is a constant matrix (96 % of the paper
 width's weights; its few ``Gemm`` nodes, which neither tool quantizes, stay float32). The music front end's
 filterbanks, the nearest-rotation and forward-kinematics products stay float32, as does every activation
 that is not a quantized product's input.
 
 - ``none``: the float32 graph as exported;
 - ``int8``: :func:`onnxruntime.quantization.quantize_dynamic` of those ``MatMul`` weights, per output
-  channel (``MatMulInteger``: int8 weights, each activation row quantized to uint8 as it is computed);
+  channel (``MatMulInteger``: int8 weights, each input quantized to uint8 as it is computed, one scale
+  per tensor);
 - ``int4``: :class:`onnxruntime.quantization.matmul_nbits_quantizer.MatMulNBitsQuantizer`, 4-bit weights in
   blocks of 32 along the input (``MatMulNBits``, accuracy level 4: the product in int8).
 """
