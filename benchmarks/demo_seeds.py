@@ -236,6 +236,12 @@ def _span(values, decimals: int = 2) -> str:
     )
 
 
+def _signed_span(values) -> str:
+    """``+a`` or ``+a to +b``: a span of values that may be negative, three decimals."""
+    low, high = (f"{f(values):+.3f}" for f in (min, max))
+    return low if low == high else f"{low} to {high}"
+
+
 def _table(header: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
@@ -385,16 +391,25 @@ def readme_demos(results: dict) -> str:
         seeds = _seed_list(results, "text2motion")
         out.append(["`humanml3d_demo.yaml`", seeds, *spans(t2m, lambda r: r["dance"]),
                     own, reached(t2m)])  # fmt: skip
+
+    def margins(rows: list[dict]) -> str:  # the dancers' beat margin over chance, when every seed has it
+        if not all("conditioning" in r for r in rows):
+            return ""
+        dance, truth = ([r["conditioning"][k] for r in rows] for k in ("margin", "truth_margin"))
+        return f"beat margin over chance {_signed_span(dance)} (truth {_signed_span(truth)})"
+
     stream = [r for _, r in _seeds(results, "stream")]
     if stream:
         out.append(["`stream_dance_demo.yaml`", _seed_list(results, "stream"),
-                    *spans(stream, lambda r: r["dance"]), "", reached(stream)])  # fmt: skip
+                    *spans(stream, lambda r: r["dance"]), margins(stream), reached(stream)])  # fmt: skip
     qean = [r for _, r in _seeds(results, "qean")]
     if qean:
         own = f"BeatAlign {_span([r['protocol']['BeatAlign'] for r in qean])} (FACT, 2 sequences)"
+        own += f"; {margins(qean)}" if margins(qean) else ""
         out.append(["`qean_demo.yaml`", _seed_list(results, "qean"), *spans(qean, lambda r: r["dance"]), own,
                     reached(qean)])  # fmt: skip
-    out.append(["target", "", ">= 0.7", "<= 1.5", "0.5 to 2", "", ""])
+    own = "dancers: beat margin over chance >= half the truth's" if margins(stream + qean) else ""
+    out.append(["target", "", ">= 0.7", "<= 1.5", "0.5 to 2", own, ""])
     return _table(header, out)
 
 

@@ -94,12 +94,7 @@ def test_page_opens_from_disk_and_steps_like_onnxruntime(site, tmp_path):
         shown = np.asarray(p.js("window.smDance.shown"), np.float32).reshape(24, 3)
         assert np.isfinite(shown).all() and np.ptp(shown, axis=0).max() > 0.3, shown  # not one ball
         frames = 45
-        samples = audio[: frames * HOP].tolist()
-        poses = p.js(
-            f"(async () => {{ const x = {samples}; for (let t = 0; t < {frames}; t++) "
-            f"await window.smDance.step(x.slice(t * {HOP}, (t + 1) * {HOP})); "
-            "return window.smDance.poses; })()"
-        )
+        poses = _step_page(p, audio, frames)
         assert p.js("window.smDance.threads") == 1  # from disk: not cross-origin isolated
         assert not p.errors, p.errors
         only_local(p.requests)
@@ -109,6 +104,16 @@ def test_page_opens_from_disk_and_steps_like_onnxruntime(site, tmp_path):
     export_web_graph(dancer, graph)
     expected = run_web_graph(graph, dancer, audio[: frames * HOP])["pose"]
     np.testing.assert_allclose(np.asarray(poses).reshape(expected.shape), expected, atol=1e-4)
+
+
+def _step_page(p: Page, audio: np.ndarray, frames: int) -> list:
+    """Step the page's dancer over the first ``frames`` hops of ``audio``; the poses it returns."""
+    samples = audio[: frames * HOP].tolist()
+    return p.js(
+        f"(async () => {{ const x = {samples}; for (let t = 0; t < {frames}; t++) "
+        f"await window.smDance.step(x.slice(t * {HOP}, (t + 1) * {HOP})); "
+        "return window.smDance.poses; })()"
+    )
 
 
 def test_a_quantized_page_names_its_precision_and_steps_like_onnxruntime(site, tmp_path):
@@ -126,12 +131,7 @@ def test_a_quantized_page_names_its_precision_and_steps_like_onnxruntime(site, t
         info = p.js("document.getElementById('info').textContent")
         assert PRECISIONS["int8"] in info and p.js("window.smDance.precision") == PRECISIONS["int8"], info
         frames = 30
-        samples = audio[: frames * HOP].tolist()
-        poses = p.js(
-            f"(async () => {{ const x = {samples}; for (let t = 0; t < {frames}; t++) "
-            f"await window.smDance.step(x.slice(t * {HOP}, (t + 1) * {HOP})); "
-            "return window.smDance.poses; })()"
-        )
+        poses = _step_page(p, audio, frames)
         assert not p.errors, p.errors
     finally:
         p.close()
