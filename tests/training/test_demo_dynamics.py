@@ -173,6 +173,7 @@ def test_two_seeded_stream_demo_runs_print_the_same_dynamics(tmp_path, monkeypat
         scores.append((_columns(columns), demo["conditioning"]["per_sequence"]))
         out = capsys.readouterr().out
         assert f"viewer: {folder / 'view.html'}" in out and (folder / "view.html").stat().st_size > 0
-        printed.append(re.findall(r"^motion amplitude.*$|^jitter.*$|^.*beat margin over chance.*$", out, re.M))
+        lines = r"^motion amplitude.*$|^jitter.*$|^.*beat margin over chance.*$"
+        printed.append(re.findall(lines, out, re.M))
     assert scores[0] == scores[1]
     assert printed[0] == printed[1] and len(printed[0]) == 4  # dynamics, the margin and its target
