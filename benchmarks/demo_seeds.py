@@ -396,7 +396,7 @@ def readme_demos(results: dict) -> str:
         if not all("conditioning" in r for r in rows):
             return ""
         dance, truth = ([r["conditioning"][k] for r in rows] for k in ("margin", "truth_margin"))
-        return f"beat margin over chance {_signed_span(dance)} (truth {_signed_span(truth)})"
+        return f"beat margin {_signed_span(dance)} (truth {_signed_span(truth)})"
 
     stream = [r for _, r in _seeds(results, "stream")]
     if stream:
@@ -404,11 +404,11 @@ def readme_demos(results: dict) -> str:
                     *spans(stream, lambda r: r["dance"]), margins(stream), reached(stream)])  # fmt: skip
     qean = [r for _, r in _seeds(results, "qean")]
     if qean:
-        own = f"BeatAlign {_span([r['protocol']['BeatAlign'] for r in qean])} (FACT, 2 sequences)"
+        own = f"BeatAlign {_span([r['protocol']['BeatAlign'] for r in qean])} (FACT)"
         own += f"; {margins(qean)}" if margins(qean) else ""
         out.append(["`qean_demo.yaml`", _seed_list(results, "qean"), *spans(qean, lambda r: r["dance"]), own,
                     reached(qean)])  # fmt: skip
-    own = "dancers: beat margin over chance >= half the truth's" if margins(stream + qean) else ""
+    own = "beat margin over chance >= half the truth's" if margins(stream + qean) else ""
     out.append(["target", "", ">= 0.7", "<= 1.5", "0.5 to 2", own, ""])
     return _table(header, out)
 
