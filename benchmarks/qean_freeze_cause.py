@@ -55,7 +55,7 @@ from common import machine_info, write_report  # noqa: E402
 
 from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_joints  # noqa: E402
 from skeleton_mamba.tasks.motion.metrics.beat_align import beat_align_over_chance  # noqa: E402
-from skeleton_mamba.tasks.motion.music.features import BEAT  # noqa: E402
+from skeleton_mamba.tasks.motion.music.features import beat_frames  # noqa: E402
 from skeleton_mamba.tasks.qean.data import AISTPPDanceDataModule  # noqa: E402
 from skeleton_mamba.tasks.qean.generate import generate_fast, pad_music  # noqa: E402
 from skeleton_mamba.tasks.qean.module import QEANModule  # noqa: E402
@@ -223,7 +223,7 @@ def measure_song(module, music: torch.Tensor, other: torch.Tensor, seeds: dict[s
     c = module.model.config
     frames = len(music) - c.seed_frames
     size = int(BLOCK_SECONDS * FPS)
-    beats = np.flatnonzero(music[:, BEAT].numpy() > 0.5)
+    beats = beat_frames(music.numpy())
     seed = seeds["held-out"]
     shift = int(SHIFT_S * FPS)
     other = other.repeat(-(-len(music) // len(other)), 1)[: len(music)]

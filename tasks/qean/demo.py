@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import warnings
 
-import numpy as np
 from lightning.pytorch import LightningModule, Trainer
 
 from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_joints
@@ -36,7 +35,7 @@ from skeleton_mamba.tasks.motion.metrics.held_out_dynamics import (
     held_out_dynamics,
     held_out_dynamics_checks,
 )
-from skeleton_mamba.tasks.motion.music.features import BEAT
+from skeleton_mamba.tasks.motion.music.features import beat_frames
 from skeleton_mamba.tasks.motion.synthetic.aistpp_set import LABEL
 from skeleton_mamba.tasks.qean.module import features_to_motion
 from skeleton_mamba.tasks.training.demo_callback import DemoCallback, write_summary
@@ -88,16 +87,15 @@ class QEANDemo(DemoCallback):
         if was_training:
             pl_module.train()
         length = seed_frames + generate_frames
-        truths = [data.sequence(name)[0][:length] for name in names]  # (<= 120 + G, 219)
+        sequences = [data.sequence(name) for name in names]  # (motion (T, 219), music (T', 35)) each
+        truths = [motion[:length] for motion, _ in sequences]  # (<= 120 + G, 219)
         train_motions = data.datasets["train"].sequences.values()
         train = [features_to_joints(motion.double()) for motion, _ in train_motions]
         dances = [j[seed_frames:] for j in joints]  # the generated frames, after the seed
         truth_joints = [features_to_joints(t[seed_frames:].double()) for t in truths]
         scores = held_out_dynamics(dances, truth_joints, train, FPS)
         checks = held_out_dynamics_checks(scores)
-        beats = [  # the music's beats from the first generated frame on
-            np.flatnonzero(data.sequence(name)[1][seed_frames:length, BEAT].numpy() > 0.5) for name in names
-        ]
+        beats = [beat_frames(music[seed_frames:length].numpy()) for _, music in sequences]  # after the seed
         conditioning = conditioning_scores(dances, truth_joints, beats, FPS)
         out = self.out_dir(trainer)
         records = []

@@ -35,7 +35,7 @@ from skeleton_mamba.tasks.motion.formats.fact_features import FPS, features_to_j
 from skeleton_mamba.tasks.motion.formats.motion_file import MotionData
 from skeleton_mamba.tasks.motion.metrics.evaluation import DanceEvaluation
 from skeleton_mamba.tasks.motion.metrics.protocols import PROTOCOLS, FACTProtocol, get_protocol
-from skeleton_mamba.tasks.motion.music.features import BEAT, describe_audio_stack, record_audio_stack
+from skeleton_mamba.tasks.motion.music.features import beat_frames, describe_audio_stack, record_audio_stack
 from skeleton_mamba.tasks.qean.generate import generate_fast
 from skeleton_mamba.tasks.qean.model import QEAN, QEANConfig
 from skeleton_mamba.tasks.training.backbone_config import config_from, plain_backbone_config
@@ -235,7 +235,7 @@ class QEANModule(BackboneModule):
         cache = getattr(self.contract, "music_cache_dir", None)  # the data's feature cache
         for i in range(full.shape[0]):
             if protocol.name == "fact":  # the data module's features are FACT's: beats of the whole window
-                beats = np.flatnonzero(batch["music"][i, :, BEAT].cpu().numpy() > 0.5)
+                beats = beat_frames(batch["music"][i].cpu().numpy())
             else:
                 beats = protocol.music_beats(batch["music_path"][i], cache_dir=cache)
             self.test_evaluation.add(joints[i].cpu(), FPS, beats)

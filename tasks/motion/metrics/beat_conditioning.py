@@ -55,9 +55,9 @@ def conditioning_scores(dances: Sequence, truths: Sequence, beats: Sequence[np.n
         frames = frames[(frames >= 0) & (frames < length)]
         margins.append(margin_over_chance(dance[:length], frames, fps))
         truth_margins.append(margin_over_chance(truth[:length], frames, fps))
-    scored = [i for i, (a, b) in enumerate(zip(margins, truth_margins)) if np.isfinite(a) and np.isfinite(b)]
-    margin = float(np.mean([margins[i] for i in scored])) if scored else float("nan")
-    truth_margin = float(np.mean([truth_margins[i] for i in scored])) if scored else float("nan")
+    scored = np.isfinite(margins) & np.isfinite(truth_margins)
+    margin = float(np.mean(np.asarray(margins)[scored])) if scored.any() else float("nan")
+    truth_margin = float(np.mean(np.asarray(truth_margins)[scored])) if scored.any() else float("nan")
     return {
         "margin": margin,
         "truth_margin": truth_margin,

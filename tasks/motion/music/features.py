@@ -63,6 +63,7 @@ __all__ = [
     "MusicAnalysis",
     "aist_start_bpm",
     "audio_stack",
+    "beat_frames",
     "compute_music_features",
     "describe_audio_stack",
     "extract_music_features",
@@ -88,6 +89,11 @@ TIGHTNESS = 100.0
 _CACHE_VERSION = 1
 
 _AIST_ID = re.compile(r"(?:^|_)(m(?:BR|PO|LO|MH|LH|WA|KR|JS|JB|HO)\d)(?:_|$)")
+
+
+def beat_frames(features: np.ndarray) -> np.ndarray:
+    """The frames (B,) whose beat flag (column :data:`BEAT`) is set, in (T, 35) music features."""
+    return np.flatnonzero(np.asarray(features)[:, BEAT] > 0.5)
 
 
 def aist_start_bpm(name: str) -> float | None:
@@ -271,7 +277,7 @@ class MusicAnalysis:
 
     @classmethod
     def from_features(cls, features: np.ndarray, fps: int, duration_s: float) -> MusicAnalysis:
-        beats = np.flatnonzero(features[:, BEAT] > 0.5)
+        beats = beat_frames(features)
         if len(beats) >= 2:
             return cls(features, fps, tempo_from_beats(beats, fps), beats, duration_s)
         if not np.any(features[:, ENVELOPE] > 0):

@@ -32,10 +32,10 @@ import soundfile as sf
 
 from skeleton_mamba.tasks.motion.io.cache import FeatureCache
 from skeleton_mamba.tasks.motion.music.features import (
-    BEAT,
     HOP_LENGTH,
     NUM_MUSIC_FEATURES,
     aist_start_bpm,
+    beat_frames,
     compute_music_features,
     extract_music_features,
     load_audio,
@@ -169,4 +169,4 @@ def edge_slice_features(
 
 def edge_slice_beats(features: np.ndarray) -> list[np.ndarray]:
     """Beat frames (30 fps, relative to each slice) from :func:`edge_slice_features` output."""
-    return [np.flatnonzero(f[:, BEAT] > 0.5) for f in features]
+    return [beat_frames(f) for f in features]
